@@ -1,0 +1,34 @@
+"""The numeric core: lognormal profiles, arcs and Euler spirals, ΣΛ*/ΓΛ* plans, sampling.
+
+Pure numpy/scipy, no I/O.
+"""
+
+from tagbot.model.euler import Clothoids, fit_euler
+from tagbot.model.lognormal import (
+    CharacteristicTimes,
+    characteristic_times,
+    lognormal,
+    lognormal_cdf,
+    lognormal_time,
+)
+from tagbot.model.motion import Motion, sample
+from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, END_TOLERANCE, MODELS, Model, Plan, Tag
+
+__all__ = [
+    "DEFAULT_MU",
+    "DEFAULT_SIGMA",
+    "END_TOLERANCE",
+    "MODELS",
+    "CharacteristicTimes",
+    "Clothoids",
+    "Model",
+    "Motion",
+    "Plan",
+    "Tag",
+    "characteristic_times",
+    "fit_euler",
+    "lognormal",
+    "lognormal_cdf",
+    "lognormal_time",
+    "sample",
+]

@@ -1,0 +1,151 @@
+"""Motion: a tag sampled at a fixed time step, in closed form.
+
+Sample ``i`` is at ``t = tag.start + i·dt``. A plan's samples run from the first one at or after its
+``start`` (on its first target) to the first one at or after its end (on its last target, within
+``END_TOLERANCE × tag.size``). Between plans the pen is up (``pen = 0``, ``plan = -1``), the speed
+is 0 and the position is where the pen will next go down; each pen lift therefore shows as at least
+one pen-up sample, and a ``dt`` too coarse for a lift is refused.
+
+Position and velocity are exact: each stroke contributes its curve evaluated at arc length
+``D·W(t)`` and the velocity ``D·Λ(t)`` along the curve's tangent there (no differencing, no
+integration). A stroke is evaluated only inside its active window; before it it contributes
+nothing, after it its whole chord. Cost is linear in the number of (sample, active stroke) pairs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import ndtr
+
+from tagbot.errors import PlanError
+from tagbot.model.plan import END_TOLERANCE, Plan, Tag
+
+MAX_SAMPLES = 50_000_000
+"""Refuse to allocate more samples than this (about 2.4 GB of arrays)."""
+
+_INV_SQRT_2PI = 1.0 / float(np.sqrt(2.0 * np.pi))
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class Motion:
+    """Samples at a fixed time step. Arrays share their first dimension ``N``."""
+
+    t: Array
+    """Time, seconds on the tag's clock, ``(N,)``."""
+    xy: Array
+    """Pen position, ``(N, 2)``, in the tag's units."""
+    v: Array
+    """Velocity, ``(N, 2)``, units per second (analytic)."""
+    speed: Array
+    """``|v|``, ``(N,)``."""
+    pen: NDArray[np.int8]
+    """1 while the pen is down, 0 during lifts, ``(N,)``."""
+    plan: NDArray[np.intp]
+    """Index of the plan being drawn, −1 during lifts, ``(N,)``."""
+    dt: float
+    """The time step, seconds."""
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def duration(self) -> float:
+        """Time from the first sample to the last, seconds."""
+        return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
+
+    def runs(self) -> Iterator[tuple[int, slice]]:
+        """``(plan index, slice)`` for each pen-down run, in drawing order."""
+        down = np.flatnonzero(np.diff(np.concatenate([[-1], self.plan, [-1]])) != 0)
+        for begin, end in zip(down[:-1], down[1:], strict=True):
+            if self.plan[begin] >= 0:
+                yield int(self.plan[begin]), slice(int(begin), int(end))
+
+
+def sample(tag: Tag, dt: float = 0.01) -> Motion:
+    """Sample ``tag`` every ``dt`` seconds. See the module docstring for what each sample holds."""
+    dt = _check_dt(dt)
+    size, origin = tag.size, tag.start
+    first = [int(np.ceil((p.start - origin) / dt - 1e-9)) for p in tag.plans]
+    last = [int(np.ceil((p.end(size) - origin) / dt)) for p in tag.plans]
+    for k in range(1, len(tag.plans)):
+        if first[k] < last[k - 1] + 2:
+            lift = tag.plans[k].start - tag.plans[k - 1].end(size)
+            raise PlanError(
+                f"dt: {dt:g} s is too coarse for the {lift:.3g} s pen lift between"
+                f" plans[{k - 1}] and plans[{k}]; use dt < {lift / 2:.3g} s or delay plans[{k}].start"
+            )
+    n = last[-1] + 1
+    if n > MAX_SAMPLES:
+        raise PlanError(f"dt: {dt:g} s over {tag.end - origin:.6g} s needs {n} samples (max {MAX_SAMPLES})")
+
+    t = origin + np.arange(n) * dt
+    xy = np.empty((n, 2))
+    v = np.zeros((n, 2))
+    pen = np.zeros(n, dtype=np.int8)
+    plan_index = np.full(n, -1, dtype=np.intp)
+    lift_start = 0
+    for k, plan in enumerate(tag.plans):
+        xy[lift_start : first[k]] = plan.targets[0]  # pen up, waiting where it goes down next
+        rows = slice(first[k], last[k] + 1)
+        xy[rows], v[rows] = _sample_plan(plan, t[rows], first[k], dt, origin, size)
+        pen[rows] = 1
+        plan_index[rows] = k
+        lift_start = last[k] + 1
+    speed = np.hypot(v[:, 0], v[:, 1])
+    for array in (t, xy, v, speed, pen, plan_index):
+        array.flags.writeable = False
+    return Motion(t=t, xy=xy, v=v, speed=speed, pen=pen, plan=plan_index, dt=dt)
+
+
+def _check_dt(dt: float) -> float:
+    try:
+        value = float(dt)
+    except (TypeError, ValueError):
+        raise PlanError(f"dt: must be a number of seconds, got {dt!r}") from None
+    if not (np.isfinite(value) and value > 0.0):
+        raise PlanError(f"dt: must be a finite number of seconds > 0, got {dt!r}")
+    return value
+
+
+def _sample_plan(
+    plan: Plan, t: Array, first: int, dt: float, origin: float, size: float
+) -> tuple[Array, Array]:
+    """Position and velocity of one plan at the grid samples ``t`` (global indices from ``first``)."""
+    count = len(t)
+    geometry = plan.geometry
+    t_on, t_off = plan.windows(size, END_TOLERANCE)
+    # Active sample range [begin, stop) of each stroke, local to this plan's rows.
+    begin = np.clip(np.ceil((t_on - origin) / dt).astype(np.intp) - first, 0, count)
+    stop = np.clip(np.floor((t_off - origin) / dt).astype(np.intp) + 1 - first, begin, count)
+
+    # Strokes completed before a sample contribute their whole chord.
+    done = np.zeros((count + 1, 2))
+    np.add.at(done, stop, plan.chords)
+    xy = plan.targets[0] + np.cumsum(done[:count], axis=0)
+    v = np.zeros((count, 2))
+
+    counts = stop - begin
+    total = int(counts.sum())
+    if total:
+        stroke = np.repeat(np.arange(plan.n_strokes), counts)
+        row = np.arange(total) - np.repeat(np.cumsum(counts) - counts - begin, counts)
+        elapsed = (origin + (row + first) * dt) - plan.onsets[stroke]
+        elapsed = np.maximum(elapsed, np.finfo(float).tiny)
+        sigma = plan.sigma[stroke]
+        z = (np.log(elapsed) - plan.mu[stroke]) / sigma
+        length = geometry.length[stroke]
+        s = length * ndtr(z)
+        offset = geometry.offset(stroke, s)
+        theta = geometry.tangent_angle(stroke, s)
+        speed = length * np.exp(-0.5 * z * z) * _INV_SQRT_2PI / (sigma * elapsed)
+        xy[:, 0] += np.bincount(row, weights=offset.real, minlength=count)
+        xy[:, 1] += np.bincount(row, weights=offset.imag, minlength=count)
+        v[:, 0] = np.bincount(row, weights=speed * np.cos(theta), minlength=count)
+        v[:, 1] = np.bincount(row, weights=speed * np.sin(theta), minlength=count)
+    return xy, v

@@ -1,0 +1,265 @@
+"""Action plans (ΣΛ* and ΓΛ*) and tags: virtual targets, stroke parameters, and their geometry.
+
+Conventions (fixed so that plans are portable):
+
+- y points up; angles are radians, counter-clockwise.
+- Stroke ``j`` (0-based) runs from ``targets[j]`` to ``targets[j + 1]``; its chord direction is
+  ``alpha = atan2(Δy, Δx)``.
+- ΓΛ*: the stroke leaves at ``alpha + phi1`` and arrives at ``alpha + phi2`` along the Euler spiral
+  of :func:`~tagbot.model.euler.fit_euler`.
+- ΣΛ*: the stroke is the circular arc leaving at ``alpha − phi`` and arriving at ``alpha + phi``
+  (so a ΣΛ* stroke is the ΓΛ* stroke with ``phi1 = −phi``, ``phi2 = phi``; a plan stores it that
+  way). Its length is ``D = c·phi / sin(phi)`` for chord ``c`` (the paper's eq. 10 prints
+  ``2c·sin(phi)``, which would not reach the target; see READING-NOTES).
+- ``dt[j]`` is the delay of stroke j's onset after stroke j−1's onset, and ``dt[0]`` the delay after
+  the plan's ``start``: ``t0[j] = start + dt[0] + … + dt[j]``. All times are seconds on the tag's
+  clock.
+
+Every stroke travels its whole curve as its lognormal CDF goes from 0 to 1, so once all strokes of
+a plan are complete the pen is exactly on the last target, whatever the overlaps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import ndtri
+
+from tagbot.errors import PlanError
+from tagbot.model.euler import Clothoids, fit_euler
+
+if TYPE_CHECKING:
+    from tagbot.model.motion import Motion
+
+Model = Literal["gamma", "sigma"]
+MODELS: tuple[Model, ...] = ("gamma", "sigma")
+
+END_TOLERANCE = 1e-6
+"""A plan's motion ends once the path still to travel is below this fraction of the tag's size."""
+
+DEFAULT_MU = float(np.log(0.2))
+"""The paper's log-delay, shared by all strokes (§5)."""
+DEFAULT_SIGMA = float(np.log(1.4))
+"""The paper's log-response time, shared by all strokes (§5)."""
+
+Array = NDArray[np.float64]
+
+
+def _vector(name: str, values: ArrayLike, size: int) -> Array:
+    array = np.array(values, dtype=float).reshape(-1) if np.ndim(values) else None
+    if array is None or array.size != size:
+        got = "a scalar" if array is None else f"{array.size} values"
+        raise PlanError(f"strokes: expected {size} values of {name} (one per stroke), got {got}")
+    bad = np.flatnonzero(~np.isfinite(array))
+    if bad.size:
+        raise PlanError(f"strokes[{bad[0]}].{name}: must be finite, got {float(array[bad[0]])!r}")
+    return array
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """One pen-down movement: ``m`` virtual targets and ``m − 1`` lognormal strokes between them.
+
+    Arrays are copied and validated on construction; a :class:`~tagbot.errors.PlanError` names the
+    offending field (``strokes[2].sigma: must be > 0, got -1.0``).
+    """
+
+    targets: Array
+    """Virtual targets, shape ``(m, 2)``."""
+    dt: Array
+    """Onset delays, seconds, shape ``(m − 1,)``; see the module docstring."""
+    mu: Array
+    """Log-delays (log seconds)."""
+    sigma: Array
+    """Log-response times (> 0)."""
+    phi1: Array
+    """Start-tangent deviation from the chord, radians."""
+    phi2: Array
+    """End-tangent deviation from the chord, radians."""
+    start: float = 0.0
+    """The plan's start time, seconds on the tag's clock."""
+
+    def __post_init__(self) -> None:
+        targets = np.array(self.targets, dtype=float)
+        if targets.ndim != 2 or targets.shape[1] != 2:
+            raise PlanError(f"targets: expected a list of [x, y] pairs, got shape {targets.shape}")
+        if len(targets) < 2:
+            raise PlanError(f"targets: need at least 2, got {len(targets)}")
+        bad = np.flatnonzero(~np.all(np.isfinite(targets), axis=1))
+        if bad.size:
+            raise PlanError(f"targets[{bad[0]}]: must be finite, got {targets[bad[0]].tolist()}")
+        same = np.flatnonzero(np.all(targets[1:] == targets[:-1], axis=1))
+        if same.size:
+            raise PlanError(f"targets[{same[0] + 1}]: coincides with targets[{same[0]}]")
+        n = len(targets) - 1
+        fields = {name: _vector(name, getattr(self, name), n) for name in _STROKE_FIELDS}
+        negative = np.flatnonzero(fields["dt"] < 0)
+        if negative.size:
+            j = negative[0]
+            raise PlanError(f"strokes[{j}].dt: must be >= 0, got {float(fields['dt'][j])!r}")
+        nonpositive = np.flatnonzero(fields["sigma"] <= 0)
+        if nonpositive.size:
+            j = nonpositive[0]
+            raise PlanError(f"strokes[{j}].sigma: must be > 0, got {float(fields['sigma'][j])!r}")
+        start = float(self.start)
+        if not np.isfinite(start):
+            raise PlanError(f"start: must be finite, got {self.start!r}")
+        targets.flags.writeable = False
+        object.__setattr__(self, "targets", targets)
+        object.__setattr__(self, "start", start)
+        for name, array in fields.items():
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
+
+    @classmethod
+    def sigma_model(
+        cls,
+        targets: ArrayLike,
+        dt: ArrayLike,
+        mu: ArrayLike,
+        sigma: ArrayLike,
+        phi: ArrayLike,
+        start: float = 0.0,
+    ) -> Plan:
+        """A ΣΛ* plan: circular-arc strokes deviating ``phi`` from the chord (|phi| < π)."""
+        phi = np.asarray(phi, dtype=float)
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(~(np.abs(phi.reshape(-1)) < np.pi))
+        if bad.size:
+            j = int(bad[0])
+            got = phi.reshape(-1)[j]
+            raise PlanError(f"strokes[{j}].phi: must be finite and in (-pi, pi), got {float(got)!r}")
+        return cls(targets, dt, mu, sigma, -phi, phi, start)
+
+    @property
+    def phi(self) -> Array:
+        """The ΣΛ* deviation ``phi`` (= ``phi2``; meaningful when ``phi1 == -phi2``)."""
+        return self.phi2
+
+    @cached_property
+    def arcs(self) -> NDArray[np.bool_]:
+        """Which strokes are circular arcs (ΣΛ* strokes): ``phi1 == -phi2`` with ``|phi2| < π``."""
+        return (self.phi1 == -self.phi2) & (np.abs(self.phi2) < np.pi)
+
+    @property
+    def n_strokes(self) -> int:
+        return len(self.dt)
+
+    @cached_property
+    def onsets(self) -> Array:
+        """Stroke onsets ``t0``, seconds on the tag's clock."""
+        return self.start + np.cumsum(self.dt)
+
+    @cached_property
+    def chords(self) -> Array:
+        """Chord vectors ``targets[j + 1] − targets[j]``, shape ``(m − 1, 2)``."""
+        return np.diff(self.targets, axis=0)
+
+    @cached_property
+    def geometry(self) -> Clothoids:
+        """Each stroke's curve as a clothoid segment (arcs for ΣΛ* strokes)."""
+        chord = self.chords
+        c = np.hypot(chord[:, 0], chord[:, 1])
+        alpha = np.arctan2(chord[:, 1], chord[:, 0])
+        arc = self.arcs
+        spiral = fit_euler(
+            self.targets[:-1], alpha + self.phi1, self.targets[1:], alpha + self.phi2
+        )
+        # Circular arcs in closed form: exact where the fit's root A would be ~1e-17, not 0.
+        phi = np.where(arc, self.phi2, 0.0)
+        arc_length = c / np.sinc(phi / np.pi)
+        return Clothoids(
+            x0=self.targets[:-1, 0].copy(),
+            y0=self.targets[:-1, 1].copy(),
+            theta0=np.where(arc, alpha - phi, spiral.theta0),
+            kappa0=np.where(arc, 2.0 * phi / arc_length, spiral.kappa0),
+            dkappa=np.where(arc, 0.0, spiral.dkappa),
+            length=np.where(arc, arc_length, spiral.length),
+        )
+
+    def windows(self, size: float, tol: float = END_TOLERANCE) -> tuple[Array, Array]:
+        """Each stroke's active window ``(t_on, t_off)``.
+
+        Outside it a stroke counts as not started (0) or complete (its whole chord), which moves
+        the pen by at most ``tol × size`` in total: each of the ``n`` strokes of length ``D`` gets
+        the budget ``eps = tol·size / (n·D)`` on either side.
+        """
+        length = self.geometry.length
+        eps = np.minimum(tol * size / (self.n_strokes * length), 1e-2)
+        z = -ndtri(eps)
+        return self.onsets + np.exp(self.mu - self.sigma * z), self.onsets + np.exp(
+            self.mu + self.sigma * z
+        )
+
+    def end(self, size: float, tol: float = END_TOLERANCE) -> float:
+        """When the plan's motion ends: the path left to travel is below ``tol × size``."""
+        return float(np.max(self.windows(size, tol)[1]))
+
+
+_STROKE_FIELDS = ("dt", "mu", "sigma", "phi1", "phi2")
+
+
+@dataclass(frozen=True, eq=False)
+class Tag:
+    """An ordered sequence of plans with pen lifts between them.
+
+    Plans must not overlap in time: each starts once the previous one's motion has ended.
+    """
+
+    plans: tuple[Plan, ...]
+    model: Model = "gamma"
+    units: str = "mm"
+
+    def __post_init__(self) -> None:
+        if self.model not in MODELS:
+            raise PlanError(f"model: must be 'gamma' or 'sigma', got {self.model!r}")
+        plans = tuple(self.plans)
+        if not plans:
+            raise PlanError("plans: empty (a tag needs at least one plan)")
+        for k, plan in enumerate(plans):
+            if not isinstance(plan, Plan):
+                raise PlanError(f"plans[{k}]: expected a Plan, got {type(plan).__name__}")
+            if self.model == "sigma" and not np.all(plan.arcs):
+                j = int(np.flatnonzero(~plan.arcs)[0])
+                raise PlanError(
+                    f"plans[{k}].strokes[{j}].phi: a sigma-model stroke is an arc with"
+                    f" phi1 == -phi2 and |phi| < pi, got phi1={float(plan.phi1[j])!r}, phi2={float(plan.phi2[j])!r}"
+                )
+        object.__setattr__(self, "plans", plans)
+        for k in range(1, len(plans)):
+            previous_end = plans[k - 1].end(self.size)
+            if plans[k].start < previous_end:
+                raise PlanError(
+                    f"plans[{k}].start: {plans[k].start:.6g} s is before plans[{k - 1}] ends"
+                    f" ({previous_end:.6g} s); plans are drawn one after another"
+                )
+
+    @cached_property
+    def size(self) -> float:
+        """The diagonal of the targets' bounding box: the tag's length scale."""
+        points = np.concatenate([plan.targets for plan in self.plans])
+        return float(np.hypot(*(points.max(axis=0) - points.min(axis=0))))
+
+    @property
+    def start(self) -> float:
+        """When the first plan starts."""
+        return self.plans[0].start
+
+    @cached_property
+    def end(self) -> float:
+        """When the last plan's motion ends."""
+        return self.plans[-1].end(self.size)
+
+    @property
+    def n_strokes(self) -> int:
+        return sum(plan.n_strokes for plan in self.plans)
+
+    def sample(self, dt: float = 0.01) -> Motion:
+        """The motion at a fixed time step ``dt`` (seconds); see :func:`tagbot.model.motion.sample`."""
+        from tagbot.model.motion import sample
+
+        return sample(self, dt)
