@@ -69,7 +69,7 @@ def _sinc_half(b: Array) -> NDArray[np.complex128]:
 
 
 def moments(n_max: int, b: ArrayLike) -> NDArray[np.complex128]:
-    """``M_n(b) = ∫₀¹ τ^n e^{ibτ} dτ`` for ``n = 0..n_max``; shape ``(n_max + 1,) + b.shape``.
+    """``M_n(b) = ∫₀¹ τ^n e^{ibτ} dτ`` for ``n = 0..n_max``; shape ``(n_max + 1, *b.shape)``.
 
     Upward recurrence ``M_n = (e^{ib} − n M_{n−1}) / (ib)`` is stable for ``n < |b|``; downward
     ``M_{n−1} = (e^{ib} − ib M_n) / n`` is stable for ``n > |b|``, started from a short series of
@@ -78,7 +78,7 @@ def moments(n_max: int, b: ArrayLike) -> NDArray[np.complex128]:
     b = np.asarray(b, dtype=float)
     e = np.exp(1j * b)
     ib = 1j * b
-    up = np.empty((n_max + 1,) + b.shape, dtype=complex)
+    up = np.empty((n_max + 1, *b.shape), dtype=complex)
     up[0] = _sinc_half(b)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # unused where |b| small
         for n in range(1, n_max + 1):
@@ -104,9 +104,9 @@ def moments(n_max: int, b: ArrayLike) -> NDArray[np.complex128]:
 
 
 def generalized_fresnel(k_max: int, a: ArrayLike, b: ArrayLike) -> NDArray[np.complex128]:
-    """``I_k(a, b) = ∫₀¹ τ^k exp(i(aτ²/2 + bτ)) dτ`` for ``k = 0..k_max``; shape ``(k_max+1, …)``."""
+    """``I_k(a, b) = ∫₀¹ τ^k exp(i(aτ²/2 + bτ)) dτ``, ``k = 0..k_max``; shape ``(k_max+1, …)``."""
     a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
-    out = np.empty((k_max + 1,) + a.shape, dtype=complex)
+    out = np.empty((k_max + 1, *a.shape), dtype=complex)
     small = np.abs(a) < (SMALL_A if k_max == 0 else _SMALL_A_MOMENTS)
     if np.any(small):
         out[:, small] = _generalized_fresnel_series(k_max, a[small], b[small])
@@ -127,7 +127,7 @@ def _generalized_fresnel_large(k_max: int, a: Array, b: Array) -> NDArray[np.com
     s1, c1 = fresnel(u1)
     i0 = scale * np.exp(-0.5j * b_s * b_s / a_abs) * ((c1 - c0) + 1j * (s1 - s0))
     i0 = np.where(sign < 0, np.conj(i0), i0)
-    out = np.empty((k_max + 1,) + a.shape, dtype=complex)
+    out = np.empty((k_max + 1, *a.shape), dtype=complex)
     out[0] = i0
     e1 = np.exp(1j * (0.5 * a + b))
     for k in range(k_max):
@@ -149,7 +149,7 @@ def _generalized_fresnel_series(k_max: int, a: Array, b: Array) -> NDArray[np.co
         n_terms += 1
         bound *= h / n_terms
     m = moments(k_max + 2 * n_terms, b)
-    out = np.empty((k_max + 1,) + a.shape, dtype=complex)
+    out = np.empty((k_max + 1, *a.shape), dtype=complex)
     for k in range(k_max + 1):
         total = m[k].copy()
         coeff = np.ones_like(a, dtype=complex)
@@ -191,52 +191,78 @@ class Clothoids:
         """Points at arc length ``s`` (broadcast against the batch); shape ``(..., 2)``."""
         s = np.asarray(s, dtype=float)
         shape = np.broadcast_shapes(s.shape, np.shape(self.length))
-        index = np.broadcast_to(np.arange(len(self)).reshape(np.shape(self.length)), shape)
-        offset = self.offset(index.ravel(), np.broadcast_to(s, shape).ravel()).reshape(shape)
+        index = np.broadcast_to(np.arange(len(self)).reshape(np.shape(self.length)), shape).ravel()
+        flat_s = np.broadcast_to(s, shape).ravel()
+        order = np.argsort(self._flat.kind[index], kind="stable")
+        dx, dy = np.empty(flat_s.shape), np.empty(flat_s.shape)
+        ones = np.ones(len(order), np.intp)
+        dx[order], dy[order], _, _ = self.evaluate_runs(index[order], ones, flat_s[order])
         x0 = np.broadcast_to(self.x0, shape)
         y0 = np.broadcast_to(self.y0, shape)
-        return np.stack([x0 + offset.real, y0 + offset.imag], axis=-1)
+        return np.stack([x0 + dx.reshape(shape), y0 + dy.reshape(shape)], axis=-1)
 
     @property
     def end(self) -> Array:
         """End points, shape ``(..., 2)``."""
         return self.point(self.length)
 
-    def tangent_angle(self, index: NDArray[np.intp], s: Array) -> Array:
-        """Tangent angle of segment ``index[i]`` at arc length ``s[i]`` (flat arrays)."""
-        flat = self._flat
-        return flat.theta0[index] + s * (flat.kappa0[index] + 0.5 * flat.dkappa[index] * s)
+    @property
+    def kind(self) -> NDArray[np.int8]:
+        """Per segment (flattened): 0 arc or line, 1 near-arc (series), 2 spiral (Fresnel)."""
+        return self._flat.kind
 
-    def offset(self, index: NDArray[np.intp], s: Array) -> NDArray[np.complex128]:
-        """Displacement from its start (as ``x + iy``) of segment ``index[i]`` at arc length ``s[i]``.
+    def evaluate_runs(
+        self, segments: NDArray[np.intp], counts: NDArray[np.intp], s: Array
+    ) -> tuple[Array, Array, Array, Array]:
+        """Displacement ``(dx, dy)`` from the start and unit tangent ``(tx, ty)`` at lengths ``s``.
 
-        The hot path of sampling: flat arrays, one standard Fresnel evaluation per point on
-        spirals, none on arcs.
+        ``s`` holds ``counts[i]`` consecutive values for segment ``segments[i]``, and the segments
+        are ordered by :attr:`kind`, so that each branch works on one contiguous slice with
+        per-segment constants expanded by ``np.repeat``. This is the hot path of sampling: real
+        arithmetic, one sine/cosine pair per point, plus one standard Fresnel evaluation on spirals.
         """
         flat = self._flat
-        out = np.empty(s.shape, dtype=complex)
-        kind = flat.kind[index]
-        for branch, mask in ((0, kind == 0), (1, kind == 1), (2, kind == 2)):
-            if not np.any(mask):
+        kinds = flat.kind[segments]
+        if np.any(np.diff(kinds) < 0):
+            raise ValueError("segments: must be ordered by kind")
+        dx, dy, tx, ty = (np.empty(s.shape) for _ in range(4))
+        bounds = np.concatenate([[0], np.cumsum(counts)])
+        for branch in (0, 1, 2):
+            group = np.flatnonzero(kinds == branch)
+            if not group.size:
                 continue
-            j, sj = index[mask], s[mask]
-            if branch == 0:  # circular arc or line: s·e^{iθ0}·M_0(κ0 s), exact
-                k0s = flat.kappa0[j] * sj
-                out[mask] = sj * np.exp(1j * (flat.theta0[j] + 0.5 * k0s)) * np.sinc(
-                    k0s / (2.0 * np.pi)
-                )
-            elif branch == 1:  # near-arc: series in dkappa·s²
-                out[mask] = (
-                    sj
-                    * np.exp(1j * flat.theta0[j])
-                    * generalized_fresnel(0, flat.dkappa[j] * sj * sj, flat.kappa0[j] * sj)[0]
-                )
+            rows = slice(int(bounds[group[0]]), int(bounds[group[-1] + 1]))
+            seg, cnt, sj = segments[group], counts[group], s[rows]
+
+            def per_point(values: np.ndarray, seg=seg, cnt=cnt) -> np.ndarray:
+                return np.repeat(values[seg], cnt)
+
+            cos0, sin0 = per_point(flat.cos0), per_point(flat.sin0)
+            if branch == 0:
+                # Arc or line: the chord to s turns by half the tangent's turn κ0·s, and has
+                # length s·sin(x)/x with x = κ0·s/2 (exact at x = 0 and for tiny x).
+                x = 0.5 * per_point(flat.kappa0) * sj
+                cx, sx = np.cos(x), np.sin(x)
+                chord = sj * np.divide(sx, x, out=np.ones_like(x), where=x != 0.0)
+                hx, hy = cos0 * cx - sin0 * sx, sin0 * cx + cos0 * sx  # direction θ0 + x
+                dx[rows], dy[rows] = chord * hx, chord * hy
+                tx[rows], ty[rows] = hx * cx - hy * sx, hy * cx + hx * sx  # direction θ0 + 2x
+                continue
+            k0, dk = per_point(flat.kappa0), per_point(flat.dkappa)
+            turn = sj * (k0 + 0.5 * dk * sj)
+            ct, st = np.cos(turn), np.sin(turn)
+            tx[rows], ty[rows] = cos0 * ct - sin0 * st, sin0 * ct + cos0 * st
+            if branch == 1:  # near-arc: series in dkappa·s²
+                off = sj * (cos0 + 1j * sin0) * generalized_fresnel(0, dk * sj * sj, k0 * sj)[0]
+                dx[rows], dy[rows] = off.real, off.imag
             else:  # spiral: ρ e^{iθc} [F(u) − F(u0)], u = (s − s_c)/ρ, F = C + iγS
-                fs, fc = fresnel((sj - flat.s_centre[j]) * flat.inv_scale[j])
-                out[mask] = flat.rotation[j] * (
-                    (fc - flat.c0[j]) + 1j * flat.gamma[j] * (fs - flat.s0[j])
-                )
-        return out
+                fs, fc = fresnel((sj - per_point(flat.s_centre)) * per_point(flat.inv_scale))
+                fc -= per_point(flat.c0)
+                fs -= per_point(flat.s0)
+                fs *= per_point(flat.gamma)
+                rc, rs = per_point(flat.rotation_cos), per_point(flat.rotation_sin)
+                dx[rows], dy[rows] = rc * fc - rs * fs, rs * fc + rc * fs
+        return dx, dy, tx, ty
 
     @cached_property
     def _flat(self) -> _FlatClothoids:
@@ -245,16 +271,18 @@ class Clothoids:
 
 @dataclass(frozen=True, eq=False)
 class _FlatClothoids:
-    """Per-segment constants for :meth:`Clothoids.offset` (flattened batch)."""
+    """Per-segment constants for :meth:`Clothoids.evaluate_runs` (flattened batch)."""
 
     kind: NDArray[np.int8]  # 0 arc/line, 1 near-arc (series), 2 spiral (Fresnel)
-    theta0: Array
+    cos0: Array  # cos θ0
+    sin0: Array  # sin θ0
     kappa0: Array
     dkappa: Array
     s_centre: Array  # arc length of the zero-curvature point
     inv_scale: Array  # 1/ρ, ρ = sqrt(π/|dkappa|)
     gamma: Array  # sign of dkappa
-    rotation: NDArray[np.complex128]  # ρ·e^{iθc}, θc the tangent angle at zero curvature
+    rotation_cos: Array  # ρ·cos θc, θc the tangent angle at zero curvature
+    rotation_sin: Array  # ρ·sin θc
     c0: Array  # C(u0)
     s0: Array  # S(u0)
 
@@ -270,17 +298,18 @@ class _FlatClothoids:
         scale = np.sqrt(np.pi / np.abs(dk))
         s_centre = -kappa0 / dk
         theta_c = theta0 - 0.5 * kappa0 * kappa0 / dk
-        gamma = np.sign(dk)
         fs0, fc0 = fresnel(-s_centre / scale)
         return cls(
             kind=kind,
-            theta0=theta0,
+            cos0=np.cos(theta0),
+            sin0=np.sin(theta0),
             kappa0=kappa0,
             dkappa=dkappa,
             s_centre=s_centre,
             inv_scale=1.0 / scale,
-            gamma=gamma,
-            rotation=scale * np.exp(1j * theta_c),
+            gamma=np.sign(dk),
+            rotation_cos=scale * np.cos(theta_c),
+            rotation_sin=scale * np.sin(theta_c),
             c0=fc0,
             s0=fs0,
         )

@@ -51,7 +51,9 @@ def lognormal_time(
     fraction: ArrayLike, t0: ArrayLike, mu: ArrayLike, sigma: ArrayLike
 ) -> NDArray[np.float64]:
     """The inverse of W: the time at which ``fraction`` (in (0, 1)) of the stroke is done."""
-    return np.asarray(t0, dtype=float) + np.exp(mu + np.asarray(sigma, dtype=float) * ndtri(fraction))
+    return np.asarray(t0, dtype=float) + np.exp(
+        mu + np.asarray(sigma, dtype=float) * ndtri(fraction)
+    )
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ nothing, after it its whole chord. Cost is linear in the number of (sample, acti
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -28,6 +29,8 @@ MAX_SAMPLES = 50_000_000
 """Refuse to allocate more samples than this (about 2.4 GB of arrays)."""
 
 _INV_SQRT_2PI = 1.0 / float(np.sqrt(2.0 * np.pi))
+_CHUNK = 1 << 14
+"""(sample, stroke) pairs evaluated at once: temporaries stay in the CPU cache."""
 
 Array = NDArray[np.float64]
 
@@ -47,7 +50,7 @@ class Motion:
     pen: NDArray[np.int8]
     """1 while the pen is down, 0 during lifts, ``(N,)``."""
     plan: NDArray[np.intp]
-    """Index of the plan being drawn, −1 during lifts, ``(N,)``."""
+    """Index of the plan being drawn, -1 during lifts, ``(N,)``."""
     dt: float
     """The time step, seconds."""
 
@@ -62,7 +65,7 @@ class Motion:
     def runs(self) -> Iterator[tuple[int, slice]]:
         """``(plan index, slice)`` for each pen-down run, in drawing order."""
         down = np.flatnonzero(np.diff(np.concatenate([[-1], self.plan, [-1]])) != 0)
-        for begin, end in zip(down[:-1], down[1:], strict=True):
+        for begin, end in itertools.pairwise(down):
             if self.plan[begin] >= 0:
                 yield int(self.plan[begin]), slice(int(begin), int(end))
 
@@ -78,11 +81,14 @@ def sample(tag: Tag, dt: float = 0.01) -> Motion:
             lift = tag.plans[k].start - tag.plans[k - 1].end(size)
             raise PlanError(
                 f"dt: {dt:g} s is too coarse for the {lift:.3g} s pen lift between"
-                f" plans[{k - 1}] and plans[{k}]; use dt < {lift / 2:.3g} s or delay plans[{k}].start"
+                f" plans[{k - 1}] and plans[{k}]; use dt < {lift / 2:.3g} s"
+                f" or delay plans[{k}].start"
             )
     n = last[-1] + 1
     if n > MAX_SAMPLES:
-        raise PlanError(f"dt: {dt:g} s over {tag.end - origin:.6g} s needs {n} samples (max {MAX_SAMPLES})")
+        raise PlanError(
+            f"dt: {dt:g} s over {tag.end - origin:.6g} s needs {n} samples (max {MAX_SAMPLES})"
+        )
 
     t = origin + np.arange(n) * dt
     xy = np.empty((n, 2))
@@ -116,7 +122,7 @@ def _check_dt(dt: float) -> float:
 def _sample_plan(
     plan: Plan, t: Array, first: int, dt: float, origin: float, size: float
 ) -> tuple[Array, Array]:
-    """Position and velocity of one plan at the grid samples ``t`` (global indices from ``first``)."""
+    """Position and velocity of one plan at grid samples ``t`` (global indices from ``first``)."""
     count = len(t)
     geometry = plan.geometry
     t_on, t_off = plan.windows(size, END_TOLERANCE)
@@ -130,22 +136,32 @@ def _sample_plan(
     xy = plan.targets[0] + np.cumsum(done[:count], axis=0)
     v = np.zeros((count, 2))
 
-    counts = stop - begin
-    total = int(counts.sum())
-    if total:
-        stroke = np.repeat(np.arange(plan.n_strokes), counts)
-        row = np.arange(total) - np.repeat(np.cumsum(counts) - counts - begin, counts)
-        elapsed = (origin + (row + first) * dt) - plan.onsets[stroke]
-        elapsed = np.maximum(elapsed, np.finfo(float).tiny)
-        sigma = plan.sigma[stroke]
-        z = (np.log(elapsed) - plan.mu[stroke]) / sigma
-        length = geometry.length[stroke]
-        s = length * ndtr(z)
-        offset = geometry.offset(stroke, s)
-        theta = geometry.tangent_angle(stroke, s)
-        speed = length * np.exp(-0.5 * z * z) * _INV_SQRT_2PI / (sigma * elapsed)
-        xy[:, 0] += np.bincount(row, weights=offset.real, minlength=count)
-        xy[:, 1] += np.bincount(row, weights=offset.imag, minlength=count)
-        v[:, 0] = np.bincount(row, weights=speed * np.cos(theta), minlength=count)
-        v[:, 1] = np.bincount(row, weights=speed * np.sin(theta), minlength=count)
+    # Flatten the (sample, active stroke) pairs, strokes ordered by curve kind (see
+    # Clothoids.evaluate_runs) and processed in cache-sized chunks of consecutive strokes.
+    order = np.argsort(geometry.kind, kind="stable")
+    counts = (stop - begin)[order]
+    ends = np.cumsum(counts)
+    chunk_of = ends // _CHUNK
+    for chunk in np.unique(chunk_of[counts > 0]):
+        pick = np.flatnonzero(chunk_of == chunk)
+        strokes, n = order[pick], counts[pick]
+        lo = int(begin[strokes].min())
+        row = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n - (begin[strokes] - lo), n)
+        span = int(row.max()) + 1
+        inv_sigma = 1.0 / plan.sigma[strokes]
+        elapsed = row * dt + np.repeat(origin + (first + lo) * dt - plan.onsets[strokes], n)
+        np.maximum(elapsed, np.finfo(float).tiny, out=elapsed)
+        z = np.log(elapsed)
+        z *= np.repeat(inv_sigma, n)
+        z -= np.repeat(plan.mu[strokes] * inv_sigma, n)
+        length = geometry.length[strokes]
+        dx, dy, tx, ty = geometry.evaluate_runs(strokes, n, np.repeat(length, n) * ndtr(z))
+        speed = np.exp(-0.5 * z * z)
+        speed /= elapsed
+        speed *= np.repeat(length * inv_sigma * _INV_SQRT_2PI, n)
+        rows = slice(lo, lo + span)
+        xy[rows, 0] += np.bincount(row, weights=dx, minlength=span)
+        xy[rows, 1] += np.bincount(row, weights=dy, minlength=span)
+        v[rows, 0] += np.bincount(row, weights=speed * tx, minlength=span)
+        v[rows, 1] += np.bincount(row, weights=speed * ty, minlength=span)
     return xy, v

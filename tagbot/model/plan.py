@@ -41,6 +41,9 @@ MODELS: tuple[Model, ...] = ("gamma", "sigma")
 END_TOLERANCE = 1e-6
 """A plan's motion ends once the path still to travel is below this fraction of the tag's size."""
 
+MIN_CHORD = 1e-9
+"""Consecutive targets closer than this fraction of the plan's extent are refused."""
+
 DEFAULT_MU = float(np.log(0.2))
 """The paper's log-delay, shared by all strokes (§5)."""
 DEFAULT_SIGMA = float(np.log(1.4))
@@ -71,7 +74,7 @@ class Plan:
     targets: Array
     """Virtual targets, shape ``(m, 2)``."""
     dt: Array
-    """Onset delays, seconds, shape ``(m − 1,)``; see the module docstring."""
+    """Onset delays, seconds, shape ``(m - 1,)``; see the module docstring."""
     mu: Array
     """Log-delays (log seconds)."""
     sigma: Array
@@ -95,6 +98,15 @@ class Plan:
         same = np.flatnonzero(np.all(targets[1:] == targets[:-1], axis=1))
         if same.size:
             raise PlanError(f"targets[{same[0] + 1}]: coincides with targets[{same[0]}]")
+        chord = np.hypot(*np.diff(targets, axis=0).T)
+        extent = float(np.hypot(*np.ptp(targets, axis=0)))
+        close = np.flatnonzero((chord < MIN_CHORD * extent) | (chord < 1e-100))
+        if close.size:
+            j = int(close[0])
+            raise PlanError(
+                f"targets[{j + 1}]: too close to targets[{j}] ({chord[j]:.3g} apart in a plan"
+                f" {extent:.3g} across; need more than {MIN_CHORD:g} of it)"
+            )
         n = len(targets) - 1
         fields = {name: _vector(name, getattr(self, name), n) for name in _STROKE_FIELDS}
         negative = np.flatnonzero(fields["dt"] < 0)
@@ -132,7 +144,9 @@ class Plan:
         if bad.size:
             j = int(bad[0])
             got = phi.reshape(-1)[j]
-            raise PlanError(f"strokes[{j}].phi: must be finite and in (-pi, pi), got {float(got)!r}")
+            raise PlanError(
+                f"strokes[{j}].phi: must be finite and in (-pi, pi), got {float(got)!r}"
+            )
         return cls(targets, dt, mu, sigma, -phi, phi, start)
 
     @property
@@ -227,7 +241,8 @@ class Tag:
                 j = int(np.flatnonzero(~plan.arcs)[0])
                 raise PlanError(
                     f"plans[{k}].strokes[{j}].phi: a sigma-model stroke is an arc with"
-                    f" phi1 == -phi2 and |phi| < pi, got phi1={float(plan.phi1[j])!r}, phi2={float(plan.phi2[j])!r}"
+                    f" phi1 == -phi2 and |phi| < pi, got phi1={float(plan.phi1[j])!r},"
+                    f" phi2={float(plan.phi2[j])!r}"
                 )
         object.__setattr__(self, "plans", plans)
         for k in range(1, len(plans)):
@@ -259,7 +274,7 @@ class Tag:
         return sum(plan.n_strokes for plan in self.plans)
 
     def sample(self, dt: float = 0.01) -> Motion:
-        """The motion at a fixed time step ``dt`` (seconds); see :func:`tagbot.model.motion.sample`."""
+        """The motion at a fixed time step ``dt`` in seconds; see :func:`.motion.sample`."""
         from tagbot.model.motion import sample
 
         return sample(self, dt)

@@ -1,5 +1,7 @@
 """Hypothesis strategies and builders for random plans (shared by the model tests)."""
 
+import itertools
+
 import numpy as np
 from hypothesis import strategies as st
 
@@ -26,7 +28,7 @@ def plans(draw, max_targets: int = 8, start: float = 0.0) -> Plan:
     targets = draw(
         st.lists(st.tuples(coord, coord), min_size=m, max_size=m, unique=True).filter(
             lambda pts: all(
-                np.hypot(a[0] - b[0], a[1] - b[1]) > 1e-3 for a, b in zip(pts, pts[1:])
+                np.hypot(a[0] - b[0], a[1] - b[1]) > 1e-3 for a, b in itertools.pairwise(pts)
             )
         )
     )

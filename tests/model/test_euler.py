@@ -1,4 +1,4 @@
-"""Euler spirals: generalised Fresnel integrals and the G1 Hermite fit against independent oracles."""
+"""Euler spirals: generalised Fresnel integrals and the G1 fit, against independent oracles."""
 
 import numpy as np
 import pytest

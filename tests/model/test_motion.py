@@ -155,7 +155,9 @@ def test_gamma_arc_strokes_reproduce_the_sigma_model():
     rng = np.random.default_rng(5)
     sigma_tag = chain(rng, plans_count=2, sigma_model=True)
     gamma_tag = Tag(
-        tuple(Plan(p.targets, p.dt, p.mu, p.sigma, p.phi1, p.phi2, p.start) for p in sigma_tag.plans)
+        tuple(
+            Plan(p.targets, p.dt, p.mu, p.sigma, p.phi1, p.phi2, p.start) for p in sigma_tag.plans
+        )
     )
     a, b = sigma_tag.sample(0.005), gamma_tag.sample(0.005)
     np.testing.assert_array_equal(a.xy, b.xy)
@@ -200,19 +202,25 @@ def test_bad_dt_is_refused(dt):
 def test_strokes_are_evaluated_only_inside_their_windows(monkeypatch):
     """A long plan: evaluated (sample, stroke) pairs stay far below samples × strokes."""
     evaluated = []
-    original = euler.Clothoids.offset
+    original = euler.Clothoids.evaluate_runs
 
-    def counting(self, index, s):
+    def counting(self, segments, counts, s):
         evaluated.append(len(s))
-        return original(self, index, s)
+        return original(self, segments, counts, s)
 
-    monkeypatch.setattr(euler.Clothoids, "offset", counting)
+    monkeypatch.setattr(euler.Clothoids, "evaluate_runs", counting)
     rng = np.random.default_rng(8)
     m = 200
     targets = np.cumsum(rng.normal(size=(m, 2)) * 20, axis=0)
     n = m - 1
-    plan = Plan(targets, np.full(n, 0.25), np.full(n, DEFAULT_MU), np.full(n, DEFAULT_SIGMA),
-                rng.uniform(-1, 1, n), rng.uniform(-1, 1, n))
+    plan = Plan(
+        targets,
+        np.full(n, 0.25),
+        np.full(n, DEFAULT_MU),
+        np.full(n, DEFAULT_SIGMA),
+        rng.uniform(-1, 1, n),
+        rng.uniform(-1, 1, n),
+    )
     motion = Tag((plan,)).sample(0.01)
     pairs = sum(evaluated)
     assert 0 < pairs < 0.05 * len(motion) * n

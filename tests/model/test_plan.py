@@ -47,6 +47,8 @@ def test_bad_stroke_fields_are_named(changes, message):
         ([[0.0, 0.0], [0.0, np.inf], [2.0, 2.0]], r"targets\[1\]: must be finite"),
         ([[0.0, 0.0], [1.0, 1.0], [1.0, 1.0]], r"targets\[2\]: coincides with targets\[1\]"),
         ([[0.0, 0.0]], r"targets: need at least 2, got 1"),
+        ([[0.0, 0.0], [5.0, 0.0], [5.0, 1e-12]], r"targets\[2\]: too close to targets\[1\]"),
+        ([[0.0, 0.0], [2.5e-202, 0.0]], r"targets\[1\]: too close to targets\[0\]"),
         ([], r"targets: "),
         ([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]], r"targets: expected a list of \[x, y\] pairs"),
     ],

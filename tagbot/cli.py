@@ -1,0 +1,190 @@
+"""The ``tagbot`` command line.
+
+:func:`main` runs the click group and turns every expected failure into one line on stderr,
+``tagbot: error: <message>``, with exit status 2 for bad input or usage, 1 for other tagbot errors
+and 130 when interrupted. Unexpected exceptions propagate: they are bugs.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+import click
+
+from tagbot.errors import TagbotError
+
+__all__ = ["cli", "main"]
+
+EXIT_OK = 0
+EXIT_ERROR = 1
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+
+PROG = "tagbot"
+
+
+class _Interrupted(Exception):
+    """A KeyboardInterrupt inside a command, carried past click's own handling."""
+
+
+class _Group(click.Group):
+    """A click group that lets :func:`main` report Ctrl-C as one line."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as e:
+            raise _Interrupted from e
+
+
+class Seconds(click.ParamType):
+    """A positive, finite number of seconds."""
+
+    name = "SECONDS"
+
+    def convert(
+        self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+    ) -> float:
+        if isinstance(value, float | int) and not isinstance(value, bool):
+            x = float(value)
+        else:
+            try:
+                x = float(str(value).strip())
+            except ValueError:
+                self.fail(f"{value!r} is not a number of seconds", param, ctx)
+        if not (math.isfinite(x) and x > 0):
+            self.fail(f"{value!r} is not a positive, finite number of seconds", param, ctx)
+        return x
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("tagbot")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    if value and not ctx.resilient_parsing:
+        click.echo(f"{PROG} {_version()}")
+        ctx.exit()
+
+
+@click.group(
+    name=PROG,
+    cls=_Group,
+    invoke_without_command=True,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+@click.option(
+    "--version",
+    is_flag=True,
+    expose_value=False,
+    is_eager=True,
+    callback=_print_version,
+    help="Show the version and exit.",
+)
+@click.pass_context
+def cli(ctx: click.Context) -> None:
+    """Model graffiti tags with Sigma-Lognormal / Gamma-Lognormal strokes.
+
+    Plans are JSON files (see the README, "Plan files"); examples ship in tagbot/examples/.
+    """
+    if ctx.invoked_subcommand is None:
+        click.echo(ctx.get_help())
+
+
+@cli.command()
+@click.argument("plan", metavar="PLAN.json", type=click.Path(dir_okay=False))
+@click.option(
+    "--dt",
+    type=Seconds(),
+    default=0.01,
+    show_default=True,
+    help="Sampling interval in seconds (> 0).",
+)
+@click.option(
+    "-o",
+    "--output",
+    metavar="MOTION.csv",
+    type=click.Path(dir_okay=False, allow_dash=True),
+    default="-",
+    show_default="stdout",
+    help="Where to write the CSV; '-' is stdout.",
+)
+def sample(plan: str, dt: float, output: str) -> None:
+    """Sample a plan file's tag at a fixed time step and write it as CSV.
+
+    Columns: t,x,y,vx,vy,speed,pen (seconds, plan units, units/s; pen 1 = down).
+    """
+    from tagbot.io.motionfile import write_motion_csv
+    from tagbot.io.planfile import load_plan
+
+    tag = load_plan(plan)
+    motion = tag.sample(dt=dt)
+    if output == "-":
+        write_motion_csv(motion, sys.stdout)
+        sys.stdout.flush()
+        return
+    write_motion_csv(motion, output)
+    n = len(motion.t)
+    duration = float(motion.t[-1] - motion.t[0]) if n else 0.0
+    plans = len(tag.plans)
+    click.echo(
+        f"wrote {n} samples ({duration:.2f} s, {plans} plan{'s' if plans != 1 else ''}) "
+        f"to {output}",
+        err=True,
+    )
+
+
+def _one_line(message: str) -> str:
+    return " ".join(message.splitlines()).strip()
+
+
+def _error(message: str) -> None:
+    click.echo(f"{PROG}: error: {_one_line(message)}", err=True)
+
+
+def _os_error_message(e: OSError) -> str:
+    if e.filename is not None:
+        name = os.fsdecode(e.filename)
+        return f"{name}: {e.strerror or e}"
+    return str(e)
+
+
+def _command_path(e: click.UsageError, args: list[str]) -> str:
+    """The command a usage error is about, for the ``--help`` hint."""
+    if e.ctx is not None:
+        return e.ctx.command_path
+    command = next((a for a in args if not a.startswith("-")), None)
+    return f"{PROG} {command}" if command in cli.commands else PROG
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``tagbot`` command line with ``argv`` (default: ``sys.argv[1:]``); return the exit
+    status."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    try:
+        rv = cli.main(args=args, prog_name=PROG, standalone_mode=False)
+    except click.UsageError as e:
+        _error(f"{e.format_message()} (see '{_command_path(e, args)} --help')")
+        return EXIT_USAGE
+    except click.ClickException as e:
+        _error(e.format_message())
+        return e.exit_code
+    except (_Interrupted, click.Abort, KeyboardInterrupt):
+        _error("interrupted")
+        return EXIT_INTERRUPTED
+    except TagbotError as e:
+        _error(str(e))
+        return EXIT_USAGE if isinstance(e, ValueError) else EXIT_ERROR
+    except OSError as e:
+        _error(_os_error_message(e))
+        return EXIT_USAGE
+    return rv if isinstance(rv, int) else EXIT_OK
