@@ -79,15 +79,21 @@ def fresnel_arguments(tag: Tag, dt: float) -> np.ndarray:
     return np.concatenate(recorded) if recorded else np.zeros(1)
 
 
-def best_time(fn: Callable[[], object], repeat: int) -> float:
-    """The best of ``repeat`` wall-clock timings (after one warm-up call)."""
-    fn()
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
+def best_times(fns: dict[str, Callable[[], object]], repeat: int) -> dict[str, float]:
+    """Best wall-clock time of each function over ``repeat`` rounds, interleaved.
+
+    Each round runs every function once, so drifts in the machine's speed hit all of them alike
+    and their ratios stay meaningful. One warm-up round first.
+    """
+    best = {name: float("inf") for name in fns}
+    for round_ in range(repeat + 1):
+        for name, fn in fns.items():
+            start = time.perf_counter()
+            fn()
+            elapsed = time.perf_counter() - start
+            if round_:
+                best[name] = min(best[name], elapsed)
+    return best
 
 
 def main() -> None:
@@ -95,7 +101,7 @@ def main() -> None:
     parser.add_argument("--strokes", type=int, default=400, help="strokes in the base tag")
     parser.add_argument("--plans", type=int, default=8, help="plans in the base tag")
     parser.add_argument("--dt", type=float, default=0.001, help="time step, seconds")
-    parser.add_argument("--repeat", type=int, default=7, help="timings per measurement (best)")
+    parser.add_argument("--repeat", type=int, default=15, help="timings per measurement (best)")
     args = parser.parse_args()
 
     print(
@@ -117,12 +123,20 @@ def main() -> None:
         fit_time = time.perf_counter() - fit_start
 
         pairs = active_pairs(base, args.dt)
-        t_sample = best_time(lambda tag=base: tag.sample(args.dt), args.repeat)
         u = np.resize(own_arguments, pairs)
-        t_fresnel = best_time(lambda u=u: fresnel(u), args.repeat)
         wide = np.random.default_rng(0).uniform(-8.0, 8.0, pairs)
-        t_wide = best_time(lambda wide=wide: fresnel(wide), args.repeat)
-        t_double = best_time(lambda tag=double: tag.sample(args.dt), args.repeat)
+        times = best_times(
+            {
+                "sample": lambda tag=base: tag.sample(args.dt),
+                "fresnel": lambda u=u: fresnel(u),
+                "wide": lambda wide=wide: fresnel(wide),
+                "double": lambda tag=double: tag.sample(args.dt),
+            },
+            args.repeat,
+        )
+        t_sample, t_fresnel, t_wide, t_double = (
+            times[k] for k in ("sample", "fresnel", "wide", "double")
+        )
         samples = len(base.sample(args.dt))
 
         print(

@@ -8,6 +8,9 @@ The public API::
     tagbot.save_plan(tag, "copy.json")
 """
 
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _version
+
 from tagbot.errors import InputError, PlanError, PlanFileError, TagbotError
 from tagbot.io.planfile import load_plan, save_plan
 from tagbot.model import (
@@ -22,7 +25,10 @@ from tagbot.model import (
     lognormal_cdf,
 )
 
-__version__ = "0.1.0"
+try:
+    __version__ = _version("tagbot")
+except PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = "unknown"
 
 __all__ = [
     "DEFAULT_MU",

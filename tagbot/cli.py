@@ -61,18 +61,11 @@ class Seconds(click.ParamType):
         return x
 
 
-def _version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("tagbot")
-    except PackageNotFoundError:
-        return "unknown (not installed)"
-
-
 def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
     if value and not ctx.resilient_parsing:
-        click.echo(f"{PROG} {_version()}")
+        from tagbot import __version__
+
+        click.echo(f"{PROG} {__version__}")
         ctx.exit()
 
 
