@@ -11,7 +11,7 @@ from tagbot.model.lognormal import (
     lognormal_cdf,
     lognormal_time,
 )
-from tagbot.model.motion import Motion, sample
+from tagbot.model.motion import Motion, evaluate_plan, sample
 from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, END_TOLERANCE, MODELS, Model, Plan, Tag
 
 __all__ = [
@@ -26,6 +26,7 @@ __all__ = [
     "Plan",
     "Tag",
     "characteristic_times",
+    "evaluate_plan",
     "fit_euler",
     "lognormal",
     "lognormal_cdf",

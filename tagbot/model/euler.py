@@ -103,11 +103,18 @@ def moments(n_max: int, b: ArrayLike) -> NDArray[np.complex128]:
     return result
 
 
-def generalized_fresnel(k_max: int, a: ArrayLike, b: ArrayLike) -> NDArray[np.complex128]:
-    """``I_k(a, b) = ∫₀¹ τ^k exp(i(aτ²/2 + bτ)) dτ``, ``k = 0..k_max``; shape ``(k_max+1, …)``."""
+def generalized_fresnel(
+    k_max: int, a: ArrayLike, b: ArrayLike, accurate: bool = True
+) -> NDArray[np.complex128]:
+    """``I_k(a, b) = ∫₀¹ τ^k exp(i(aτ²/2 + bτ)) dτ``, ``k = 0..k_max``; shape ``(k_max+1, …)``.
+
+    ``I_0`` is accurate to ~1e-14 everywhere. ``accurate=False`` computes ``I_k`` for ``k ≥ 1``
+    by the fast recurrence down to ``|a| = SMALL_A``, where it may lose up to ~8 digits for large
+    ``|b|``: good enough for a derivative in Newton's method, and much cheaper.
+    """
     a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
     out = np.empty((k_max + 1, *a.shape), dtype=complex)
-    small = np.abs(a) < (SMALL_A if k_max == 0 else _SMALL_A_MOMENTS)
+    small = np.abs(a) < (SMALL_A if k_max == 0 or not accurate else _SMALL_A_MOMENTS)
     if np.any(small):
         out[:, small] = _generalized_fresnel_series(k_max, a[small], b[small])
     large = ~small
@@ -367,7 +374,9 @@ def solve_g1(phi0: ArrayLike, phi1: ArrayLike) -> Array:
         if not active.size:
             break
         ai = a[active]
-        moments_ = rot[active] * generalized_fresnel(2, 2.0 * ai, delta[active] - ai)
+        moments_ = rot[active] * generalized_fresnel(
+            2, 2.0 * ai, delta[active] - ai, accurate=False
+        )
         g = moments_[0].imag
         dg = moments_[2].real - moments_[1].real
         a[active] = ai - g / dg

@@ -19,7 +19,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtr
 
 from tagbot.errors import PlanError
@@ -99,7 +99,7 @@ def sample(tag: Tag, dt: float = 0.01) -> Motion:
     for k, plan in enumerate(tag.plans):
         xy[lift_start : first[k]] = plan.targets[0]  # pen up, waiting where it goes down next
         rows = slice(first[k], last[k] + 1)
-        xy[rows], v[rows] = _sample_plan(plan, t[rows], first[k], dt, origin, size)
+        xy[rows], v[rows] = evaluate_plan(plan, t[rows], size)
         pen[rows] = 1
         plan_index[rows] = k
         lift_start = last[k] + 1
@@ -119,16 +119,23 @@ def _check_dt(dt: float) -> float:
     return value
 
 
-def _sample_plan(
-    plan: Plan, t: Array, first: int, dt: float, origin: float, size: float
-) -> tuple[Array, Array]:
-    """Position and velocity of one plan at grid samples ``t`` (global indices from ``first``)."""
+def evaluate_plan(plan: Plan, t: ArrayLike, size: float | None = None) -> tuple[Array, Array]:
+    """Position ``(N, 2)`` and velocity ``(N, 2)`` of ``plan`` at the sorted times ``t``.
+
+    ``size`` sets the windows' tolerance (``END_TOLERANCE × size``); by default the extent of the
+    plan's own targets. :func:`sample` calls this on its grid with the tag's size.
+    """
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1 or np.any(np.diff(t) < 0) or not np.all(np.isfinite(t)):
+        raise ValueError("t: must be a finite, sorted 1-D array of times")
+    if size is None:
+        size = float(np.hypot(*np.ptp(plan.targets, axis=0)))
     count = len(t)
     geometry = plan.geometry
     t_on, t_off = plan.windows(size, END_TOLERANCE)
-    # Active sample range [begin, stop) of each stroke, local to this plan's rows.
-    begin = np.clip(np.ceil((t_on - origin) / dt).astype(np.intp) - first, 0, count)
-    stop = np.clip(np.floor((t_off - origin) / dt).astype(np.intp) + 1 - first, begin, count)
+    # Active sample range [begin, stop) of each stroke.
+    begin = np.searchsorted(t, t_on, side="left")
+    stop = np.searchsorted(t, t_off, side="right")
 
     # Strokes completed before a sample contribute their whole chord.
     done = np.zeros((count + 1, 2))
@@ -140,8 +147,7 @@ def _sample_plan(
     # Clothoids.evaluate_runs) and processed in cache-sized chunks of consecutive strokes.
     order = np.argsort(geometry.kind, kind="stable")
     counts = (stop - begin)[order]
-    ends = np.cumsum(counts)
-    chunk_of = ends // _CHUNK
+    chunk_of = np.cumsum(counts) // _CHUNK
     for chunk in np.unique(chunk_of[counts > 0]):
         pick = np.flatnonzero(chunk_of == chunk)
         strokes, n = order[pick], counts[pick]
@@ -149,7 +155,7 @@ def _sample_plan(
         row = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n - (begin[strokes] - lo), n)
         span = int(row.max()) + 1
         inv_sigma = 1.0 / plan.sigma[strokes]
-        elapsed = row * dt + np.repeat(origin + (first + lo) * dt - plan.onsets[strokes], n)
+        elapsed = t[lo:][row] - np.repeat(plan.onsets[strokes], n)
         np.maximum(elapsed, np.finfo(float).tiny, out=elapsed)
         z = np.log(elapsed)
         z *= np.repeat(inv_sigma, n)

@@ -1,0 +1,312 @@
+"""Gesture reconstruction (paper §6): a trace becomes a ΓΛ* or ΣΛ* plan that evokes a fast hand.
+
+Per trace:
+
+1. resample uniformly along its length and smooth (§6.1);
+2. salient points: curvature extrema turning more than 25° between their neighbours, plus the
+   ends; one extra dominant point per 180° of turning between two of them (§6.1); the ΣΛ* model
+   also splits sections at their inflections, since its arcs cannot inflect;
+3. ``phi`` per section from the area between contour and chord, one circular arc, or two across
+   an inflection (eq. 19, §6.2);
+4. ``dt`` per stroke from the sharpness of the contour around the target that precedes it
+   (eq. 20–21, exponent 3.5);
+5. targets start on the dominant points, then move by ``p(z_j) − c_j`` (eq. 22), ``c_j`` the
+   trajectory's position where the speed profiles of the strokes meeting at target ``j`` cross,
+   until the largest move is below one resampling step or after 10 iterations (§6.4);
+6. beyond the paper, unless ``refine=False``: a least-squares polish of targets, tangents and
+   onsets so the trajectory follows the whole contour (:mod:`tagbot.fit.refine`).
+
+Lengths in :class:`FitOptions` are fractions of the tag's size (the diagonal of all traces'
+bounding box), so a fit does not depend on units; angles are degrees; times seconds.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Sequence
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tagbot.errors import PlanError
+from tagbot.fit import contour
+from tagbot.fit.refine import refine
+from tagbot.model.euler import wrap_angle
+from tagbot.model.lognormal import lognormal
+from tagbot.model.motion import evaluate_plan
+from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, MODELS, Model, Plan, Tag
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """Every constant of the reconstruction, with the paper's defaults where it gives one."""
+
+    mu: float = DEFAULT_MU
+    """Log-delay shared by all strokes (§5: ln 0.2)."""
+    sigma: float = DEFAULT_SIGMA
+    """Log-response time shared by all strokes (§5: ln 1.4)."""
+    dt_min: float = 0.1
+    """Onset delay at the smoothest target, seconds (the paper gives no value)."""
+    dt_max: float = 0.35
+    """Onset delay at the sharpest corner, seconds (with the default mu and sigma the previous
+    stroke is then ~95 % done)."""
+    sharpness_exponent: float = 3.5
+    """Eq. 21's exponent ``a`` biasing sharpness towards smooth (§6.3: 3.5)."""
+    salient_angle: float = 25.0
+    """Salient points turn more than this between their neighbours, degrees (§6.1: 25)."""
+    max_turn: float = 180.0
+    """One extra dominant point per this much turning between salient points, degrees (§6.1)."""
+    step: float = 1 / 600
+    """Resampling step, fraction of the tag's size (the paper's Δs = 1 pixel)."""
+    smoothing: float = 0.003
+    """Gaussian smoothing width (standard deviation), fraction of the tag's size."""
+    support: float = 0.025
+    """Support of the turning angles and half-width of the sharpness region (l_sup)."""
+    prominence: float = 8.0
+    """How much a curvature peak must stand out to be a salient candidate, degrees."""
+    inflection_angle: float = 8.0
+    """An inflection needs at least this much turning on each side, degrees."""
+    iterations: int = 10
+    """Target corrections at most (§6.4: 10)."""
+    tolerance: float = 1.0
+    """Stop once targets move less than this many resampling steps (§6.4: about 1 unit)."""
+    lift: float = 0.3
+    """Pen-up time between consecutive plans, seconds."""
+    dot: float = 0.003
+    """A trace with no length (a dot) becomes a straight stroke this long, fraction of size."""
+    refine: bool = True
+    """Polish targets, tangents and delays by least squares after the paper's steps
+    (:mod:`tagbot.fit.refine`); off, the result is the paper's method alone."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not np.isfinite(value):
+                raise PlanError(f"{f.name}: must be finite, got {value!r}")
+        positive = ("sigma", "step", "support", "max_turn", "dot", "tolerance")
+        for name in positive:
+            if getattr(self, name) <= 0:
+                raise PlanError(f"{name}: must be > 0, got {getattr(self, name)!r}")
+        for name in ("dt_min", "lift", "smoothing", "prominence", "inflection_angle"):
+            if getattr(self, name) < 0:
+                raise PlanError(f"{name}: must be >= 0, got {getattr(self, name)!r}")
+        if self.dt_max < self.dt_min:
+            raise PlanError(f"dt_max: must be >= dt_min ({self.dt_min}), got {self.dt_max!r}")
+        if self.iterations < 0 or int(self.iterations) != self.iterations:
+            raise PlanError(f"iterations: must be a whole number >= 0, got {self.iterations!r}")
+
+
+def fit(traces: Sequence[Any], model: Model = "gamma", **options: Any) -> Tag:
+    """Reconstruct a tag from traces: one plan per trace, in the given order, pen lifted between.
+
+    ``traces`` holds objects with an ``xy`` array ``(N, 2)`` (such as those of
+    :func:`tagbot.load_traces`) or plain ``(N, 2)`` arrays. ``options`` override
+    :class:`FitOptions` fields by name.
+    """
+    if model not in MODELS:
+        raise PlanError(f"model: must be 'gamma' or 'sigma', got {model!r}")
+    unknown = sorted(set(options) - {f.name for f in fields(FitOptions)})
+    if unknown:
+        raise PlanError(f"{unknown[0]}: not a fit option (see tagbot.fit.FitOptions)")
+    opts = replace(FitOptions(), **options)
+    polylines = [_polyline(trace, k) for k, trace in enumerate(traces)]
+    if not polylines:
+        raise PlanError("traces: empty (nothing to fit)")
+    points = np.concatenate(polylines)
+    size = float(np.hypot(*np.ptp(points, axis=0)))
+    if size == 0.0:
+        size = 1.0  # only dots, all at one place: any scale will do
+    plans = [fit_trace(xy, size, model, opts) for xy in polylines]
+    # Sequence the plans: each starts a pen lift after the previous one ends.
+    tag_size = float(np.hypot(*np.ptp(np.concatenate([p.targets for p in plans]), axis=0)))
+    start = 0.0
+    timed = []
+    for plan in plans:
+        timed.append(Plan(plan.targets, plan.dt, plan.mu, plan.sigma, plan.phi1, plan.phi2, start))
+        start = timed[-1].end(tag_size) + opts.lift
+    return Tag(tuple(timed), model)
+
+
+def _polyline(trace: Any, index: int) -> Array:
+    xy = np.asarray(getattr(trace, "xy", trace), dtype=float)
+    if xy.ndim != 2 or xy.shape[1] != 2 or len(xy) == 0:
+        raise PlanError(f"traces[{index}]: expected (N, 2) points with N >= 1, got {xy.shape}")
+    if not np.all(np.isfinite(xy)):
+        raise PlanError(f"traces[{index}]: points must be finite")
+    return xy
+
+
+def fit_trace(xy: ArrayLike, size: float, model: Model, opts: FitOptions) -> Plan:
+    """One trace → one plan (start 0). ``size`` is the whole tag's, which sets every scale."""
+    xy = np.asarray(xy, dtype=float)
+    step = opts.step * size
+    length = contour.arc_length(xy)[-1]
+    if length < 0.5 * opts.dot * size:
+        return _dot(xy[0], size, opts)
+    curve = contour.smooth(contour.resample(xy, step), opts.smoothing * size / step)
+    # The resampled step (≤ step): every scale below is in samples of it.
+    ds = length / (len(curve) - 1)
+    support = max(2, round(opts.support * size / ds))
+    dominant = contour.salient_points(
+        curve, support, np.radians(opts.salient_angle), np.radians(opts.prominence)
+    )
+    dominant = contour.add_turning_points(curve, dominant, np.radians(opts.max_turn), support // 2)
+    min_turn = np.radians(opts.inflection_angle)
+    cuts = [
+        contour.inflection(curve, int(a), int(b), support, min_turn)
+        for a, b in itertools.pairwise(dominant)
+    ]
+    if model == "sigma":  # arcs cannot inflect: inflections become targets
+        dominant = np.unique(np.concatenate([dominant, [c for c in cuts if c is not None]]))
+        dominant = dominant.astype(np.intp)
+        cuts = [None] * (len(dominant) - 1)
+    phi1, phi2 = _deviations(curve, dominant, cuts)
+    dt = _onset_delays(curve, dominant, support, opts)
+    n = len(dominant) - 1
+    mu, sigma = np.full(n, opts.mu), np.full(n, opts.sigma)
+    plan = _correct_targets(
+        curve, dominant, dt, mu, sigma, phi1, phi2, opts.iterations, ds * opts.tolerance
+    )
+    if not opts.refine:
+        return plan
+    return refine(plan, curve, (opts.dt_min, opts.dt_max), arcs_only=model == "sigma")
+
+
+def _dot(point: Array, size: float, opts: FitOptions) -> Plan:
+    """A dot: a short straight stroke, so that the pen touches down."""
+    end = point + np.array([opts.dot * size, 0.0])
+    return Plan([point, end], [0.0], [opts.mu], [opts.sigma], [0.0], [0.0])
+
+
+def _deviations(
+    curve: Array, dominant: NDArray[np.intp], cuts: list[int | None]
+) -> tuple[Array, Array]:
+    """``phi1, phi2`` per section of ``curve`` (one arc, or two across the inflection ``cuts``)."""
+    pairs = [
+        section_tangents(curve[a : b + 1], None if q is None else q - a)
+        for a, b, q in zip(dominant[:-1], dominant[1:], cuts, strict=True)
+    ]
+    return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+
+
+def section_tangents(section: Array, cut: int | None) -> tuple[float, float]:
+    """Eq. 19: a section's start and end tangents from the chord, from circular segments.
+
+    With no inflection, one arc: ``(-phi, phi)``. With an inflection at ``section[cut]``, two arcs,
+    one on each side; their start and end tangents measured from the whole section's chord.
+    """
+    if cut is None or not 0 < cut < len(section) - 1:
+        phi = contour.arc_deviation(section)
+        return -phi, phi
+    alpha = _direction(section[-1] - section[0])
+    first = contour.arc_deviation(section[: cut + 1])
+    second = contour.arc_deviation(section[cut:])
+    start = _direction(section[cut] - section[0]) - first
+    end = _direction(section[-1] - section[cut]) + second
+    return float(wrap_angle(start - alpha)), float(wrap_angle(end - alpha))
+
+
+def _onset_delays(
+    curve: Array, dominant: NDArray[np.intp], support: int, opts: FitOptions
+) -> Array:
+    """``dt`` per stroke (eq. 21): the first 0, then from the sharpness at the preceding target."""
+    dt = np.zeros(len(dominant) - 1)
+    for j in range(1, len(dominant) - 1):
+        z = int(dominant[j])
+        a = max(int(dominant[j - 1]), z - support)
+        b = min(int(dominant[j + 1]), z + support)
+        sharp = contour.sharpness(curve, a, z, b)
+        dt[j] = opts.dt_min + (opts.dt_max - opts.dt_min) * min(sharp**opts.sharpness_exponent, 1.0)
+    return dt
+
+
+def _correct_targets(
+    curve: Array,
+    dominant: NDArray[np.intp],
+    dt: Array,
+    mu: Array,
+    sigma: Array,
+    phi1: Array,
+    phi2: Array,
+    iterations: int,
+    tolerance: float,
+) -> Plan:
+    """Eq. 22: move each interior target by ``p(z_j) − c_j`` until the moves are small.
+
+    All targets move at once; with strongly overlapping strokes a full move can overshoot, so each
+    iteration takes the largest step of 1, ½, ¼ or ⅛ of it that lowers the largest error (and
+    stops when none does).
+    """
+    wanted = curve[dominant]
+    plan = Plan(wanted, dt, mu, sigma, phi1, phi2)
+    error = wanted - critical_points(plan)
+    worst = float(np.max(np.hypot(*error.T)))
+    for _ in range(iterations):
+        if worst < tolerance:
+            break
+        for step in (1.0, 0.5, 0.25, 0.125):
+            try:
+                trial = Plan(plan.targets + step * error, dt, mu, sigma, phi1, phi2)
+            except PlanError:  # targets collapsed onto each other
+                continue
+            trial_error = wanted - critical_points(trial)
+            trial_worst = float(np.max(np.hypot(*trial_error.T)))
+            if trial_worst < worst:
+                plan, error, worst = trial, trial_error, trial_worst
+                break
+        else:
+            break
+    return plan
+
+
+def critical_points(plan: Plan) -> Array:
+    """The trajectory's position at each target's critical instant (§6.4), ``(m, 2)``.
+
+    Start and end for the first and last targets; for an interior target ``j``, where the speed
+    profiles of strokes ``j − 1`` and ``j`` cross (between their peaks), or the later peak if they
+    do not.
+    """
+    times = crossing_times(plan)
+    order = np.argsort(times)
+    xy, _ = evaluate_plan(plan, times[order])
+    points = np.empty_like(xy)
+    points[order] = xy
+    points[0], points[-1] = plan.targets[0], plan.targets[-1]
+    return points
+
+
+def crossing_times(plan: Plan) -> Array:
+    """Critical instants per target: plan start, speed-profile crossings, and the plan's end."""
+    m = len(plan.targets)
+    length = plan.geometry.length
+    peaks = plan.onsets + np.exp(plan.mu - plan.sigma**2)
+    times = np.empty(m)
+    times[0] = plan.start
+    times[-1] = float(np.max(peaks)) if m > 2 else peaks[0]
+    if m > 2:
+        j = np.arange(1, m - 1)
+        a, b = j - 1, j
+        lo, hi = np.minimum(peaks[a], peaks[b]), np.maximum(peaks[a], peaks[b])
+
+        def excess(t: Array) -> Array:
+            first = length[a] * lognormal(t, plan.onsets[a], plan.mu[a], plan.sigma[a])
+            second = length[b] * lognormal(t, plan.onsets[b], plan.mu[b], plan.sigma[b])
+            return first - second
+
+        f_lo, f_hi = excess(lo), excess(hi)
+        bracket = (f_lo > 0) & (f_hi < 0)
+        for _ in range(50):  # bisection, all targets at once
+            mid = 0.5 * (lo + hi)
+            positive = excess(mid) > 0
+            lo = np.where(bracket & positive, mid, lo)
+            hi = np.where(bracket & ~positive, mid, hi)
+        times[1:-1] = np.where(bracket, 0.5 * (lo + hi), np.maximum(peaks[a], peaks[b]))
+    return times
+
+
+def _direction(vector: Array) -> float:
+    return float(np.arctan2(vector[1], vector[0]))
