@@ -136,6 +136,98 @@ def sample(plan: str, dt: float, output: str) -> None:
     )
 
 
+@cli.command(name="fit")
+@click.argument("source", metavar="INPUT", type=click.Path(dir_okay=False))
+@click.option(
+    "--model",
+    type=click.Choice(["gamma", "sigma"]),
+    default="gamma",
+    show_default=True,
+    help="Euler-spiral strokes (gamma, can inflect) or circular arcs (sigma).",
+)
+@click.option(
+    "--refine/--no-refine",
+    default=True,
+    show_default=True,
+    help="Polish the paper's reconstruction by least squares.",
+)
+@click.option(
+    "-o",
+    "--output",
+    metavar="PLAN.json",
+    type=click.Path(dir_okay=False, allow_dash=True),
+    default="-",
+    show_default="stdout",
+    help="Where to write the plan; '-' is stdout.",
+)
+def fit_command(source: str, model: str, refine: bool, output: str) -> None:
+    """Reconstruct a plan from a trace file (GML, #000000book JSON, SVG, CSV or JSON points).
+
+    The format is told from the content. Prints the traces, strokes, shape error (and velocity
+    SNR when the input has timing) and the fit time on stderr.
+    """
+    import time
+
+    from tagbot.fit import fit
+    from tagbot.inputs import load_traces
+    from tagbot.io.planfile import save_plan, tag_to_dict
+    from tagbot.metrics import fit_report
+
+    traces = load_traces(source)
+    started = time.perf_counter()
+    tag = fit(traces, model=model, refine=refine)
+    elapsed = time.perf_counter() - started
+    if output == "-":
+        import json
+
+        click.echo(json.dumps(tag_to_dict(tag), indent=1))
+    else:
+        save_plan(tag, output)
+    report = fit_report(traces, tag)
+    click.echo(f"{source}: {report.summary()}; fit {elapsed:.2f} s", err=True)
+    if output != "-":
+        click.echo(f"wrote {output}", err=True)
+
+
+@cli.command()
+@click.argument("plan", metavar="PLAN.json", type=click.Path(dir_okay=False))
+@click.option("--count", "-n", type=click.IntRange(min=1), required=True, help="Instances.")
+@click.option(
+    "--seed",
+    type=click.IntRange(min=0),
+    default=None,
+    help="Seed of the random variations (printed when not given, to repeat a run).",
+)
+@click.option(
+    "-o",
+    "--output",
+    metavar="DIR",
+    type=click.Path(file_okay=False),
+    required=True,
+    help="Folder for the varied plans (created if needed).",
+)
+def vary(plan: str, count: int, seed: int | None, output: str) -> None:
+    """Write COUNT plausible variations of a plan (paper §7): targets, proportions, rhythm and
+    curvature varied at random, reproducibly for a seed."""
+    from pathlib import Path
+
+    from tagbot.fit import new_seed
+    from tagbot.fit import vary as vary_tag
+    from tagbot.io.planfile import load_plan, save_plan
+
+    tag = load_plan(plan)
+    if seed is None:
+        seed = new_seed()
+        click.echo(f"seed {seed} (pass --seed {seed} to repeat)", err=True)
+    folder = Path(output)
+    folder.mkdir(parents=True, exist_ok=True)
+    stem = Path(plan).name.removesuffix(".json").removesuffix(".plan")
+    width = len(str(count))
+    for i, instance in enumerate(vary_tag(tag, count, seed), start=1):
+        save_plan(instance, folder / f"{stem}-{i:0{width}d}.json")
+    click.echo(f"wrote {count} plan{'s' * (count != 1)} to {folder}", err=True)
+
+
 def _one_line(message: str) -> str:
     return " ".join(message.splitlines()).strip()
 

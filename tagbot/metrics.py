@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from tagbot.model.motion import Motion
+from tagbot.model.plan import Tag
 
 Array = NDArray[np.float64]
 
@@ -94,19 +95,16 @@ def velocity_snr(
 
     The recording (times ``t``, points ``xy``) is resampled every ``dt`` seconds and its velocity
     taken by central differences; the model velocity ``model_v`` (at ``model_t``) is mapped to the
-    recording's clock by ``t = offset + scale·t_model`` (velocities divide by ``scale``). Returns
+    recording's clock by ``t = offset + scale·(t_model − model_t[0])`` (velocities divide by
+    ``scale``). Returns
     ``(snr_db, scale, offset)`` for the scale and offset maximising
     ``10·log10(Σ|v|² / Σ|v − v̂|²)``.
     """
-    t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
     model_t, model_v = np.asarray(model_t, dtype=float), np.asarray(model_v, dtype=float)
-    keep = np.concatenate([[True], np.diff(t) > 0])
-    t, xy = t[keep], xy[keep]
-    if len(t) < 3 or t[-1] - t[0] < 3 * dt or len(model_t) < 2:
-        raise ValueError("velocity_snr: the recording needs at least 3 samples over 3·dt")
-    grid = np.arange(t[0], t[-1], dt)
-    rec = np.column_stack([np.interp(grid, t, xy[:, 0]), np.interp(grid, t, xy[:, 1])])
-    v = np.gradient(rec, dt, axis=0)
+    model_t = model_t - model_t[0]  # the mapping's offset is from the model's first sample
+    if len(model_t) < 2:
+        raise ValueError("velocity_snr: the model needs at least 2 samples")
+    grid, v = recorded_velocity(t, xy, dt)
     energy = float(np.sum(v * v))
     model_span = model_t[-1] - model_t[0]
 
@@ -136,3 +134,79 @@ def velocity_snr(
                     best = (value, s, o)
         _, scale, offset = best
     return best
+
+
+@dataclass(frozen=True)
+class FitReport:
+    """How a tag reconstructed from traces compares with them."""
+
+    traces: int
+    points: int
+    strokes: int
+    shape: ShapeError
+    strokes_per_half_turn: float
+    """Strokes per 180° of the input's turning (the paper adds one per 180°)."""
+    velocity_snr_db: float | None
+    """Velocity SNR against the recorded timing (None when the input has none)."""
+
+    def summary(self) -> str:
+        """One line for people."""
+        snr = (
+            f", velocity SNR {self.velocity_snr_db:.1f} dB"
+            if self.velocity_snr_db is not None
+            else ""
+        )
+        return (
+            f"{self.traces} trace{'s' * (self.traces != 1)} ({self.points} points) ->"
+            f" {self.strokes} strokes; shape error mean {100 * self.shape.mean:.2f}%"
+            f" max {100 * self.shape.max:.2f}% of {self.shape.size:.4g}{snr}"
+        )
+
+
+def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitReport:
+    """Compare a reconstructed ``tag`` (one plan per trace) with its input ``traces``.
+
+    Traces are objects with ``xy`` and optional ``t`` (as :func:`tagbot.load_traces` returns).
+    """
+    polylines = [np.asarray(getattr(tr, "xy", tr), dtype=float) for tr in traces]
+    motion = tag.sample(dt)
+    shape = shape_error(polylines, pen_down_paths(motion))
+    turning = turning_of(polylines)
+    snr = None
+    timed = [tr for tr in traces if getattr(tr, "t", None) is not None]
+    if timed and len(timed) == len(traces) == len(tag.plans):
+        signal = noise = 0.0
+        for trace, (_, rows) in zip(traces, motion.runs(), strict=True):
+            t, xy = np.asarray(trace.t), np.asarray(trace.xy)
+            try:
+                db, _, _ = velocity_snr(t, xy, motion.t[rows], motion.v[rows])
+            except ValueError:  # too short to compare
+                continue
+            _, v = recorded_velocity(t, xy)
+            energy = float(np.sum(v * v))
+            signal += energy
+            noise += energy / 10 ** (db / 10)
+        snr = 10 * np.log10(signal / noise) if noise > 0 else None
+    return FitReport(
+        traces=len(polylines),
+        points=sum(len(p) for p in polylines),
+        strokes=tag.n_strokes,
+        shape=shape,
+        strokes_per_half_turn=tag.n_strokes / turning if turning > 0 else float("nan"),
+        velocity_snr_db=snr,
+    )
+
+
+def recorded_velocity(t: ArrayLike, xy: ArrayLike, dt: float = 0.01) -> tuple[Array, Array]:
+    """A recording resampled every ``dt`` seconds and its velocity by central differences.
+
+    Repeated time stamps are dropped (the first of each kept).
+    """
+    t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
+    keep = np.concatenate([[True], np.diff(t) > 0])
+    t, xy = t[keep], xy[keep]
+    if len(t) < 3 or t[-1] - t[0] < 3 * dt:
+        raise ValueError("velocity: the recording needs at least 3 samples over 3·dt")
+    grid = np.arange(t[0], t[-1], dt)
+    rec = np.column_stack([np.interp(grid, t, xy[:, 0]), np.interp(grid, t, xy[:, 1])])
+    return grid, np.gradient(rec, dt, axis=0)

@@ -23,6 +23,52 @@ def arc_length(xy: Array) -> Array:
     return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))])
 
 
+def decimate(xy: Array, radius: float) -> Array:
+    """Keep a point only once it is at least ``radius`` from the last kept one (and the last).
+
+    Removes jitter below ``radius`` that would otherwise inflate the arc length of a densely
+    captured trace. Works through the points in vectorised chunks, so its cost is about
+    (points + kept points) numpy steps of a few dozen points.
+    """
+    n = len(xy)
+    if n < 3 or radius <= 0:
+        return xy
+    kept = [0]
+    i = 0
+    chunk = 64
+    while True:
+        block = xy[i + 1 : i + 1 + chunk]
+        if not len(block):
+            break
+        far = np.flatnonzero(np.hypot(*(block - xy[i]).T) >= radius)
+        if far.size:
+            i = i + 1 + int(far[0])
+            kept.append(i)
+            chunk = 64
+        elif i + 1 + chunk >= n:
+            break
+        else:
+            chunk *= 2  # a long stretch of jitter: look further at once
+    if kept[-1] != n - 1:
+        kept.append(n - 1)
+    return xy[kept]
+
+
+def prefilter(xy: Array, step: float) -> Array:
+    """Average points captured much more densely than ``step`` over about one step of path.
+
+    Jitter on a dense capture inflates its arc length (each tiny zig-zag counts), which would
+    drown the shape. The density is estimated on a coarse decimation (points 5 steps apart), which
+    jitter barely lengthens; with more than two points per step, the points are averaged with a
+    Gaussian half a step wide (in points). Sparser captures are returned unchanged.
+    """
+    coarse_length = arc_length(decimate(xy, 5.0 * step))[-1]
+    if coarse_length <= 0:
+        return xy
+    per_step = len(xy) * step / coarse_length
+    return smooth(xy, 0.5 * per_step) if per_step > 2.0 else xy
+
+
 def resample(xy: Array, step: float) -> Array:
     """Points equally spaced along the polyline, at most ``step`` apart, both ends kept."""
     s = arc_length(xy)
@@ -67,6 +113,21 @@ def turning(xy: Array, support: int = 1) -> Array:
     return angle
 
 
+def heading_changes(xy: Array, support: int = 1) -> Array:
+    """Per sample, the change of direction of the chord ``support`` samples long centred there.
+
+    Summing their absolute values gives the total absolute turning at that scale.
+    """
+    n = len(xy)
+    half = support // 2
+    i = np.arange(n)
+    chords = xy[np.minimum(i + support - half, n - 1)] - xy[np.maximum(i - half, 0)]
+    heading = np.arctan2(chords[:, 1], chords[:, 0])
+    change = np.zeros(n)
+    change[1:] = np.angle(np.exp(1j * np.diff(heading)))
+    return change
+
+
 def chord_turn(xy: Array, prev: Indices, here: Indices, nxt: Indices) -> Array:
     """Absolute turning angle at ``xy[here]`` between the chords from ``xy[prev]`` and to
     ``xy[nxt]`` (the angle between a salient point and its two neighbours)."""
@@ -99,14 +160,16 @@ def salient_points(xy: Array, support: int, threshold: float, prominence: float)
 
 
 def add_turning_points(
-    xy: Array, points: Indices, max_turn: float = np.pi, margin: int = 0
+    xy: Array, points: Indices, max_turn: float = np.pi, support: int = 1
 ) -> Indices:
     """Add ⌊θ̂ / max_turn⌋ points equally spaced along each section turning θ̂ > ``max_turn``.
 
-    θ̂ is the section's total absolute turning, summed over the (smoothed) samples, leaving out
-    ``margin`` samples at each interior salient point: a corner's own turning is the corner's.
+    θ̂ is the section's total absolute turning, measured on chords ``support`` samples long (so
+    that jitter below that scale does not add up), leaving out half a support at each interior
+    salient point: a corner's own turning is the corner's.
     """
-    step_turn = np.abs(turning(xy, 1))
+    step_turn = np.abs(heading_changes(xy, support))
+    margin = support // 2
     s = arc_length(xy)
     last = len(xy) - 1
     out = [int(points[0])]
@@ -135,8 +198,10 @@ def inflection(xy: Array, a: int, b: int, support: int, min_turn: float) -> int 
     theta = turning(xy, max(1, min(support, (b - a) // 4)))[a + 1 : b]
     left = np.cumsum(theta)  # turning from a to each candidate
     right = left[-1] - left
-    sign = np.sign(theta)
-    change = np.flatnonzero(sign[:-1] * sign[1:] < 0)
+    # Sign changes between consecutive non-zero turnings (a zero can sit exactly on one).
+    nonzero = np.flatnonzero(theta != 0)
+    flips = np.flatnonzero(np.sign(theta[nonzero[:-1]]) != np.sign(theta[nonzero[1:]]))
+    change = (nonzero[flips] + nonzero[flips + 1]) // 2
     if not change.size:
         return None
     score = np.minimum(np.abs(left[change]), np.abs(right[change]))

@@ -2,7 +2,8 @@
 
 Per trace:
 
-1. resample uniformly along its length and smooth (§6.1);
+1. average away jitter on dense captures, resample uniformly along the length and smooth
+   (§6.1);
 2. salient points: curvature extrema turning more than 25° between their neighbours, plus the
    ends; one extra dominant point per 180° of turning between two of them (§6.1); the ΣΛ* model
    also splits sections at their inflections, since its arcs cannot inflect;
@@ -36,7 +37,7 @@ from tagbot.fit.refine import refine
 from tagbot.model.euler import wrap_angle
 from tagbot.model.lognormal import lognormal
 from tagbot.model.motion import evaluate_plan
-from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, MODELS, Model, Plan, Tag
+from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, MODELS, Model, Plan, Tag, sequence
 
 Array = NDArray[np.float64]
 
@@ -120,15 +121,7 @@ def fit(traces: Sequence[Any], model: Model = "gamma", **options: Any) -> Tag:
     size = float(np.hypot(*np.ptp(points, axis=0)))
     if size == 0.0:
         size = 1.0  # only dots, all at one place: any scale will do
-    plans = [fit_trace(xy, size, model, opts) for xy in polylines]
-    # Sequence the plans: each starts a pen lift after the previous one ends.
-    tag_size = float(np.hypot(*np.ptp(np.concatenate([p.targets for p in plans]), axis=0)))
-    start = 0.0
-    timed = []
-    for plan in plans:
-        timed.append(Plan(plan.targets, plan.dt, plan.mu, plan.sigma, plan.phi1, plan.phi2, start))
-        start = timed[-1].end(tag_size) + opts.lift
-    return Tag(tuple(timed), model)
+    return sequence([fit_trace(xy, size, model, opts) for xy in polylines], opts.lift, model)
 
 
 def _polyline(trace: Any, index: int) -> Array:
@@ -142,8 +135,8 @@ def _polyline(trace: Any, index: int) -> Array:
 
 def fit_trace(xy: ArrayLike, size: float, model: Model, opts: FitOptions) -> Plan:
     """One trace → one plan (start 0). ``size`` is the whole tag's, which sets every scale."""
-    xy = np.asarray(xy, dtype=float)
     step = opts.step * size
+    xy = contour.decimate(contour.prefilter(np.asarray(xy, dtype=float), step), 0.5 * step)
     length = contour.arc_length(xy)[-1]
     if length < 0.5 * opts.dot * size:
         return _dot(xy[0], size, opts)
@@ -154,7 +147,7 @@ def fit_trace(xy: ArrayLike, size: float, model: Model, opts: FitOptions) -> Pla
     dominant = contour.salient_points(
         curve, support, np.radians(opts.salient_angle), np.radians(opts.prominence)
     )
-    dominant = contour.add_turning_points(curve, dominant, np.radians(opts.max_turn), support // 2)
+    dominant = contour.add_turning_points(curve, dominant, np.radians(opts.max_turn), support)
     min_turn = np.radians(opts.inflection_angle)
     cuts = [
         contour.inflection(curve, int(a), int(b), support, min_turn)

@@ -12,7 +12,16 @@ from tagbot.model.lognormal import (
     lognormal_time,
 )
 from tagbot.model.motion import Motion, evaluate_plan, sample
-from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, END_TOLERANCE, MODELS, Model, Plan, Tag
+from tagbot.model.plan import (
+    DEFAULT_MU,
+    DEFAULT_SIGMA,
+    END_TOLERANCE,
+    MODELS,
+    Model,
+    Plan,
+    Tag,
+    sequence,
+)
 
 __all__ = [
     "DEFAULT_MU",
@@ -32,4 +41,5 @@ __all__ = [
     "lognormal_cdf",
     "lognormal_time",
     "sample",
+    "sequence",
 ]

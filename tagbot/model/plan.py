@@ -21,6 +21,7 @@ a plan are complete the pen is exactly on the last target, whatever the overlaps
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import TYPE_CHECKING, Literal
@@ -154,6 +155,13 @@ class Plan:
         """The ΣΛ* deviation ``phi`` (= ``phi2``; meaningful when ``phi1 == -phi2``)."""
         return self.phi2
 
+    def at(self, start: float) -> Plan:
+        """The same plan starting at ``start`` (its fitted geometry is reused)."""
+        moved = Plan(self.targets, self.dt, self.mu, self.sigma, self.phi1, self.phi2, start)
+        if "geometry" in self.__dict__:
+            moved.__dict__["geometry"] = self.geometry
+        return moved
+
     @cached_property
     def arcs(self) -> NDArray[np.bool_]:
         """Which strokes are circular arcs (ΣΛ* strokes): ``phi1 == -phi2`` with ``|phi2| < π``."""
@@ -278,3 +286,27 @@ class Tag:
         from tagbot.model.motion import sample
 
         return sample(self, dt)
+
+
+def sequence(
+    plans: Sequence[Plan],
+    lifts: float | Sequence[float],
+    model: Model = "gamma",
+    units: str = "mm",
+) -> Tag:
+    """A tag drawing ``plans`` in order, each starting ``lifts[k]`` seconds after plan ``k`` ends.
+
+    The first plan keeps its start. ``lifts`` is one duration for all, or one per pen lift.
+    """
+    plans = list(plans)
+    if not plans:
+        raise PlanError("plans: empty (a tag needs at least one plan)")
+    gaps = np.broadcast_to(np.asarray(lifts, dtype=float), (max(len(plans) - 1, 0),))
+    if np.any(~np.isfinite(gaps)) or np.any(gaps < 0):
+        raise PlanError(f"lifts: must be finite and >= 0, got {gaps.tolist()}")
+    points = np.concatenate([plan.targets for plan in plans])
+    size = float(np.hypot(*np.ptp(points, axis=0)))
+    timed = [plans[0]]
+    for plan, gap in zip(plans[1:], gaps, strict=True):
+        timed.append(plan.at(timed[-1].end(size) + float(gap)))
+    return Tag(tuple(timed), model, units)

@@ -1,0 +1,150 @@
+"""Reconstruction (paper §6): synthetic round trips and degenerate traces."""
+
+import numpy as np
+import pytest
+
+from tagbot.errors import PlanError
+from tagbot.fit import critical_points, fit
+from tagbot.metrics import pen_down_paths, shape_error
+from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, Plan, Tag
+
+
+def random_tag(rng, sigma_model=False):
+    """A plausible random single-plan tag: 3–8 targets ~20–50 mm apart, turning up to ±2.5 rad."""
+    m = int(rng.integers(3, 9))
+    heading = np.cumsum(rng.uniform(-2.5, 2.5, m))
+    step = rng.uniform(20, 50, m)
+    targets = np.cumsum(np.column_stack([step * np.cos(heading), step * np.sin(heading)]), axis=0)
+    n = m - 1
+    dt = np.r_[0.0, rng.uniform(0.1, 0.35, n - 1)]
+    mu, sigma = np.full(n, DEFAULT_MU), np.full(n, DEFAULT_SIGMA)
+    if sigma_model:
+        return Tag((Plan.sigma_model(targets, dt, mu, sigma, rng.uniform(-1.2, 1.2, n)),), "sigma")
+    phi1, phi2 = rng.uniform(-1.2, 1.2, n), rng.uniform(-1.2, 1.2, n)
+    return Tag((Plan(targets, dt, mu, sigma, phi1, phi2),))
+
+
+def round_trip(tag, model):
+    contour = tag.sample(0.005).xy  # the shape only: no timing goes in
+    fitted = fit([contour], model=model)
+    return shape_error([contour], pen_down_paths(fitted.sample(0.005))), fitted
+
+
+@pytest.mark.parametrize("model", ["gamma", "sigma"])
+def test_synthetic_round_trip(model):
+    """Random plans → contour without timing → fit: ≤ 0.5 % of the diagonal, stroke counts
+    near the truth."""
+    rng = np.random.default_rng(2026)
+    errors, ratios = [], []
+    for _ in range(12):
+        tag = random_tag(rng, sigma_model=model == "sigma")
+        error, fitted = round_trip(tag, model)
+        errors.append(error.mean)
+        ratios.append(fitted.n_strokes / tag.n_strokes)
+        assert error.mean < 0.02
+    assert np.median(errors) <= 0.005
+    assert 0.5 <= np.median(ratios) <= 1.6
+    assert min(ratios) >= 0.25 and max(ratios) <= 2.5
+
+
+def test_paper_method_alone_is_close_and_refining_improves_it():
+    rng = np.random.default_rng(7)
+    plain, polished = [], []
+    for _ in range(6):
+        contour = random_tag(rng).sample(0.005).xy
+        for out, refine in ((plain, False), (polished, True)):
+            fitted = fit([contour], refine=refine)
+            out.append(shape_error([contour], pen_down_paths(fitted.sample(0.005))).mean)
+    assert np.median(plain) < 0.03
+    assert np.median(polished) < np.median(plain)
+
+
+def test_a_straight_line_is_one_straight_stroke():
+    line = np.column_stack([np.linspace(0, 80, 200), np.linspace(10, 30, 200)])
+    tag = fit([line])
+    plan = tag.plans[0]
+    assert plan.n_strokes == 1
+    np.testing.assert_allclose(plan.targets, line[[0, -1]])
+    assert abs(plan.phi1[0]) < 1e-6 and abs(plan.phi2[0]) < 1e-6
+
+
+@pytest.mark.parametrize("points", [[[5.0, 5.0]], [[5.0, 5.0]] * 20])
+def test_a_dot_becomes_a_short_stroke(points):
+    tag = fit([np.array([[0.0, 0.0], [100.0, 0.0]]), np.array(points)])
+    dot = tag.plans[1]
+    assert dot.n_strokes == 1
+    np.testing.assert_array_equal(dot.targets[0], [5.0, 5.0])
+    assert 0 < np.hypot(*(dot.targets[1] - dot.targets[0])) < 1.0
+
+
+def test_a_closed_loop_closes():
+    a = np.linspace(0, 2 * np.pi, 500)
+    circle = np.column_stack([30 * np.cos(a), 30 * np.sin(a)])
+    tag = fit([circle])
+    assert tag.n_strokes >= 2
+    end = tag.sample(0.01).xy[-1]
+    assert np.hypot(*(end - circle[0])) < 1e-6
+    error = shape_error([circle], pen_down_paths(tag.sample(0.005)))
+    assert error.mean < 0.01
+
+
+def test_a_spike_keeps_its_cusp():
+    spike = np.array([[0.0, 0.0], [50.0, 0.0], [0.0, 5.0]])
+    tag = fit([spike])
+    error = shape_error([spike], pen_down_paths(tag.sample(0.005)))
+    assert tag.n_strokes >= 2
+    assert error.max < 0.05
+
+
+def test_many_noisy_points():
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 1, 100_000)
+    xy = np.column_stack([100 * t, 20 * np.sin(6 * t)]) + rng.normal(0, 0.05, (t.size, 2))
+    tag = fit([xy])
+    assert 1 <= tag.n_strokes <= 12
+    assert shape_error([xy], pen_down_paths(tag.sample(0.005))).mean < 0.005
+
+
+def test_traces_become_plans_in_order_with_lifts():
+    strokes = [np.array([[0.0, 0.0], [10.0, 0.0]]), np.array([[0.0, 5.0], [10.0, 9.0]])]
+    tag = fit(strokes, lift=0.5)
+    assert len(tag.plans) == 2
+    np.testing.assert_array_equal(tag.plans[1].targets[0], strokes[1][0])
+    assert tag.plans[1].start == pytest.approx(tag.plans[0].end(tag.size) + 0.5)
+
+
+def test_objects_with_xy_are_accepted():
+    class Trace:
+        xy = np.array([[0.0, 0.0], [3.0, 4.0]])
+        t = None
+
+    assert fit([Trace()]).n_strokes == 1
+
+
+@pytest.mark.parametrize(
+    ("args", "options", "message"),
+    [
+        ([], {}, r"traces: empty"),
+        ([np.zeros((0, 2))], {}, r"traces\[0\]: expected \(N, 2\) points"),
+        ([np.array([[0.0, np.nan]])], {}, r"traces\[0\]: points must be finite"),
+        ([np.eye(2)], {"smoothing_width": 3}, r"smoothing_width: not a fit option"),
+        ([np.eye(2)], {"dt_min": 0.3, "dt_max": 0.1}, r"dt_max: must be >= dt_min"),
+        ([np.eye(2)], {"step": 0.0}, r"step: must be > 0"),
+        ([np.eye(2)], {"iterations": 2.5}, r"iterations: must be a whole number"),
+    ],
+)
+def test_bad_input_is_refused_by_name(args, options, message):
+    with pytest.raises(PlanError, match=message):
+        fit(args, **options)
+
+
+def test_bad_model_is_refused():
+    with pytest.raises(PlanError, match="model"):
+        fit([np.eye(2)], model="delta")
+
+
+def test_critical_points_of_separate_strokes_are_their_targets():
+    """With little overlap, the speed profiles cross where one stroke ends and the next starts."""
+    targets = np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 30.0], [0.0, 30.0]])
+    plan = Plan(targets, [0.0, 1.2, 1.2], [DEFAULT_MU] * 3, [0.15] * 3, [0.0] * 3, [0.0] * 3)
+    np.testing.assert_allclose(critical_points(plan), targets, atol=1e-3)
