@@ -6,8 +6,9 @@ contour. Overlapping strokes then bend the trajectory away from the contour betw
 This step polishes targets, tangents and onset delays together so that the trajectory follows the
 whole contour, ICP-style:
 
-1. give each contour sample the time at which the trajectory passes closest to it;
-2. solve the non-linear least-squares problem ``trajectory(τ_k) ≈ contour_k`` over the plan's
+1. give each contour sample the time at which the trajectory passes closest to it, and each of
+   as many trajectory instants its closest contour point;
+2. solve the non-linear least-squares problem ``trajectory(τ_k) ≈ goal_k`` over the plan's
    parameters, with a few evaluations (scipy's trust-region reflective method, ``dt`` kept inside
    ``[dt_min, dt_max]``);
 3. repeat from 1 a few times.
@@ -63,13 +64,21 @@ def refine(
     goal_all = curve[np.linspace(0, len(curve) - 1, count).round().astype(np.intp)]
     layout = _Layout(m, arcs_only)
     lower, upper = layout.bounds(plan, dt_range)
+    contour_tree = cKDTree(curve)
     for _ in range(rounds):
         size = float(np.hypot(*np.ptp(plan.targets, axis=0)))
         grid = np.linspace(plan.start, plan.end(size), 8 * count)
         points, _ = evaluate_plan(plan, grid)
+        # Both ways, like the shape error: each contour sample to the trajectory's closest
+        # instant, and the trajectory (every 8th grid instant) to its closest contour point, so
+        # that a loop between matched instants is not free.
         _, nearest = cKDTree(points).query(goal_all)
-        order = np.argsort(nearest, kind="stable")
-        tau, goal = grid[nearest[order]], goal_all[order]
+        back = np.arange(0, len(grid), 8)
+        _, onto = contour_tree.query(points[back])
+        tau = np.concatenate([grid[nearest], grid[back]])
+        goal = np.concatenate([goal_all, curve[onto]])
+        order = np.argsort(tau, kind="stable")
+        tau, goal = tau[order], goal[order]
         sparsity = layout.sparsity(plan, tau, size, _onset_slack(dt_range))
         x0 = np.clip(layout.pack(plan), lower, upper)
 

@@ -1,0 +1,259 @@
+"""Reconstruction benchmark (paper §6) on real captures: shape error, strokes, time, velocity SNR.
+
+Run from the repository root, with the shared data beside it (``../shared/data``)::
+
+    python benchmarks/bench_fit.py [--data ../shared/data] [--model gamma] [--jobs 2]
+                                   [--csv fits.csv] [--no-refine]
+
+Datasets (the development half of the project's data; see its README):
+
+* ``gml``: the graffiti tags in ``gml/dev`` (GML and #000000book JSON), read by
+  :func:`tagbot.load_traces`; velocity SNR on the files ``index.csv`` marks as
+  ``velocity_benchmark`` (dense real timestamps);
+* ``unipen``: the NICI cursive words of writers anton and corrie (100 Hz tablet, words from the
+  ``.SEGMENT WORD`` lines, time running through the in-air samples);
+* ``mocap``: capital letters A–Z from motion capture (120 Hz, metres → mm).
+
+Per file: traces, points, strokes, strokes per 180° of the input's turning, mean and max shape
+error (% of the bounding-box diagonal), fit time, fit time over one sampling of the fitted tag at
+10 ms, velocity SNR (dB, after the best uniform time scaling and offset). Summaries give median,
+p90 and worst. A fit that fails is reported as a failure, never dropped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import platform
+import re
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tagbot.fit import fit
+from tagbot.inputs import Trace, load_traces
+from tagbot.metrics import fit_report
+
+
+@dataclass
+class Row:
+    dataset: str
+    name: str
+    traces: int = 0
+    points: int = 0
+    strokes: int = 0
+    strokes_per_180: float = math.nan
+    mean_pct: float = math.nan
+    max_pct: float = math.nan
+    fit_s: float = math.nan
+    fit_over_sampling: float = math.nan
+    snr_db: float = math.nan
+    error: str = ""
+
+
+# --- datasets -------------------------------------------------------------------------------
+
+
+def gml_cases(data: Path) -> list[tuple[str, str, object]]:
+    folder = data / "gml" / "dev"
+    timed = set()
+    with open(folder / "index.csv", newline="") as f:
+        for row in csv.DictReader(f):
+            if row.get("velocity_benchmark", "").strip().lower() == "true":
+                timed.add(row["file"])
+    cases = []
+    for path in sorted(folder.iterdir()):
+        if path.name == "index.csv":
+            continue
+        cases.append(("gml", path.name, (str(path), path.name in timed)))
+    return cases
+
+
+def unipen_cases(data: Path) -> list[tuple[str, str, object]]:
+    cases = []
+    for seg_file in sorted((data / "unipen" / "data").rglob("*.dat")):
+        include = None
+        words = []
+        for line in seg_file.read_text(errors="replace").splitlines():
+            if line.startswith(".INCLUDE"):
+                include = line.split()[1]
+            m = re.match(r'\.SEGMENT WORD (\d+)-(\d+) \S+ "(.*)"', line)
+            if m:
+                words.append((int(m[1]), int(m[2]), m[3]))
+        if include is None:
+            continue
+        components = _unipen_components(data / "unipen" / "include" / include)
+        writer = Path(include).stem
+        for a, b, label in words:
+            cases.append(("unipen", f"{writer}:{a}-{b}:{label}", components[a : b + 1]))
+    return cases
+
+
+def _unipen_components(path: Path) -> list[tuple[bool, np.ndarray]]:
+    """Pen-down and pen-up blocks in order: (down?, points in mm)."""
+    per_mm = 50.0
+    components: list[tuple[bool, list[list[float]]]] = []
+    current: list[list[float]] | None = None
+    for line in path.read_text(errors="replace").splitlines():
+        if line.startswith(".X_POINTS_PER_MM"):
+            per_mm = float(line.split()[1])
+        elif line.startswith((".PEN_DOWN", ".PEN_UP")):
+            current = []
+            components.append((line.startswith(".PEN_DOWN"), current))
+        elif line.startswith("."):
+            current = None
+        elif current is not None and line.strip():
+            x, y = line.split()[:2]
+            current.append([float(x), float(y)])
+    return [
+        (down, np.asarray(pts, dtype=float).reshape(-1, 2) / per_mm) for down, pts in components
+    ]
+
+
+def mocap_cases(data: Path) -> list[tuple[str, str, object]]:
+    letters = np.load(data / "mocap_letters" / "all_letters_max.npz", allow_pickle=True)
+    cases = []
+    for name in sorted(letters.files):
+        parts = letters[name]
+        components = [
+            (i % 2 == 1, np.asarray(p, dtype=float) * 1000.0) for i, p in enumerate(parts)
+        ]
+        cases.append(("mocap", name, components))
+    return cases
+
+
+def _timed_traces(components: list[tuple[bool, np.ndarray]], rate: float) -> list[Trace]:
+    """Pen-down components as traces on one clock running through the pen-up samples."""
+    traces, index = [], 0
+    for down, points in components:
+        if down and len(points):
+            traces.append(Trace(points, (index + np.arange(len(points))) / rate))
+        index += len(points)
+    return traces
+
+
+# --- one fit ---------------------------------------------------------------------------------
+
+
+def run_case(case: tuple[str, str, object], model: str, refine: bool) -> Row:
+    dataset, name, payload = case
+    row = Row(dataset, name)
+    try:
+        if dataset == "gml":
+            path, timed = payload
+            traces = load_traces(path)
+            if not timed:  # velocity SNR only where index.csv vouches for the timing
+                traces = [Trace(tr.xy) for tr in traces]
+        else:
+            traces = _timed_traces(payload, 100.0 if dataset == "unipen" else 120.0)
+        started = time.perf_counter()
+        tag = fit(traces, model=model, refine=refine)
+        row.fit_s = time.perf_counter() - started
+        sampling = min(_timed(lambda: tag.sample(0.01)) for _ in range(3))
+        report = fit_report(traces, tag)
+        row.traces, row.points, row.strokes = report.traces, report.points, report.strokes
+        row.strokes_per_180 = report.strokes_per_half_turn
+        row.mean_pct, row.max_pct = 100 * report.shape.mean, 100 * report.shape.max
+        row.fit_over_sampling = row.fit_s / sampling
+        if report.velocity_snr_db is not None:
+            row.snr_db = report.velocity_snr_db
+    except Exception as e:  # noqa: BLE001 - a benchmark reports every failure, it never stops
+        row.error = f"{type(e).__name__}: {e}"
+    return row
+
+
+def _timed(fn) -> float:
+    started = time.perf_counter()
+    fn()
+    return time.perf_counter() - started
+
+
+# --- report ----------------------------------------------------------------------------------
+
+
+def summarise(rows: list[Row], field: str) -> str:
+    values = np.array([getattr(r, field) for r in rows if not r.error], dtype=float)
+    values = values[np.isfinite(values)]
+    if not values.size:
+        return "-"
+    worst = values.min() if field == "snr_db" else values.max()
+    return (
+        f"{np.median(values):.3g} / {np.percentile(values, 90 if field != 'snr_db' else 10):.3g}"
+        f" / {worst:.3g}"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    default_data = Path(__file__).resolve().parent.parent.parent / "shared" / "data"
+    parser.add_argument("--data", type=Path, default=default_data, help="the shared data folder")
+    parser.add_argument("--model", choices=["gamma", "sigma"], default="gamma")
+    parser.add_argument("--no-refine", dest="refine", action="store_false")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--datasets", default="gml,unipen,mocap")
+    parser.add_argument("--csv", type=Path, help="write every row to this CSV file")
+    parser.add_argument("--quiet", action="store_true", help="summaries only")
+    args = parser.parse_args()
+    if not args.data.is_dir():
+        sys.exit(f"bench_fit: no data folder at {args.data} (use --data)")
+
+    loaders = {"gml": gml_cases, "unipen": unipen_cases, "mocap": mocap_cases}
+    cases = [c for d in args.datasets.split(",") for c in loaders[d](args.data)]
+    print(
+        f"machine: {platform.machine()} python {platform.python_version()} numpy"
+        f" {np.__version__}; model {args.model}, refine {args.refine}, {len(cases)} fits,"
+        f" {args.jobs} processes"
+    )
+    started = time.perf_counter()
+    with ProcessPoolExecutor(args.jobs) as pool:
+        rows = list(
+            pool.map(run_case, cases, [args.model] * len(cases), [args.refine] * len(cases))
+        )
+    print(f"wall time {time.perf_counter() - started:.1f} s\n")
+
+    if not args.quiet:
+        print(
+            f"{'file':44s} {'trc':>4s} {'pts':>6s} {'strk':>5s} {'s/180':>6s} {'mean%':>6s}"
+            f" {'max%':>6s} {'fit s':>6s} {'ratio':>6s} {'SNR dB':>6s}"
+        )
+        for r in rows:
+            label = f"{r.dataset}:{r.name}"[:44]
+            if r.error:
+                print(f"{label:44s} FAILED {r.error}")
+                continue
+            print(
+                f"{label:44s} {r.traces:4d} {r.points:6d} {r.strokes:5d} {r.strokes_per_180:6.2f}"
+                f" {r.mean_pct:6.2f} {r.max_pct:6.2f} {r.fit_s:6.2f} {r.fit_over_sampling:6.0f}"
+                f" {r.snr_db:6.1f}"
+            )
+    print("\nmedian / p90 / worst (SNR: median / p10 / worst)")
+    fields = [
+        ("mean_pct", "mean shape error %"),
+        ("max_pct", "max shape error %"),
+        ("strokes", "strokes"),
+        ("strokes_per_180", "strokes per 180°"),
+        ("fit_s", "fit time s"),
+        ("fit_over_sampling", "fit / one sampling"),
+        ("snr_db", "velocity SNR dB"),
+    ]
+    for dataset in [d for d in ("gml", "unipen", "mocap") if any(r.dataset == d for r in rows)]:
+        subset = [r for r in rows if r.dataset == dataset]
+        failed = [r for r in subset if r.error]
+        print(f"[{dataset}] {len(subset)} files, {len(failed)} failed")
+        for field, label in fields:
+            print(f"  {label:22s} {summarise(subset, field)}")
+    if args.csv:
+        with open(args.csv, "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(asdict(rows[0])))
+            writer.writeheader()
+            writer.writerows(asdict(r) for r in rows)
+
+
+if __name__ == "__main__":
+    main()
