@@ -163,7 +163,7 @@ def run_case(case: tuple[str, str, object], model: str, refine: bool) -> Row:
         row.fit_over_sampling = row.fit_s / sampling
         if report.velocity_snr_db is not None:
             row.snr_db = report.velocity_snr_db
-    except Exception as e:
+    except Exception as e:  # a benchmark reports every failure and goes on
         row.error = f"{type(e).__name__}: {e}"
     return row
 
