@@ -1,0 +1,30 @@
+<GML>
+  <tag>
+    <header>
+      <client><name>tagbot test (clock restarts)</name></client>
+      <environment>
+        <screenBounds><x>500</x><y>250</y></screenBounds>
+      </environment>
+    </header>
+    <drawing>
+      <stroke>
+        <pt><x>0</x><y>0</y><time>0</time></pt>
+        <pt><x>1</x><y>0</y><time>2</time></pt>
+      </stroke>
+      <stroke>
+        <pt><x>1</x><y>0.5</y><time>5</time></pt>
+        <pt><x>0.5</x><y>0.25</y><time>6</time></pt>
+      </stroke>
+    </drawing>
+    <drawing>
+      <stroke>
+        <pt><x>0</x><y>0.5</y><time>0</time></pt>
+        <pt><x>0.2</x><y>0.5</y><time>1</time></pt>
+      </stroke>
+      <stroke>
+        <pt><x>0.3</x><y>0.3</y><time>4</time></pt>
+        <pt><x>0.4</x><y>0.3</y><time>4.5</time></pt>
+      </stroke>
+    </drawing>
+  </tag>
+</GML>
