@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tagbot.fit import fit
+from tagbot.gesture import fit
 from tagbot.inputs import Trace, load_traces
 from tagbot.metrics import fit_report
 

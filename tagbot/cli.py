@@ -168,7 +168,7 @@ def fit_command(source: str, model: str, refine: bool, output: str) -> None:
     """
     import time
 
-    from tagbot.fit import fit
+    from tagbot.gesture import fit
     from tagbot.inputs import load_traces
     from tagbot.io.planfile import save_plan, tag_to_dict
     from tagbot.metrics import fit_report
@@ -211,8 +211,8 @@ def vary(plan: str, count: int, seed: int | None, output: str) -> None:
     curvature varied at random, reproducibly for a seed."""
     from pathlib import Path
 
-    from tagbot.fit import new_seed
-    from tagbot.fit import vary as vary_tag
+    from tagbot.gesture import new_seed
+    from tagbot.gesture import vary as vary_tag
     from tagbot.io.planfile import load_plan, save_plan
 
     tag = load_plan(plan)

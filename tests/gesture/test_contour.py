@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tagbot.fit import contour
+from tagbot.gesture import contour
 
 
 def arc(radius, start, stop, count=400):

@@ -15,7 +15,7 @@ Per trace:
    trajectory's position where the speed profiles of the strokes meeting at target ``j`` cross,
    until the largest move is below one resampling step or after 10 iterations (§6.4);
 6. beyond the paper, unless ``refine=False``: a least-squares polish of targets, tangents and
-   onsets so the trajectory follows the whole contour (:mod:`tagbot.fit.refine`).
+   onsets so the trajectory follows the whole contour (:mod:`tagbot.gesture.refine`).
 
 Lengths in :class:`FitOptions` are fractions of the tag's size (the diagonal of all traces'
 bounding box), so a fit does not depend on units; angles are degrees; times seconds.
@@ -32,8 +32,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tagbot.errors import PlanError
-from tagbot.fit import contour
-from tagbot.fit.refine import refine
+from tagbot.gesture import contour
+from tagbot.gesture.refine import refine
 from tagbot.model.euler import wrap_angle
 from tagbot.model.lognormal import lognormal
 from tagbot.model.motion import evaluate_plan
@@ -81,7 +81,7 @@ class FitOptions:
     """A trace with no length (a dot) becomes a straight stroke this long, fraction of size."""
     refine: bool = True
     """Polish targets, tangents and delays by least squares after the paper's steps
-    (:mod:`tagbot.fit.refine`); off, the result is the paper's method alone."""
+    (:mod:`tagbot.gesture.refine`); off, the result is the paper's method alone."""
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -112,7 +112,7 @@ def fit(traces: Sequence[Any], model: Model = "gamma", **options: Any) -> Tag:
         raise PlanError(f"model: must be 'gamma' or 'sigma', got {model!r}")
     unknown = sorted(set(options) - {f.name for f in fields(FitOptions)})
     if unknown:
-        raise PlanError(f"{unknown[0]}: not a fit option (see tagbot.fit.FitOptions)")
+        raise PlanError(f"{unknown[0]}: not a fit option (see tagbot.gesture.FitOptions)")
     opts = replace(FitOptions(), **options)
     polylines = [_polyline(trace, k) for k, trace in enumerate(traces)]
     if not polylines:

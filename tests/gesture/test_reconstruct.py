@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tagbot.errors import PlanError
-from tagbot.fit import critical_points, fit
+from tagbot.gesture import critical_points, fit
 from tagbot.metrics import pen_down_paths, shape_error
 from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, Plan, Tag
 
