@@ -10,8 +10,8 @@ from __future__ import annotations
 import math
 import os
 import sys
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, TypeVar
 
 import click
 
@@ -25,6 +25,8 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
 PROG = "tagbot"
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 
 class _Interrupted(Exception):
@@ -69,6 +71,19 @@ def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> 
         ctx.exit()
 
 
+def _output_file(metavar: str, what: str) -> Callable[[F], F]:
+    """The ``-o/--output`` option of commands that write one file (default: stdout)."""
+    return click.option(
+        "-o",
+        "--output",
+        metavar=metavar,
+        type=click.Path(dir_okay=False, allow_dash=True),
+        default="-",
+        show_default="stdout",
+        help=f"Where to write {what}; '-' is stdout.",
+    )
+
+
 @click.group(
     name=PROG,
     cls=_Group,
@@ -102,15 +117,7 @@ def cli(ctx: click.Context) -> None:
     show_default=True,
     help="Sampling interval in seconds (> 0).",
 )
-@click.option(
-    "-o",
-    "--output",
-    metavar="MOTION.csv",
-    type=click.Path(dir_okay=False, allow_dash=True),
-    default="-",
-    show_default="stdout",
-    help="Where to write the CSV; '-' is stdout.",
-)
+@_output_file("MOTION.csv", "the CSV")
 def sample(plan: str, dt: float, output: str) -> None:
     """Sample a plan file's tag at a fixed time step and write it as CSV.
 
@@ -151,15 +158,7 @@ def sample(plan: str, dt: float, output: str) -> None:
     show_default=True,
     help="Polish the paper's reconstruction by least squares.",
 )
-@click.option(
-    "-o",
-    "--output",
-    metavar="PLAN.json",
-    type=click.Path(dir_okay=False, allow_dash=True),
-    default="-",
-    show_default="stdout",
-    help="Where to write the plan; '-' is stdout.",
-)
+@_output_file("PLAN.json", "the plan")
 def fit_command(source: str, model: str, refine: bool, output: str) -> None:
     """Reconstruct a plan from a trace file (GML, #000000book JSON, SVG, CSV or JSON points).
 
