@@ -136,13 +136,17 @@ def chord_turn(xy: Array, prev: Indices, here: Indices, nxt: Indices) -> Array:
     return np.abs(np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], np.einsum("ij,ij->i", a, b)))
 
 
-def salient_points(xy: Array, support: int, threshold: float, prominence: float) -> Indices:
+def salient_points(
+    xy: Array, support: int, threshold: float, prominence: float, reach: float = 3.0
+) -> Indices:
     """Indices of salient points: the ends, plus curvature extrema that turn enough.
 
     Candidates are the peaks of ``|turning(xy, support)|`` standing out by ``prominence`` (rad)
     from their surroundings (de Winter & Wagemans, as in the paper); then, while some candidate
     turns less than ``threshold`` (rad) between its two neighbouring candidates, the weakest one
-    is dropped.
+    is dropped. The turn is also measured with chords reaching at most ``reach`` supports, and the
+    larger of the two counts: on a long smooth stretch the next candidate can be far away, and a
+    chord that long no longer sees a sharp corner.
     """
     n = len(xy)
     peaks, _ = find_peaks(np.abs(turning(xy, support)), prominence=prominence, distance=support)
@@ -151,7 +155,12 @@ def salient_points(xy: Array, support: int, threshold: float, prominence: float)
     points = [0, *peaks.tolist(), n - 1]
     while len(points) > 2:
         idx = np.asarray(points)
-        turns = chord_turn(xy, idx[:-2], idx[1:-1], idx[2:])
+        span = int(reach * support)
+        here = idx[1:-1]
+        near = chord_turn(
+            xy, np.maximum(idx[:-2], here - span), here, np.minimum(idx[2:], here + span)
+        )
+        turns = np.maximum(chord_turn(xy, idx[:-2], here, idx[2:]), near)
         weakest = int(np.argmin(turns))
         if turns[weakest] >= threshold:
             break
