@@ -35,7 +35,6 @@ from tagbot.errors import PlanError
 from tagbot.gesture import contour
 from tagbot.gesture.refine import refine
 from tagbot.model.euler import wrap_angle
-from tagbot.model.lognormal import lognormal
 from tagbot.model.motion import evaluate_plan
 from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, MODELS, Model, Plan, Tag, sequence
 
@@ -285,20 +284,40 @@ def crossing_times(plan: Plan) -> Array:
         a, b = j - 1, j
         lo, hi = np.minimum(peaks[a], peaks[b]), np.maximum(peaks[a], peaks[b])
 
-        def excess(t: Array) -> Array:
-            first = length[a] * lognormal(t, plan.onsets[a], plan.mu[a], plan.sigma[a])
-            second = length[b] * lognormal(t, plan.onsets[b], plan.mu[b], plan.sigma[b])
-            return first - second
+        # Compare log-speeds: log(D Λ(t)) = log D − log σ − ℓ − (ℓ − μ)²/2σ², ℓ = log(t − t0).
+        offset_a = np.log(length[a]) - np.log(plan.sigma[a])
+        offset_b = np.log(length[b]) - np.log(plan.sigma[b])
+        tiny = np.finfo(float).tiny
 
-        f_lo, f_hi = excess(lo), excess(hi)
-        bracket = (f_lo > 0) & (f_hi < 0)
-        for _ in range(50):  # bisection, all targets at once
-            mid = 0.5 * (lo + hi)
-            positive = excess(mid) > 0
-            lo = np.where(bracket & positive, mid, lo)
-            hi = np.where(bracket & ~positive, mid, hi)
-        times[1:-1] = np.where(bracket, 0.5 * (lo + hi), np.maximum(peaks[a], peaks[b]))
+        def excess(t: Array) -> tuple[Array, Array]:
+            """The log-speed difference and its derivative in t."""
+            ea = np.maximum(t - plan.onsets[a], tiny)
+            eb = np.maximum(t - plan.onsets[b], tiny)
+            la, lb = np.log(ea), np.log(eb)
+            za = (la - plan.mu[a]) / plan.sigma[a]
+            zb = (lb - plan.mu[b]) / plan.sigma[b]
+            value = (offset_a - la - 0.5 * za * za) - (offset_b - lb - 0.5 * zb * zb)
+            slope = (1.0 + zb / plan.sigma[b]) / eb - (1.0 + za / plan.sigma[a]) / ea
+            return value, slope
+
+        # Near an onset the slope overflows: the Newton step is then refused and we bisect.
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            bracket = (excess(lo)[0] > 0) & (excess(hi)[0] < 0)
+            t = 0.5 * (lo + hi)
+            for _ in range(_CROSSING_STEPS):  # Newton's method, kept inside the bracket
+                value, slope = excess(t)
+                positive = value > 0
+                lo = np.where(bracket & positive, t, lo)
+                hi = np.where(bracket & ~positive, t, hi)
+                step = t - value / slope
+                inside = (step > lo) & (step < hi)
+                t = np.where(inside, step, 0.5 * (lo + hi))
+        times[1:-1] = np.where(bracket, t, np.maximum(peaks[a], peaks[b]))
     return times
+
+
+_CROSSING_STEPS = 8
+"""Safeguarded Newton steps for the speed-profile crossings (quadratic once close)."""
 
 
 def _direction(vector: Array) -> float:

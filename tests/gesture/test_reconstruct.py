@@ -148,3 +148,17 @@ def test_critical_points_of_separate_strokes_are_their_targets():
     targets = np.array([[0.0, 0.0], [30.0, 0.0], [30.0, 30.0], [0.0, 30.0]])
     plan = Plan(targets, [0.0, 1.2, 1.2], [DEFAULT_MU] * 3, [0.15] * 3, [0.0] * 3, [0.0] * 3)
     np.testing.assert_allclose(critical_points(plan), targets, atol=1e-3)
+
+
+def test_crossing_times_are_where_the_speed_profiles_cross():
+    from tagbot.gesture.reconstruct import crossing_times
+    from tagbot.model.lognormal import lognormal
+
+    rng = np.random.default_rng(3)
+    plan = random_tag(rng).plans[0]
+    times = crossing_times(plan)[1:-1]
+    length = plan.geometry.length
+    for j, t in enumerate(times, start=1):
+        before = length[j - 1] * lognormal(t, plan.onsets[j - 1], plan.mu[j - 1], plan.sigma[j - 1])
+        after = length[j] * lognormal(t, plan.onsets[j], plan.mu[j], plan.sigma[j])
+        assert before == pytest.approx(after, rel=1e-9)
