@@ -12,7 +12,10 @@ Datasets (the development half of the project's data; see its README):
   ``velocity_benchmark`` (dense real timestamps);
 * ``unipen``: the NICI cursive words of writers anton and corrie (100 Hz tablet, words from the
   ``.SEGMENT WORD`` lines, time running through the in-air samples);
-* ``mocap``: capital letters A–Z from motion capture (120 Hz, metres → mm).
+* ``mocap``: capital letters A–Z from motion capture (120 Hz, metres → mm);
+* ``synthetic``: 50 random ΓΛ* plans (3–8 targets 20–50 mm apart, turning up to ±2.5 rad,
+  tangents within ±1.2 rad, delays in the fitter's range) sampled without timing: the round trip
+  of the tests, larger. It needs no data folder.
 
 Per file: traces, points, strokes, strokes per 180° of the input's turning, mean and max shape
 error (% of the bounding-box diagonal), fit time, fit time over one sampling of the fitted tag at
@@ -39,6 +42,7 @@ import numpy as np
 from tagbot.gesture import fit
 from tagbot.inputs import Trace, load_traces
 from tagbot.metrics import fit_report
+from tagbot.model.plan import Tag, random_plan
 
 
 @dataclass
@@ -128,6 +132,15 @@ def mocap_cases(data: Path) -> list[tuple[str, str, object]]:
     return cases
 
 
+def synthetic_cases(data: Path, count: int = 50) -> list[tuple[str, str, object]]:
+    return [("synthetic", f"seed-{seed}", seed) for seed in range(count)]
+
+
+def _synthetic_traces(seed: int) -> list[Trace]:
+    plan = random_plan(np.random.default_rng(seed))
+    return [Trace(Tag((plan,)).sample(0.005).xy)]
+
+
 def _timed_traces(components: list[tuple[bool, np.ndarray]], rate: float) -> list[Trace]:
     """Pen-down components as traces on one clock running through the pen-up samples."""
     traces, index = [], 0
@@ -150,6 +163,8 @@ def run_case(case: tuple[str, str, object], model: str, refine: bool) -> Row:
             traces = load_traces(path)
             if not timed:  # velocity SNR only where index.csv vouches for the timing
                 traces = [Trace(tr.xy) for tr in traces]
+        elif dataset == "synthetic":
+            traces = _synthetic_traces(payload)
         else:
             traces = _timed_traces(payload, 100.0 if dataset == "unipen" else 120.0)
         started = time.perf_counter()
@@ -196,15 +211,24 @@ def main() -> None:
     parser.add_argument("--model", choices=["gamma", "sigma"], default="gamma")
     parser.add_argument("--no-refine", dest="refine", action="store_false")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
-    parser.add_argument("--datasets", default="gml,unipen,mocap")
+    parser.add_argument("--datasets", default="gml,unipen,mocap,synthetic")
     parser.add_argument("--csv", type=Path, help="write every row to this CSV file")
     parser.add_argument("--quiet", action="store_true", help="summaries only")
     args = parser.parse_args()
-    if not args.data.is_dir():
-        sys.exit(f"bench_fit: no data folder at {args.data} (use --data)")
+    names = args.datasets.split(",")
+    unknown = sorted(set(names) - {"gml", "unipen", "mocap", "synthetic"})
+    if unknown:
+        sys.exit(f"bench_fit: unknown dataset {unknown[0]!r}")
+    if not args.data.is_dir() and names != ["synthetic"]:
+        sys.exit(f"bench_fit: no data folder at {args.data} (use --data, or --datasets synthetic)")
 
-    loaders = {"gml": gml_cases, "unipen": unipen_cases, "mocap": mocap_cases}
-    cases = [c for d in args.datasets.split(",") for c in loaders[d](args.data)]
+    loaders = {
+        "gml": gml_cases,
+        "unipen": unipen_cases,
+        "mocap": mocap_cases,
+        "synthetic": synthetic_cases,
+    }
+    cases = [c for d in names for c in loaders[d](args.data)]
     print(
         f"machine: {platform.machine()} python {platform.python_version()} numpy"
         f" {np.__version__}; model {args.model}, refine {args.refine}, {len(cases)} fits,"
@@ -242,7 +266,8 @@ def main() -> None:
         ("fit_over_sampling", "fit / one sampling"),
         ("snr_db", "velocity SNR dB"),
     ]
-    for dataset in [d for d in ("gml", "unipen", "mocap") if any(r.dataset == d for r in rows)]:
+    datasets = ("gml", "unipen", "mocap", "synthetic")
+    for dataset in [d for d in datasets if any(r.dataset == d for r in rows)]:
         subset = [r for r in rows if r.dataset == dataset]
         failed = [r for r in subset if r.error]
         print(f"[{dataset}] {len(subset)} files, {len(failed)} failed")

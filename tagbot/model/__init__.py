@@ -20,6 +20,7 @@ from tagbot.model.plan import (
     Model,
     Plan,
     Tag,
+    random_plan,
     sequence,
 )
 
@@ -40,6 +41,7 @@ __all__ = [
     "lognormal",
     "lognormal_cdf",
     "lognormal_time",
+    "random_plan",
     "sample",
     "sequence",
 ]

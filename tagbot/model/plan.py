@@ -310,3 +310,29 @@ def sequence(
     for plan, gap in zip(plans[1:], gaps, strict=True):
         timed.append(plan.at(timed[-1].end(size) + float(gap)))
     return Tag(tuple(timed), model, units)
+
+
+def random_plan(
+    rng: np.random.Generator,
+    targets: tuple[int, int] = (3, 8),
+    step: tuple[float, float] = (20.0, 50.0),
+    turn: float = 2.5,
+    phi: float = 1.2,
+    dt: tuple[float, float] = (0.1, 0.35),
+    sigma_model: bool = False,
+) -> Plan:
+    """A random plausible plan: a walk of ``targets`` (inclusive range) targets ``step`` mm apart
+    turning up to ``±turn`` rad each time, tangent deviations within ``±phi``, delays in ``dt``
+    (the first 0), the paper's mu and sigma. Synthetic data for tests, benchmarks and demos."""
+    m = int(rng.integers(targets[0], targets[1] + 1))
+    heading = np.cumsum(rng.uniform(-turn, turn, m))
+    length = rng.uniform(step[0], step[1], m)
+    points = np.cumsum(
+        np.column_stack([length * np.cos(heading), length * np.sin(heading)]), axis=0
+    )
+    n = m - 1
+    delays = np.r_[0.0, rng.uniform(dt[0], dt[1], n - 1)]
+    mu, sigma = np.full(n, DEFAULT_MU), np.full(n, DEFAULT_SIGMA)
+    if sigma_model:
+        return Plan.sigma_model(points, delays, mu, sigma, rng.uniform(-phi, phi, n))
+    return Plan(points, delays, mu, sigma, rng.uniform(-phi, phi, n), rng.uniform(-phi, phi, n))

@@ -6,22 +6,12 @@ import pytest
 from tagbot.errors import PlanError
 from tagbot.gesture import critical_points, fit
 from tagbot.metrics import pen_down_paths, shape_error
-from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, Plan, Tag
+from tagbot.model.plan import DEFAULT_MU, Plan, Tag, random_plan
 
 
 def random_tag(rng, sigma_model=False):
-    """A plausible random single-plan tag: 3–8 targets ~20–50 mm apart, turning up to ±2.5 rad."""
-    m = int(rng.integers(3, 9))
-    heading = np.cumsum(rng.uniform(-2.5, 2.5, m))
-    step = rng.uniform(20, 50, m)
-    targets = np.cumsum(np.column_stack([step * np.cos(heading), step * np.sin(heading)]), axis=0)
-    n = m - 1
-    dt = np.r_[0.0, rng.uniform(0.1, 0.35, n - 1)]
-    mu, sigma = np.full(n, DEFAULT_MU), np.full(n, DEFAULT_SIGMA)
-    if sigma_model:
-        return Tag((Plan.sigma_model(targets, dt, mu, sigma, rng.uniform(-1.2, 1.2, n)),), "sigma")
-    phi1, phi2 = rng.uniform(-1.2, 1.2, n), rng.uniform(-1.2, 1.2, n)
-    return Tag((Plan(targets, dt, mu, sigma, phi1, phi2),))
+    """A plausible random single-plan tag (see tagbot.model.plan.random_plan)."""
+    return Tag((random_plan(rng, sigma_model=sigma_model),), "sigma" if sigma_model else "gamma")
 
 
 def round_trip(tag, model):
