@@ -157,10 +157,14 @@ class FitReport:
             else ""
         )
         return (
-            f"{self.traces} trace{'s' * (self.traces != 1)} ({self.points} points) ->"
-            f" {self.strokes} strokes; shape error mean {100 * self.shape.mean:.2f}%"
+            f"{_count(self.traces, 'trace')} ({_count(self.points, 'point')}) ->"
+            f" {_count(self.strokes, 'stroke')}; shape error mean {100 * self.shape.mean:.2f}%"
             f" max {100 * self.shape.max:.2f}% of {self.shape.size:.4g}{snr}"
         )
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}{'s' * (n != 1)}"
 
 
 def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitReport:
