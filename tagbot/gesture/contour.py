@@ -266,13 +266,18 @@ def sharpness(xy: Array, a: int, z: int, b: int) -> float:
     (``A_t``, sharpest) and the circular segment through ``a, z, b`` (``A_s``, roundest).
     """
     pa, pz, pb = xy[a], xy[z], xy[b]
-    chord = float(np.hypot(*(pb - pa)))
     u, w = pa - pz, pb - pz
-    triangle = 0.5 * abs(float(u[0] * w[1] - u[1] * w[0]))
-    if chord <= 0 or triangle <= 0:
+    lengths = float(np.hypot(*u) * np.hypot(*w))
+    if lengths <= 0:
         return 0.0
     # The inscribed angle at z; the arc through z subtends 2π − 2γ at the centre.
-    gamma = float(np.arccos(np.clip(np.dot(u, w) / (np.hypot(*u) * np.hypot(*w)), -1.0, 1.0)))
+    gamma = float(np.arccos(np.clip(np.dot(u, w) / lengths, -1.0, 1.0)))
+    if gamma < 1e-6:  # a cusp (a and b on one ray from z): as sharp as it gets
+        return 1.0
+    chord = float(np.hypot(*(pb - pa)))
+    triangle = 0.5 * abs(float(u[0] * w[1] - u[1] * w[0]))
+    if chord <= 0 or triangle <= 0 or np.pi - gamma < 1e-9:  # straight through
+        return 0.0
     radius = chord / (2.0 * np.sin(gamma))
     theta = 2.0 * np.pi - 2.0 * gamma
     circle = 0.5 * radius * radius * (theta - np.sin(theta))

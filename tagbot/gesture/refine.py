@@ -91,7 +91,8 @@ def refine(
             bounds=(lower, upper),
             max_nfev=evaluations,
             x_scale="jac",
-            method="trf",
+            # scipy's "trf" with bounds cannot take a single parameter (a one-arc plan's phi).
+            method="trf" if layout.size > 1 else "dogbox",
         )
         try:
             candidate = layout.unpack(plan, solution.x)

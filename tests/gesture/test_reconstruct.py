@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from tagbot.errors import PlanError
 from tagbot.gesture import critical_points, fit
@@ -152,3 +154,29 @@ def test_crossing_times_are_where_the_speed_profiles_cross():
         before = length[j - 1] * lognormal(t, plan.onsets[j - 1], plan.mu[j - 1], plan.sigma[j - 1])
         after = length[j] * lognormal(t, plan.onsets[j], plan.mu[j], plan.sigma[j])
         assert before == pytest.approx(after, rel=1e-9)
+
+
+coordinate = st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    st.lists(st.tuples(coordinate, coordinate), min_size=1, max_size=25),
+    st.sampled_from(["gamma", "sigma"]),
+    st.sampled_from([1.0, 1e-4, 1e4]),
+)
+def test_any_point_set_fits(points, model, scale):
+    """Random points, repeats, back-and-forth and lattices: always a valid tag that ends on
+    the trace's last point (a dot ends a dot's length away)."""
+    xy = np.asarray(points) * scale
+    tag = fit([xy], model=model)
+    end = tag.sample(0.01).xy[-1]
+    size = max(float(np.hypot(*np.ptp(xy, axis=0))), 1.0)
+    assert np.hypot(*(end - xy[-1])) <= 0.01 * size
+
+
+def test_cusps_are_sharpest():
+    from tagbot.gesture import contour
+
+    spike = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [1.0, 0.0], [0.0, 0.0]])
+    assert contour.sharpness(spike, 0, 2, 4) == 1.0
