@@ -1,0 +1,45 @@
+"""Simulated Grbl 1.1 motion: the look-ahead planner and the stepper's timing.
+
+:class:`GrblExecutor` takes already-parsed motion blocks (:class:`MotionBlock`, :class:`Dwell`)
+and executes them in simulated time as Grbl 1.1h's ``planner.c`` and ``stepper.c`` would, with
+back-pressure (``submit`` refuses while the 15-block planner is full), feed hold, resume and
+soft reset. The serial-device layer on top of it parses G-code and answers ``ok``.
+"""
+
+from sim.grbl.executor import (
+    ACCELERATION_TICKS_PER_SECOND,
+    DT_SEGMENT,
+    HOLD,
+    IDLE,
+    RUN,
+    SEGMENT_CAPACITY,
+    GrblExecutor,
+    Recorder,
+)
+from sim.grbl.planner import (
+    BLOCK_BUFFER_SIZE,
+    PLANNER_CAPACITY,
+    Dwell,
+    GrblPlanner,
+    GrblSettings,
+    MotionBlock,
+    PlanBlock,
+)
+
+__all__ = [
+    "ACCELERATION_TICKS_PER_SECOND",
+    "BLOCK_BUFFER_SIZE",
+    "DT_SEGMENT",
+    "HOLD",
+    "IDLE",
+    "PLANNER_CAPACITY",
+    "RUN",
+    "SEGMENT_CAPACITY",
+    "Dwell",
+    "GrblExecutor",
+    "GrblPlanner",
+    "GrblSettings",
+    "MotionBlock",
+    "PlanBlock",
+    "Recorder",
+]
