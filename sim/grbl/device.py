@@ -1,0 +1,821 @@
+"""A byte-level Grbl 1.1h: serial receive buffer, line protocol, real-time bytes, in simulated time.
+
+:class:`SimulatedGrbl` is what a host sees at the far end of a serial line. ``write(data)`` is the
+host sending bytes, ``read()`` what Grbl has printed so far, and :meth:`SimulatedGrbl.advance`
+moves the simulated clock on: motion executes (:class:`~sim.grbl.executor.GrblExecutor`), the
+receive buffer drains as the planner frees slots, and each line's ``ok`` or ``error:N`` is printed
+at the simulated time Grbl would print it.
+
+How it follows the firmware (Grbl 1.1h ``serial.c``, ``protocol.c``, ``system.c``, ``report.c``):
+
+- **Receive buffer.** A 128-byte ring (one slot always empty: 127 bytes stored). A byte arriving
+  when it is full is lost, as on hardware; :attr:`SimulatedGrbl.lost_bytes` counts them.
+  ``Bf:``'s second field is Grbl's ``serial_get_rx_buffer_available()``, which says 128 when empty.
+- **Real-time bytes** (``?``, ``!``, ``~``, ctrl-x, and every byte from 0x80 up) never enter the
+  buffer and are acted on at once, even when it is full. Unknown bytes from 0x80 up are dropped.
+- **Lines.** The main loop moves characters from the ring into its line; each ``\\n`` or ``\\r``
+  ends a line (so ``\\r\\n`` is a line and an empty line: two ``ok``, as on the device), read with
+  :func:`firmware_protocols.grbl.parse_line`, checked with :class:`~firmware_protocols.grbl.
+  ParserState`. Every line gets exactly one ``ok`` or ``error:N``. While a line waits (planner
+  full, dwell, a spindle change waiting for the queue to empty) the loop reads nothing more, so
+  the ring fills. When the ring runs dry Grbl starts the cycle (auto cycle start).
+- **Pen.** ``M3 S..``/``M4``/``M5`` (and a new S while the spindle runs) wait until all queued
+  motion has finished, then take effect; ``G4 P..`` dwells. The pen is down while the spindle runs
+  with S > 0 (``pen="spindle"``) or while Z is below ``pen_z_below`` (``pen="z"``).
+- **States** Idle, Run, Hold, Jog, Alarm, Check, Sleep; soft reset prints ``ALARM:3`` first if
+  it stopped motion (the machine then stays locked, G-code answers ``error:9``, until ``$X``),
+  then the welcome banner, then ``[MSG:'$H'|'$X' to unlock]`` in the Alarm state. A machine with
+  homing enabled (``$22=1``) starts in Alarm, as a real plotter does.
+
+Not modelled: soft limits, overrides changing speeds (their values are only reported), homing
+motion (``$H`` sets the machine position to 0 at once), work offsets (WCO is always zero).
+
+Fault hooks for tests: :meth:`~SimulatedGrbl.inject_error`, :meth:`~SimulatedGrbl.schedule_alarm`,
+:meth:`~SimulatedGrbl.go_silent`, :meth:`~SimulatedGrbl.emit_garbage`,
+:meth:`~SimulatedGrbl.drop_connection`.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+
+import numpy as np
+
+from firmware_protocols.grbl import (
+    Alarm,
+    Block,
+    Error,
+    Feedback,
+    Help,
+    Home,
+    Message,
+    Msg,
+    Ok,
+    ParserState,
+    Realtime,
+    Restore,
+    SetBuildInfo,
+    SetSetting,
+    SetStartupLine,
+    Setting,
+    Sleep,
+    StartupLine,
+    StartupResult,
+    State,
+    Status,
+    Step,
+    ToggleCheckMode,
+    Unlock,
+    ViewBuildInfo,
+    ViewParameters,
+    ViewParserState,
+    ViewSettings,
+    ViewStartupLines,
+    Welcome,
+    format_message,
+    is_realtime_byte,
+    parse_line,
+)
+from firmware_protocols.grbl.codes import (
+    BUILD_DATE,
+    HELP,
+    INTEGER_SETTINGS,
+    MSG_ALARM_LOCK,
+    MSG_DISABLED,
+    MSG_ENABLED,
+    MSG_PROGRAM_END,
+    MSG_RESET_TO_CONTINUE,
+    MSG_RESTORING_DEFAULTS,
+    MSG_SLEEPING,
+    MSG_UNLOCKED,
+    RX_BUFFER_SIZE,
+)
+from sim.grbl.executor import HOLD, RUN, GrblExecutor
+from sim.grbl.planner import Dwell, GrblSettings, MotionBlock
+
+DEFAULT_SETTINGS: dict[int, float] = {
+    0: 10,
+    1: 25,
+    2: 0,
+    3: 0,
+    4: 0,
+    5: 0,
+    6: 0,
+    10: 1,
+    11: 0.010,
+    12: 0.002,
+    13: 0,
+    20: 0,
+    21: 0,
+    22: 0,
+    23: 0,
+    24: 25.0,
+    25: 500.0,
+    26: 250,
+    27: 1.0,
+    30: 1000,
+    31: 0,
+    32: 0,
+    100: 250.0,
+    101: 250.0,
+    102: 250.0,
+    110: 500.0,
+    111: 500.0,
+    112: 500.0,
+    120: 10.0,
+    121: 10.0,
+    122: 10.0,
+    130: 200.0,
+    131: 200.0,
+    132: 200.0,
+}
+"""Grbl 1.1h's generic defaults (``defaults.h``), in ``$$`` order."""
+
+RX_CAPACITY = RX_BUFFER_SIZE - 1
+"""Bytes the receive ring can hold (one slot of 128 always stays empty)."""
+
+_WCO_REFRESH = (30, 10)  # REPORT_WCO_REFRESH_BUSY_COUNT, _IDLE_COUNT
+_OVR_REFRESH = (20, 10)  # REPORT_OVR_REFRESH_BUSY_COUNT, _IDLE_COUNT
+_CRITICAL_ALARMS = (1, 2)  # hard and soft limit: "[MSG:Reset to continue]", locked until reset
+_OVERRIDE_STEPS = {
+    Realtime.FEED_OVR_COARSE_PLUS: (0, 10),
+    Realtime.FEED_OVR_COARSE_MINUS: (0, -10),
+    Realtime.FEED_OVR_FINE_PLUS: (0, 1),
+    Realtime.FEED_OVR_FINE_MINUS: (0, -1),
+    Realtime.SPINDLE_OVR_COARSE_PLUS: (2, 10),
+    Realtime.SPINDLE_OVR_COARSE_MINUS: (2, -10),
+    Realtime.SPINDLE_OVR_FINE_PLUS: (2, 1),
+    Realtime.SPINDLE_OVR_FINE_MINUS: (2, -1),
+}
+_OVERRIDE_SETS = {
+    Realtime.FEED_OVR_RESET: (0, 100),
+    Realtime.RAPID_OVR_RESET: (1, 100),
+    Realtime.RAPID_OVR_MEDIUM: (1, 50),
+    Realtime.RAPID_OVR_LOW: (1, 25),
+    Realtime.SPINDLE_OVR_RESET: (2, 100),
+}
+_OVERRIDE_LIMITS = ((10, 200), (25, 100), (10, 200))
+
+
+class _Wait:
+    """A step of a line that must wait: for motion to end, or for the executor to take an item."""
+
+    __slots__ = ("item",)
+
+    def __init__(self, item: MotionBlock | Dwell | None) -> None:
+        self.item = item  # None: wait until all motion has finished (protocol_buffer_synchronize)
+
+
+class SimulatedGrbl:
+    """Grbl 1.1h at the byte level, on a simulated clock (seconds from 0).
+
+    ``settings`` overrides :data:`DEFAULT_SETTINGS` (``{100: 80, 110: 6000, ...}``).
+    ``start_in_alarm`` defaults to whether homing is enabled (``$22``). ``clock="real"`` makes
+    :meth:`poll` follow the wall clock (for the pseudo-terminal server); ``"simulated"`` (the
+    default) moves only with :meth:`advance`. ``pen`` chooses what the recorded pen column follows
+    (see the module docstring).
+    """
+
+    def __init__(
+        self,
+        settings: Mapping[int, float] | None = None,
+        *,
+        start_in_alarm: bool | None = None,
+        clock: str = "simulated",
+        pen: str = "spindle",
+        pen_z_below: float = 0.0,
+        position_mm: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        if clock not in ("simulated", "real"):
+            raise ValueError(f"clock: expected 'simulated' or 'real', got {clock!r}")
+        if pen not in ("spindle", "z"):
+            raise ValueError(f"pen: expected 'spindle' or 'z', got {pen!r}")
+        self.settings: dict[int, float] = dict(DEFAULT_SETTINGS)
+        for number, value in (settings or {}).items():
+            if number not in DEFAULT_SETTINGS:
+                raise ValueError(f"settings: unknown setting ${number}")
+            self.settings[number] = float(value)
+        self.clock = clock
+        self.pen_source = pen
+        self.pen_z_below = float(pen_z_below)
+        self.executor = GrblExecutor(self._grbl_settings(), position_mm, auto_start=False)
+        self._wall_start = time.monotonic()
+        self._output: deque[tuple[float, bytes]] = deque()
+        self._rx: deque[int] = deque()
+        self._rx_head = 0  # ring indices, for Bf:'s exact arithmetic
+        self._rx_tail = 0
+        self.lost_bytes = 0
+        self.lines_received = 0
+        self.closed = False
+        self.silent = False
+        self.on_close: list[Callable[[], None]] = []
+        self.lock = threading.RLock()
+        """Held by the pty server's thread while it drives the device; the fault hooks take it."""
+        self._injected: dict[int, int] = {}
+        self._alarms: list[tuple[float, int]] = []
+        self.startup_lines = ["", ""]
+        self.build_info = ""
+        self._pen_events: list[tuple[float, float]] = [(0.0, 0.0)]
+        homing = bool(self.settings[22])
+        alarm = homing if start_in_alarm is None else start_in_alarm
+        self._boot(alarm)
+
+    # -- host side ---------------------------------------------------------------------------
+
+    @property
+    def now(self) -> float:
+        """The simulated time in seconds."""
+        return self.executor.now
+
+    def write(self, data: bytes) -> int:
+        """Bytes from the host, arriving now. Returns ``len(data)`` (lost bytes included)."""
+        self._check_open()
+        for byte in bytes(data):
+            if not is_realtime_byte(byte):
+                self._store(byte)
+            elif not self.silent:  # a hung main loop: real-time bytes are taken, then ignored
+                self._realtime(byte)
+        self._pump()
+        return len(data)
+
+    def read(self) -> bytes:
+        """Everything Grbl has printed and the host has not read yet."""
+        data = b"".join(chunk for _, chunk in self._output)
+        self._output.clear()
+        return data
+
+    def read_timed(self) -> list[tuple[float, bytes]]:
+        """Like :meth:`read`, with the simulated time each chunk was printed at."""
+        chunks = list(self._output)
+        self._output.clear()
+        return chunks
+
+    @property
+    def out_waiting(self) -> int:
+        return sum(len(chunk) for _, chunk in self._output)
+
+    def advance(self, seconds: float) -> None:
+        """Move the simulated clock on by ``seconds``, executing whatever happens meanwhile."""
+        if not (math.isfinite(seconds) and seconds >= 0):
+            raise ValueError(f"seconds: must be a finite number >= 0, got {seconds!r}")
+        self.advance_to(self.now + seconds)
+
+    def advance_to(self, t: float, until: Callable[[], bool] | None = None) -> bool:
+        """Move the simulated clock on to time ``t`` (no effect if it is already later), or
+        only to the first event at which ``until()`` holds (then True)."""
+        self._check_open()
+        while True:
+            self._pump()
+            if until is not None and until():
+                return True
+            due = [a for a in self._alarms if a[0] <= t]
+            end = min(due)[0] if due else t
+
+            def event() -> bool:
+                self._pump()
+                return self.closed or (until is not None and until())
+
+            stopped = self.executor.run_until(end, until=event)
+            if self.closed:
+                return False
+            if stopped and not (due and self.now >= end):
+                return True
+            if due and self.now >= end:
+                alarm = min(due)
+                self._alarms.remove(alarm)
+                self._raise_alarm(alarm[1])
+                continue
+            if self.now >= t:
+                self._pump()
+                return False
+
+    def poll(self) -> None:
+        """With ``clock="real"``, catch the simulation up with the wall clock."""
+        if self.clock == "real":
+            self.advance_to(time.monotonic() - self._wall_start)
+        else:
+            self._pump()
+
+    def run_until_idle(self, limit: float = 3600.0) -> bool:
+        """Advance until nothing is left to do (no line waiting, idle, no scheduled alarm), or
+        to time ``limit``. True if the device became idle."""
+        return self.advance_to(limit, until=lambda: not self.busy)
+
+    def close(self) -> None:
+        self.closed = True
+
+    @property
+    def busy(self) -> bool:
+        """Something will still happen without more input: a line waiting, bytes in the receive
+        buffer, motion, a dwell, a scheduled alarm."""
+        return self._busy() or bool(self._alarms)
+
+    # -- fault hooks -------------------------------------------------------------------------
+
+    def inject_error(self, line: int, code: int) -> None:
+        """Answer the ``line``-th line received (1-based, counting every line) with
+        ``error:code`` instead of executing it."""
+        with self.lock:
+            self._injected[int(line)] = int(code)
+
+    def schedule_alarm(self, at: float, code: int) -> None:
+        """Raise ``ALARM:code`` at simulated time ``at``: motion stops at once, Alarm state.
+        Codes 1 and 2 (limits) are critical: ``[MSG:Reset to continue]``, deaf until a reset."""
+        with self.lock:
+            self._alarms.append((float(at), int(code)))
+
+    def go_silent(self, silent: bool = True) -> None:
+        """Stop answering anything (bytes still fill the receive buffer), or wake up again."""
+        with self.lock:
+            self.silent = silent
+
+    def emit_garbage(self, data: bytes) -> None:
+        """Print ``data`` as it is, now (line noise, a wrong baud rate)."""
+        with self.lock:
+            self._emit_raw(bytes(data))
+
+    def drop_connection(self) -> None:
+        """The cable is pulled: the device closes and the transport closes with it."""
+        with self.lock:
+            self.closed = True
+            for callback in list(self.on_close):
+                callback()
+
+    # -- recording ---------------------------------------------------------------------------
+
+    def trace(self, dt: float = 0.001) -> np.ndarray:
+        """``(N, 5)``: ``t, x, y, z, pen`` every ``dt`` (≤ 1 ms) from time 0 to now.
+
+        Positions come from the executor's recorder (exact at segment boundaries); pen is 1 while
+        down, 0 while up.
+        """
+        recorder = self.executor.recorder
+        assert recorder is not None
+        base = recorder.trace(dt)
+        pen = np.zeros(len(base))
+        if self.pen_source == "z":
+            pen[:] = base[:, 3] < self.pen_z_below
+        else:
+            times = np.array([t for t, _ in self._pen_events])
+            values = np.array([v for _, v in self._pen_events])
+            pen[:] = values[np.searchsorted(times, base[:, 0], side="right") - 1]
+        return np.column_stack([base, pen])
+
+    @property
+    def position_mm(self) -> tuple[float, float, float]:
+        return self.executor.position_mm
+
+    @property
+    def state(self) -> State:
+        """The state a status report shows now."""
+        if self._state in (State.ALARM, State.CHECK, State.SLEEP):
+            return self._state
+        ex = self.executor.state
+        if ex == HOLD:
+            return State.HOLD
+        if ex == RUN:
+            return State.JOG if self._jogging else State.RUN
+        return State.IDLE
+
+    # -- internals: boot and reset -----------------------------------------------------------
+
+    def _boot(self, alarm: bool) -> None:
+        self._state = State.ALARM if alarm else State.IDLE
+        self._critical = False
+        self._line = bytearray()
+        self._actions: deque[object] = deque()
+        self._jogging = False
+        self._jog_cancel = False
+        self._status_pending = False
+        self._hold_pending = False
+        self._reset_pending = False
+        self._overrides = [100, 100, 100]
+        self._wco_counter = 0
+        self._ovr_counter = 0
+        self.parser = ParserState(position=self.executor.position_mm)
+        self._set_pen(0.0)
+        self._emit(Welcome())
+        if self._state == State.ALARM:
+            self._emit(Msg(MSG_ALARM_LOCK))
+        else:
+            self._run_startup_lines()
+
+    def _soft_reset(self) -> None:
+        in_motion = self.executor.soft_reset()
+        if self._state == State.CHECK:
+            self._state = State.IDLE
+        if in_motion:
+            self._emit(Alarm(3))
+            self._state = State.ALARM
+        if self._state == State.SLEEP:
+            self._state = State.ALARM
+        self._rx.clear()
+        self._rx_head = self._rx_tail = 0
+        self._boot(self._state == State.ALARM)
+
+    def _run_startup_lines(self) -> None:
+        for text in self.startup_lines:
+            if not text:
+                continue
+            parsed = parse_line(text, self._state)
+            result: Ok | Error = Ok()
+            if isinstance(parsed, Error):
+                result = parsed
+            elif isinstance(parsed, Block):
+                step = self.parser.step(parsed)
+                if isinstance(step, Error):
+                    result = step
+                else:
+                    self._queue_step(step)
+            self._emit(StartupResult(text, result))
+
+    # -- internals: receiving ----------------------------------------------------------------
+
+    def _store(self, byte: int) -> None:
+        if len(self._rx) >= RX_CAPACITY:
+            self.lost_bytes += 1
+            return
+        self._rx.append(byte)
+        self._rx_head = (self._rx_head + 1) % RX_BUFFER_SIZE
+
+    def _rx_available(self) -> int:
+        """``serial_get_rx_buffer_available()`` of Grbl 1.1h, quirk included (128 when empty)."""
+        head, tail = self._rx_head, self._rx_tail
+        if head >= tail:
+            return RX_BUFFER_SIZE - (head - tail)
+        return tail - head - 1
+
+    def _realtime(self, byte: int) -> None:
+        if byte == Realtime.SOFT_RESET:
+            self._reset_pending = True
+        elif self._critical:
+            return
+        elif byte == Realtime.STATUS_REPORT:
+            self._status_pending = True
+        elif byte == Realtime.FEED_HOLD:
+            if self._state not in (State.ALARM, State.CHECK, State.SLEEP):
+                self._hold_pending = True
+        elif byte == Realtime.CYCLE_START:
+            stopped = self._state in (State.ALARM, State.CHECK, State.SLEEP)
+            if not stopped and not self.executor.resume() and self.executor.idle:
+                self.executor.cycle_start()
+                self._ovr_counter = 0
+        elif byte == Realtime.JOG_CANCEL:
+            if self._jogging and self.executor.state == RUN:
+                self._jog_cancel = True
+                self._hold_pending = True
+        elif byte in _OVERRIDE_SETS:
+            index, value = _OVERRIDE_SETS[byte]
+            self._overrides[index] = value
+            self._ovr_counter = 0
+        elif byte in _OVERRIDE_STEPS:
+            index, step = _OVERRIDE_STEPS[byte]
+            low, high = _OVERRIDE_LIMITS[index]
+            self._overrides[index] = min(high, max(low, self._overrides[index] + step))
+            self._ovr_counter = 0
+
+    # -- internals: the main loop ------------------------------------------------------------
+
+    def _event(self) -> bool:
+        """Called by the executor at each of its events: let the main loop run. Never stops it
+        early, except when an alarm hook or a closed connection needs the outer loop."""
+        self._pump()
+        return self.closed
+
+    def _pump(self) -> None:
+        """Grbl's main loop at the current time: real-time flags, then lines while it can."""
+        if self.closed or self.silent:
+            return
+        if self._reset_pending:
+            self._reset_pending = False
+            self._soft_reset()
+        if self._critical or self.executor.locked:
+            return  # the step interrupt busy-waits ($1): the main loop is frozen
+        if self._hold_pending:
+            self._hold_pending = False
+            self.executor.feed_hold()
+        if self._jog_cancel and self.executor.state == HOLD and self.executor.hold_complete:
+            self._jog_cancel = False
+            self._jogging = False
+            self.executor.soft_reset()  # flush the jog; the machine has stopped (no alarm)
+            self.parser = ParserState(**{**self._parser_fields(), "position": self.position_mm})
+        if self._status_pending:
+            self._status_pending = False
+            self._emit(self._status())
+        if self._jogging and self.executor.idle and not self.executor.queued_blocks:
+            self._jogging = False
+        while True:
+            if self._actions and not self._run_actions():
+                return
+            if not self._take_line():
+                break
+        # The receive buffer ran dry: protocol_auto_cycle_start.
+        if self.executor.queued_blocks and self.executor.idle:
+            self.executor.cycle_start()
+            self._ovr_counter = 0
+
+    def _busy(self) -> bool:
+        frozen = self.silent or self._critical  # lines will not move until the host acts
+        lines = not frozen and (self._actions or 0x0A in self._rx or 0x0D in self._rx)
+        return bool(
+            lines
+            or self._reset_pending
+            or not self.executor.idle
+            or self.executor.queued_blocks
+            or self.executor.locked
+            or self.executor.dwelling
+        )
+
+    def _take_line(self) -> bool:
+        """Move characters from the ring into the line; handle a complete line. False when the
+        ring holds no complete line any more."""
+        while self._rx:
+            byte = self._rx.popleft()
+            self._rx_tail = (self._rx_tail + 1) % RX_BUFFER_SIZE
+            if byte in (0x0A, 0x0D):
+                text = self._line.decode("latin-1")
+                self._line.clear()
+                self._handle_line(text)
+                return True
+            self._line.append(byte)
+        return False
+
+    def _handle_line(self, text: str) -> None:
+        self.lines_received += 1
+        injected = self._injected.pop(self.lines_received, None)
+        if injected is not None:
+            self._emit(Error(injected))
+            return
+        parsed = parse_line(text, self._state if self._state != State.IDLE else self.state)
+        if isinstance(parsed, Error):
+            self._emit(parsed)
+        elif isinstance(parsed, Block):
+            self._handle_block(parsed)
+        else:
+            self._handle_system(parsed)
+
+    def _run_actions(self) -> bool:
+        """Carry out the current line's steps in order; True when all are done."""
+        while self._actions:
+            action = self._actions[0]
+            if isinstance(action, _Wait):
+                if action.item is None:
+                    if self.executor.queued_blocks or not self.executor.idle:
+                        self.executor.cycle_start()
+                        return False
+                elif not self.executor.submit(action.item):
+                    return False
+            elif callable(action):
+                action()
+            else:
+                self._emit(action)  # type: ignore[arg-type]
+            self._actions.popleft()
+        return True
+
+    # -- internals: G-code ---------------------------------------------------------------------
+
+    def _handle_block(self, block: Block) -> None:
+        step = self.parser.step(block)
+        if isinstance(step, Error):
+            self._emit(step)
+            return
+        if block.jog:
+            self._jogging = True
+        self._queue_step(step)
+        self._actions.append(Ok())
+
+    def _queue_step(self, step: Step) -> None:
+        old = self.parser
+        self.parser = step.state
+        if self._state == State.CHECK:
+            return
+        new = step.state
+        spindle_on = new.spindle in ("M3", "M4")
+        if new.spindle != old.spindle or (spindle_on and new.spindle_speed != old.spindle_speed):
+            pen = 1.0 if spindle_on and new.spindle_speed > 0 else 0.0
+            self._actions.append(_Wait(None))
+            self._actions.append(lambda: self._set_pen(pen))
+            self._actions.append(self._touch_ovr)
+        if new.coolant != old.coolant:
+            self._actions.append(_Wait(None))
+        if step.dwell is not None:
+            self._actions.append(_Wait(None))
+            self._actions.append(_Wait(Dwell(step.dwell)))
+        if step.target is not None:
+            if step.rapid:
+                block = MotionBlock(step.target, rapid=True)
+            elif new.feed_mode == "G93" and not step.jog:
+                block = MotionBlock(step.target, inverse_time_per_min=step.feed_rate)
+            else:
+                block = MotionBlock(step.target, feed_mm_per_min=step.feed_rate)
+            self._actions.append(_Wait(block))
+        if step.program_flow == "M0":
+            self._actions.append(_Wait(None))
+            self._actions.append(self.executor.feed_hold)
+        elif step.program_flow in ("M2", "M30"):
+            self._actions.append(_Wait(None))
+            self._actions.append(lambda: self._set_pen(0.0))
+            self._actions.append(Msg(MSG_PROGRAM_END))
+
+    def _touch_ovr(self) -> None:
+        self._ovr_counter = 0
+
+    def _set_pen(self, value: float) -> None:
+        t = self.now
+        if self._pen_events and self._pen_events[-1][0] == t:
+            self._pen_events[-1] = (t, value)
+        else:
+            self._pen_events.append((t, value))
+
+    def _parser_fields(self) -> dict[str, object]:
+        return {name: getattr(self.parser, name) for name in ParserState.__dataclass_fields__}
+
+    # -- internals: $ commands -----------------------------------------------------------------
+
+    def _handle_system(self, command: object) -> None:
+        emit = self._emit
+        if isinstance(command, Help):
+            emit(Feedback("HLP", HELP))
+        elif isinstance(command, ViewSettings):
+            for number, value in self.settings.items():
+                emit(Setting(number, value))
+        elif isinstance(command, ViewParserState):
+            emit(Feedback("GC", self.parser.report(inches=bool(self.settings[13]))))
+        elif isinstance(command, ViewBuildInfo):
+            emit(Feedback("VER", f"1.1h.{BUILD_DATE}:{self.build_info}"))
+            emit(Feedback("OPT", f"V,15,{RX_BUFFER_SIZE}"))
+        elif isinstance(command, SetBuildInfo):
+            self.build_info = command.text
+        elif isinstance(command, ViewParameters):
+            zero = "0.000,0.000,0.000"
+            for name in ("G54", "G55", "G56", "G57", "G58", "G59", "G28", "G30", "G92"):
+                emit(Feedback(name, zero))
+            emit(Feedback("TLO", "0.000"))
+            emit(Feedback("PRB", zero + ":0"))
+        elif isinstance(command, ViewStartupLines):
+            for index, text in enumerate(self.startup_lines):
+                emit(StartupLine(index, text))
+        elif isinstance(command, SetStartupLine):
+            step = ParserState(position=self.parser.position).step(command.block)
+            if isinstance(step, Error):
+                emit(step)
+                return
+            if 0 <= command.index < len(self.startup_lines):
+                self.startup_lines[command.index] = command.block.text
+        elif isinstance(command, ToggleCheckMode):
+            if self._state == State.CHECK:
+                emit(Msg(MSG_DISABLED))
+                self._actions.append(Ok())
+                self._actions.append(self._request_reset)
+                return
+            self._state = State.CHECK
+            emit(Msg(MSG_ENABLED))
+        elif isinstance(command, Unlock):
+            if self._state == State.ALARM:
+                self._state = State.IDLE
+                self._ovr_counter = 0
+                emit(Msg(MSG_UNLOCKED))
+        elif isinstance(command, Home):
+            if not self.settings[22]:
+                emit(Error(5))
+                return
+            if command.axes:
+                emit(Error(3))
+                return
+            self._home()
+        elif isinstance(command, Sleep):
+            self.executor.soft_reset()
+            self._state = State.SLEEP
+            emit(Msg(MSG_SLEEPING))
+        elif isinstance(command, Restore):
+            if command.what in "$*":
+                self.settings = dict(DEFAULT_SETTINGS)
+            if command.what == "*":
+                self.startup_lines = ["", ""]
+            emit(Msg(MSG_RESTORING_DEFAULTS))
+            self._actions.append(Ok())
+            self._actions.append(self._apply_settings)
+            self._actions.append(self._request_reset)
+            return
+        elif isinstance(command, SetSetting):
+            error = self._set_setting(command.number, command.value)
+            if error is not None:
+                emit(error)
+                return
+            self._actions.append(_Wait(None))
+            self._actions.append(self._apply_settings)
+        self._actions.append(Ok())
+
+    def _request_reset(self) -> None:
+        self._reset_pending = True
+
+    def _set_setting(self, number: int, value: float) -> Error | None:
+        if number == 20 and value and not self.settings[22]:
+            return Error(10)
+        if number in INTEGER_SETTINGS:
+            value = float(int(value))
+        if 100 <= number <= 122 and value <= 0:
+            return Error(3)  # a zero rate would divide by zero; the firmware stores it
+        self.settings[number] = value
+        return None
+
+    def _apply_settings(self) -> None:
+        self.executor.configure(self._grbl_settings())
+
+    def _grbl_settings(self) -> GrblSettings:
+        s = self.settings
+        lock = int(s[1])
+        return GrblSettings(
+            steps_per_mm=(s[100], s[101], s[102]),
+            max_rate_mm_per_min=(s[110], s[111], s[112]),
+            acceleration_mm_per_s2=(s[120], s[121], s[122]),
+            junction_deviation_mm=s[11],
+            stepper_idle_lock_ms=min(lock, 255),
+        )
+
+    def _home(self) -> None:
+        """``$H``, without the switch-seeking motion: the machine position becomes 0."""
+        ex = self.executor
+        ex.soft_reset()
+        # The executor keeps its position in steps; set it as homing's plan_sync_position does.
+        ex._steps = (0, 0, 0)
+        ex.planner.reset((0, 0, 0))
+        if ex.recorder is not None:
+            ex.recorder.add(ex.now, (0.0, 0.0, 0.0))
+        self.parser = ParserState(**{**self._parser_fields(), "position": (0.0, 0.0, 0.0)})
+        self._state = State.IDLE
+
+    # -- internals: alarms ---------------------------------------------------------------------
+
+    def _raise_alarm(self, code: int) -> None:
+        self.executor.soft_reset()
+        self._actions.clear()
+        self._rx.clear()
+        self._rx_head = self._rx_tail = 0
+        self._line.clear()
+        self._jogging = False
+        self._state = State.ALARM
+        self.parser = ParserState(**{**self._parser_fields(), "position": self.position_mm})
+        self._set_pen(0.0)
+        self._emit(Alarm(code))
+        if code in _CRITICAL_ALARMS:
+            self._critical = True
+            self._emit(Msg(MSG_RESET_TO_CONTINUE))
+
+    # -- internals: output -----------------------------------------------------------------------
+
+    def _status(self) -> Status:
+        state = self.state
+        busy = state in (State.RUN, State.HOLD, State.JOG)
+        report = int(self.settings[10])
+        inches = bool(self.settings[13])
+        scale = 1 / 25.4 if inches else 1.0
+        position = tuple(v * scale for v in self.executor.position_mm)
+        wco = None
+        if self._wco_counter > 0:
+            self._wco_counter -= 1
+        else:
+            self._wco_counter = _WCO_REFRESH[0 if busy else 1] - 1
+            if self._ovr_counter == 0:
+                self._ovr_counter = 1
+            wco = (0.0, 0.0, 0.0)
+        overrides = accessories = None
+        if self._ovr_counter > 0:
+            self._ovr_counter -= 1
+        else:
+            self._ovr_counter = _OVR_REFRESH[0 if busy else 1] - 1
+            overrides = tuple(self._overrides)
+            spindle = {"M3": "S", "M4": "C"}.get(self.parser.spindle, "")
+            coolant = "F" if self.parser.coolant == "M8" else ""
+            accessories = (spindle + coolant) or None
+        on = self.parser.spindle in ("M3", "M4") and self._pen_events[-1][1] > 0
+        return Status(
+            state=state,
+            substate=(0 if self.executor.hold_complete else 1) if state == State.HOLD else None,
+            mpos=position if report & 1 else None,  # type: ignore[arg-type]
+            wpos=None if report & 1 else position,  # type: ignore[arg-type]
+            buffer=(self.executor.free_blocks, self._rx_available()) if report & 2 else None,
+            feed=self.executor.reported_rate_mm_per_min * scale,
+            spindle=self.parser.spindle_speed if on else 0.0,
+            wco=wco,
+            overrides=overrides,  # type: ignore[arg-type]
+            accessories=accessories,
+        )
+
+    def _emit(self, message: Message) -> None:
+        inches = bool(self.settings[13])
+        self._emit_raw(format_message(message, inches=inches))
+
+    def _emit_raw(self, data: bytes) -> None:
+        self._output.append((self.now, data))
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise ConnectionError("the simulated Grbl is disconnected")
+
+
+__all__ = ["DEFAULT_SETTINGS", "RX_CAPACITY", "SimulatedGrbl"]

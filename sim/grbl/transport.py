@@ -1,0 +1,282 @@
+"""Transports for :class:`~sim.grbl.device.SimulatedGrbl`: a pyserial URL handler and a pty server.
+
+**In-process, simulated time** (fast tests): importing this module (or calling :func:`register`)
+adds ``sim.grbl`` to ``serial.protocol_handler_packages``, so that::
+
+    port = serial.serial_for_url("grblsim://?speed=115200&alarm=0&$100=80", timeout=1)
+
+returns a :class:`~sim.grbl.protocol_grblsim.Serial` (a ``serial.SerialBase``) talking to a new
+simulated Grbl (``port.device``). ``grblsim://<name>`` opens a device given to
+:func:`attach_device` instead, so a test can set it up (fault hooks) before the host opens it.
+Query parameters: ``speed`` (line speed in baud; default the port's ``baudrate``), ``alarm``
+(1: start in the Alarm state), ``pen`` (``spindle`` or ``z``) and ``$N`` (a setting).
+
+The simulated clock moves only with the host: bytes written are delivered one by one, 10 bits
+each at the line speed; reads advance the clock until enough bytes have arrived or the read
+timeout has passed in *simulated* seconds (``in_waiting`` advances it by 1 ms when nothing is
+waiting, so a polling loop makes progress). Nothing waits on the wall clock.
+
+**Pseudo-terminal, real time** (any program): :func:`serve_pty` opens ``os.openpty()``, puts it in
+raw mode and runs a thread that pumps bytes between the master side and a device driven by the
+wall clock. ``serial.Serial(path)`` or any G-code sender opens the slave ``path``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import select
+import threading
+import tty
+from collections import deque
+from collections.abc import Callable
+from urllib.parse import parse_qsl, urlsplit
+
+import serial
+
+from sim.grbl.device import SimulatedGrbl
+
+BITS_PER_BYTE = 10
+"""A start bit, 8 data bits and a stop bit."""
+
+POLL_QUANTUM = 0.001
+"""Simulated seconds a read moves the clock by per step, and an empty ``in_waiting`` poll."""
+
+_PACKAGE = "sim.grbl"
+_attached: dict[str, SimulatedGrbl] = {}
+_attached_lock = threading.Lock()
+
+
+def register() -> None:
+    """Make ``serial.serial_for_url`` know the ``grblsim://`` scheme (idempotent)."""
+    if _PACKAGE not in serial.protocol_handler_packages:
+        serial.protocol_handler_packages.append(_PACKAGE)
+
+
+def attach_device(device: SimulatedGrbl, name: str) -> str:
+    """Make ``device`` the one ``grblsim://<name>`` opens (once); returns that URL."""
+    if not name.isidentifier():
+        raise ValueError(f"name: must be an identifier, got {name!r}")
+    with _attached_lock:
+        _attached[name] = device
+    return f"grblsim://{name}"
+
+
+def take_attached(name: str) -> SimulatedGrbl | None:
+    with _attached_lock:
+        return _attached.pop(name, None)
+
+
+def device_from_url(url: str) -> tuple[SimulatedGrbl, float | None]:
+    """The device a ``grblsim://`` URL names or describes, and its ``speed`` (None: not given)."""
+    parts = urlsplit(url)
+    if parts.scheme.lower() != "grblsim":
+        raise serial.SerialException(f"expected a grblsim:// URL, got {url!r}")
+    speed: float | None = None
+    settings: dict[int, float] = {}
+    options: dict[str, object] = {}
+    try:
+        for key, value in parse_qsl(parts.query, keep_blank_values=True, strict_parsing=False):
+            if key == "speed":
+                speed = float(value)
+                if not (math.isfinite(speed) and speed > 0):
+                    raise ValueError(f"speed: must be > 0, got {value!r}")
+            elif key == "alarm":
+                options["start_in_alarm"] = value not in ("0", "false", "")
+            elif key == "pen":
+                options["pen"] = value
+            elif key.startswith("$") and key[1:].isdigit():
+                settings[int(key[1:])] = float(value)
+            else:
+                raise ValueError(f"unknown option {key!r}")
+        if parts.netloc:
+            device = take_attached(parts.netloc)
+            if device is None:
+                raise ValueError(f"no device attached as {parts.netloc!r}")
+            if settings or options:
+                raise ValueError("options and settings only apply to a new device")
+        else:
+            device = SimulatedGrbl(settings, **options)  # type: ignore[arg-type]
+    except ValueError as exc:
+        raise serial.SerialException(f"{url}: {exc}") from exc
+    return device, speed
+
+
+class Link:
+    """A serial line in simulated time between a host and a :class:`SimulatedGrbl`.
+
+    ``send`` queues host bytes; they reach the device one at a time, ``10 / baud`` seconds apart.
+    What the device prints reaches the host as whole chunks, after their bytes' transfer time.
+    """
+
+    def __init__(self, device: SimulatedGrbl, baud: float) -> None:
+        self.device = device
+        self.baud = float(baud)
+        self._to_device: deque[tuple[float, int]] = deque()
+        self._to_device_free = device.now
+        self._to_host: deque[tuple[float, bytes]] = deque()
+        self._to_host_free = device.now
+        self._collect()
+
+    @property
+    def now(self) -> float:
+        return self.device.now
+
+    @property
+    def byte_time(self) -> float:
+        return BITS_PER_BYTE / self.baud
+
+    def send(self, data: bytes) -> None:
+        t = max(self.now, self._to_device_free)
+        for byte in data:
+            t += self.byte_time
+            self._to_device.append((t, byte))
+        self._to_device_free = t
+
+    @property
+    def sending(self) -> int:
+        return len(self._to_device)
+
+    def advance_to(self, t: float) -> None:
+        """Run the line and the device to simulated time ``t``."""
+        device = self.device
+        queue = self._to_device
+        while queue and queue[0][0] <= t:
+            arrival = queue[0][0]
+            device.advance_to(arrival)
+            self._collect()
+            # Bytes arriving at the same instant, or before the device's clock, go together.
+            chunk = bytearray()
+            while queue and queue[0][0] <= max(arrival, device.now):
+                chunk.append(queue.popleft()[1])
+            device.write(bytes(chunk))
+            self._collect()
+        device.advance_to(t)
+        self._collect()
+
+    def _collect(self) -> None:
+        for t, chunk in self.device.read_timed():
+            start = max(t, self._to_host_free)
+            self._to_host_free = start + len(chunk) * self.byte_time
+            self._to_host.append((self._to_host_free, chunk))
+
+    def available(self) -> int:
+        now = self.now
+        return sum(len(c) for t, c in self._to_host if t <= now)
+
+    def receive(self, size: int) -> bytes:
+        """Up to ``size`` bytes that have arrived by now."""
+        out = bytearray()
+        now = self.now
+        while self._to_host and self._to_host[0][0] <= now and len(out) < size:
+            t, chunk = self._to_host.popleft()
+            take = size - len(out)
+            out += chunk[:take]
+            if take < len(chunk):
+                self._to_host.appendleft((t, chunk[take:]))
+        return bytes(out)
+
+    def quiet(self) -> bool:
+        """Nothing more can arrive unless the host sends something."""
+        device = self.device
+        return not (self._to_device or self._to_host or device.out_waiting or device.busy) or bool(
+            device.silent or device.closed
+        )
+
+    def clear_to_host(self) -> None:
+        self._collect()
+        self._to_host.clear()
+
+    def clear_to_device(self) -> None:
+        self._to_device.clear()
+        self._to_device_free = self.now
+
+
+class PtyServer:
+    """The thread behind :func:`serve_pty`; ``stop()`` ends it and closes both file descriptors."""
+
+    def __init__(self, device: SimulatedGrbl, poll_interval: float = 0.001) -> None:
+        if device.clock != "real":
+            raise ValueError("device: serve_pty needs a device with clock='real'")
+        self.device = device
+        self.poll_interval = poll_interval
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._master)
+        tty.setraw(self._slave)
+        os.set_blocking(self._master, False)
+        self._unsent = b""
+        self.path = os.ttyname(self._slave)
+        self._stop = threading.Event()
+        self._dropped = threading.Event()
+        self.error: BaseException | None = None
+        device.on_close.append(self._dropped.set)
+        self._thread = threading.Thread(target=self._run, name="grblsim-pty", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        master = self._master
+        try:
+            while not self._stop.is_set() and not self._dropped.is_set():
+                ready, _, _ = select.select([master], [], [], self.poll_interval)
+                data = b""
+                if ready:
+                    try:
+                        data = os.read(master, 4096)
+                    except OSError:
+                        data = b""  # no client has the slave open: nothing to read
+                with self.device.lock:
+                    if self.device.closed:
+                        break
+                    self.device.poll()
+                    if data:
+                        self.device.write(data)
+                    self._unsent += self.device.read()
+                if self._unsent:
+                    try:
+                        written = os.write(master, self._unsent)
+                    except BlockingIOError:
+                        written = 0  # the client is not reading: keep the bytes
+                    self._unsent = self._unsent[written:]
+        except BaseException as exc:  # pragma: no cover - reported through stop()
+            self.error = exc
+        finally:
+            if self._dropped.is_set():
+                self._close_fds()
+
+    def _close_fds(self) -> None:
+        for name in ("_master", "_slave"):
+            fd = getattr(self, name)
+            if fd is not None:
+                setattr(self, name, None)
+                os.close(fd)
+
+    def stop(self) -> None:
+        """Stop the thread, wait for it, close the pseudo-terminal (idempotent)."""
+        self._stop.set()
+        self._thread.join()
+        self._close_fds()
+        if self._dropped.set in self.device.on_close:
+            self.device.on_close.remove(self._dropped.set)
+        if self.error is not None:
+            error, self.error = self.error, None
+            raise RuntimeError("the pty server thread failed") from error
+
+
+def serve_pty(device: SimulatedGrbl) -> tuple[str, Callable[[], None]]:
+    """Serve ``device`` (``clock="real"``) on a new pseudo-terminal: ``(slave path, stop)``."""
+    server = PtyServer(device)
+    return server.path, server.stop
+
+
+register()
+
+__all__ = [
+    "BITS_PER_BYTE",
+    "POLL_QUANTUM",
+    "Link",
+    "PtyServer",
+    "attach_device",
+    "device_from_url",
+    "register",
+    "serve_pty",
+]
