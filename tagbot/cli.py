@@ -227,6 +227,15 @@ def vary(plan: str, count: int, seed: int | None, output: str) -> None:
     click.echo(f"wrote {count} plan{'s' * (count != 1)} to {folder}", err=True)
 
 
+def _register_machine_commands() -> None:
+    from tagbot.plotter.cli import gcode_command
+
+    cli.add_command(gcode_command)
+
+
+_register_machine_commands()
+
+
 def _one_line(message: str) -> str:
     return " ".join(message.splitlines()).strip()
 

@@ -1,0 +1,72 @@
+"""``tagbot gcode``: a plan or trace file to a Grbl program for any G-code sender.
+
+Register in ``tagbot/cli.py`` with ``cli.add_command(gcode_command)``.
+"""
+
+from __future__ import annotations
+
+import click
+
+__all__ = ["gcode_command", "load_tag"]
+
+
+def load_tag(path: str):  # -> Tag
+    """A plan file as is; any other input (GML, SVG, points...) is fitted first."""
+    import json
+
+    from tagbot.gesture import fit
+    from tagbot.inputs import load_traces
+    from tagbot.io.planfile import load_plan
+
+    try:
+        with open(path, encoding="utf-8") as stream:
+            head = json.load(stream)
+        is_plan = isinstance(head, dict) and head.get("format") == "tagbot-plan"
+    except (ValueError, UnicodeDecodeError):
+        is_plan = False
+    if is_plan:
+        return load_plan(path)
+    return fit(load_traces(path))
+
+
+@click.command(name="gcode")
+@click.argument("source", metavar="INPUT|PLAN", type=click.Path(dir_okay=False, exists=True))
+@click.option(
+    "-o",
+    "--output",
+    metavar="FILE",
+    type=click.Path(dir_okay=False),
+    required=True,
+    help="Where to write the G-code program.",
+)
+@click.option(
+    "--profile",
+    metavar="NAME|PATH",
+    default="default",
+    show_default=True,
+    help="A packaged machine profile (default, zpen) or a TOML file layered on the defaults.",
+)
+@click.option(
+    "--set",
+    "overrides",
+    metavar="KEY=VALUE",
+    multiple=True,
+    help="Override one profile value, e.g. --set bed.margin=5 --set pen.type=z (repeatable).",
+)
+def gcode_command(source: str, output: str, profile: str, overrides: tuple[str, ...]) -> None:
+    """Place and retime a tag on a Grbl pen plotter and write the G-code program.
+
+    INPUT is a plan file, or a trace file (GML, SVG, points) that is fitted first. The tag is
+    fitted into the bed, slowed down uniformly to the machine's limits (never sped up), and
+    sampled every motion.dt seconds into inverse-time (G93) moves. Nothing is written when the
+    tag would leave the bed.
+    """
+    from tagbot.plotter.place import place
+    from tagbot.plotter.profile import load_profile
+    from tagbot.plotter.program import build_program
+
+    machine = load_profile(profile, overrides)
+    tag = load_tag(source)
+    program = build_program(place(tag, machine), machine)
+    program.write(output)
+    click.echo(f"wrote {output}: {program.summary()}", err=True)
