@@ -394,12 +394,18 @@ def test_any_mix_of_commands_settles_idle_on_the_last_target(auto_start: bool, o
     ex = GrblExecutor(PLOTTER, auto_start=auto_start)
     pending: MotionBlock | Dwell | None = None
     last: MotionBlock | None = None
+    work = 0.0  # an upper bound of the accepted items' nominal durations, seconds
 
     def offer(item: MotionBlock | Dwell) -> None:
-        nonlocal pending, last
+        nonlocal pending, last, work
         if ex.submit(item):
             pending = None
-            last = item if isinstance(item, MotionBlock) else last
+            if isinstance(item, MotionBlock):
+                # 85 mm is the longest move in the ±30 mm square; feeds are mm/min.
+                work += 85.0 / (item.feed_mm_per_min or 6000.0) * 60.0
+                last = item
+            else:
+                work += item.seconds
         else:
             pending = item  # the parser stays on this line
 
@@ -427,7 +433,7 @@ def test_any_mix_of_commands_settles_idle_on_the_last_target(auto_start: bool, o
         if pending is not None:
             offer(pending)
         ex.cycle_start()
-        ex.advance(0.5)
+        ex.advance(max(0.5, work / 100.0))  # slow feeds (10 mm/min) take minutes
         if ex.idle and pending is None:
             break
     assert ex.idle and pending is None
