@@ -16,6 +16,7 @@ from typing import Any, TypeVar
 import click
 
 from tagbot.errors import TagbotError
+from tagbot.plotter.cli import gcode_command
 
 __all__ = ["cli", "main"]
 
@@ -227,13 +228,7 @@ def vary(plan: str, count: int, seed: int | None, output: str) -> None:
     click.echo(f"wrote {count} plan{'s' * (count != 1)} to {folder}", err=True)
 
 
-def _register_machine_commands() -> None:
-    from tagbot.plotter.cli import gcode_command
-
-    cli.add_command(gcode_command)
-
-
-_register_machine_commands()
+cli.add_command(gcode_command)
 
 
 def _one_line(message: str) -> str:

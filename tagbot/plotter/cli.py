@@ -1,32 +1,33 @@
-"""``tagbot gcode``: a plan or trace file to a Grbl program for any G-code sender.
-
-Register in ``tagbot/cli.py`` with ``cli.add_command(gcode_command)``.
-"""
+"""``tagbot gcode``: a plan or trace file to a Grbl program for any G-code sender."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import click
+
+if TYPE_CHECKING:
+    from tagbot.model.plan import Tag
 
 __all__ = ["gcode_command", "load_tag"]
 
 
-def load_tag(path: str):  # -> Tag
+def load_tag(path: str) -> Tag:
     """A plan file as is; any other input (GML, SVG, points...) is fitted first."""
     import json
 
     from tagbot.gesture import fit
-    from tagbot.inputs import load_traces
-    from tagbot.io.planfile import load_plan
+    from tagbot.inputs import read_input, read_traces_bytes
+    from tagbot.io.planfile import tag_from_dict
 
+    data = read_input(path)  # bounded like every input
     try:
-        with open(path, encoding="utf-8") as stream:
-            head = json.load(stream)
-        is_plan = isinstance(head, dict) and head.get("format") == "tagbot-plan"
+        document = json.loads(data.decode("utf-8-sig"))
     except (ValueError, UnicodeDecodeError):
-        is_plan = False
-    if is_plan:
-        return load_plan(path)
-    return fit(load_traces(path))
+        document = None
+    if isinstance(document, dict) and document.get("format") == "tagbot-plan":
+        return tag_from_dict(document)
+    return fit(read_traces_bytes(data, path))
 
 
 @click.command(name="gcode")
