@@ -23,3 +23,33 @@ class PlanFileError(PlanError):
 
 class InputError(TagbotError, ValueError):
     """An input file (trace, motion, profile) is unreadable or invalid."""
+
+
+class ProfileError(TagbotError, ValueError):
+    """A machine profile is unreadable or invalid; the message names the file and the field."""
+
+
+class PlacementError(TagbotError, ValueError):
+    """A tag cannot be placed in the machine's workspace (bed, reach, joint limits, speed);
+    the message names the overflow. Raised before anything is sent."""
+
+
+class DeviceError(TagbotError):
+    """A machine or its connection failed; ``where`` names the line or tick, when known."""
+
+    def __init__(self, message: str, where: str | None = None) -> None:
+        super().__init__(f"{where}: {message}" if where else message)
+        self.where = where
+
+
+class DeviceFault(DeviceError):
+    """The device reported an error: Grbl ``error:N`` or ``ALARM:N``, a DYNAMIXEL status error
+    or hardware-error alert. The run was stopped safely; nothing was sent after it."""
+
+
+class DeviceTimeout(DeviceError, TimeoutError):
+    """The device did not answer before the deadline."""
+
+
+class ConnectionLost(DeviceError, ConnectionError):
+    """The port could not be opened, or closed or failed during the run."""

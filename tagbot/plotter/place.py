@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from tagbot.errors import TagbotError
+from tagbot.errors import PlacementError
 from tagbot.model import Tag
 from tagbot.model.motion import evaluate_plan
 from tagbot.plotter.profile import Profile
@@ -48,10 +48,6 @@ Array = NDArray[np.float64]
 FINE_STEP = 0.001
 """Seconds (tag clock) between the samples used to measure speed, acceleration and extent."""
 _TOLERANCE = 1e-9
-
-
-class PlacementError(TagbotError, ValueError):
-    """The tag cannot be placed on the bed; the message names the overflow."""
 
 
 @dataclass(frozen=True, eq=False)
