@@ -214,3 +214,179 @@ def recorded_velocity(t: ArrayLike, xy: ArrayLike, dt: float = 0.01) -> tuple[Ar
     grid = np.arange(t[0], t[-1], dt)
     rec = np.column_stack([np.interp(grid, t, xy[:, 0]), np.interp(grid, t, xy[:, 1])])
     return grid, np.gradient(rec, dt, axis=0)
+
+
+@dataclass(frozen=True)
+class RunAlignment:
+    """One pen-down run, planned against executed: the time offset that aligns them."""
+
+    plan: int
+    planned_start: float
+    """Planned time (s) of the run's first setpoint."""
+    executed_start: float
+    """The executed time matching ``planned_start``: executed t - offset = planned t."""
+    planned_duration: float
+    """From the first to the last planned movement, s."""
+    executed_duration: float
+    """From the first to the last executed movement, s."""
+    snr_db: float
+
+
+@dataclass(frozen=True)
+class ExecutionComparison:
+    """How faithfully a machine drew the planned motion (machine units, mm, seconds)."""
+
+    deviation_mean: float
+    """Mean distance from executed pen-down positions to the planned path."""
+    deviation_max: float
+    """Largest distance either way between executed and planned pen-down paths."""
+    speed_snr_db: float
+    """``10·log10(Σ|v_planned|² / Σ|v_executed - v_planned|²)`` over all runs, each aligned."""
+    planned_duration: float
+    executed_duration: float
+    runs: tuple[RunAlignment, ...]
+    planned_runs: int
+    executed_runs: int
+
+    @property
+    def duration_ratio(self) -> float:
+        return self.executed_duration / self.planned_duration if self.planned_duration else 1.0
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "path_deviation_mean_mm": self.deviation_mean,
+            "path_deviation_max_mm": self.deviation_max,
+            "speed_snr_db": self.speed_snr_db,
+            "planned_drawing_s": self.planned_duration,
+            "executed_drawing_s": self.executed_duration,
+            "drawing_duration_ratio": self.duration_ratio,
+            "pen_down_runs": {"planned": self.planned_runs, "executed": self.executed_runs},
+            "runs": [
+                {
+                    "plan": r.plan,
+                    "planned_start": r.planned_start,
+                    "executed_start": r.executed_start,
+                    "planned_duration": r.planned_duration,
+                    "executed_duration": r.executed_duration,
+                    "speed_snr_db": r.snr_db,
+                }
+                for r in self.runs
+            ],
+        }
+
+
+MOVED = 0.02
+"""mm: a run starts when the pen has moved this far from its first position, and ends when it
+is this close to its last."""
+
+
+def executed_runs(executed: ArrayLike) -> list[Array]:
+    """The pen-down runs of an executed trace ``(N, 4)``: ``t, x, y, pen`` (pen > 0.5 is down)."""
+    data = np.asarray(executed, dtype=float)
+    if data.ndim != 2 or data.shape[1] != 4:
+        raise ValueError(f"executed: must be an (N, 4) array t, x, y, pen, got {data.shape}")
+    down = data[:, 3] > 0.5
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], down.astype(np.int8), [0]])))
+    return [data[a:b, :3] for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= 2]
+
+
+def compare_execution(
+    planned: Sequence[tuple[ArrayLike, ArrayLike]],
+    executed: ArrayLike,
+    *,
+    plans: Sequence[int] | None = None,
+    dt: float = 0.01,
+    spacing: float = 0.005,
+) -> ExecutionComparison:
+    """Executed pen-down runs against the planned ones (``(t, xy)`` per run, in order).
+
+    Runs are matched in order. Each executed run is aligned in time to its planned run (the
+    offset that maximises their speed agreement, searched around the movement onsets), then:
+    path deviation (closest-point distances, paths densified to ``spacing``), velocity SNR on a
+    ``dt`` grid (executed velocity by central differences), and the time each run takes from
+    its first to its last movement.
+    """
+    runs_e = executed_runs(executed)
+    plans = list(range(len(planned))) if plans is None else list(plans)
+    pairs = list(zip(planned, runs_e, plans, strict=False))
+    if not pairs:
+        raise ValueError("compare_execution: no pen-down run was executed")
+    to_path: list[Array] = []
+    from_path: list[Array] = []
+    signal = noise = 0.0
+    alignments: list[RunAlignment] = []
+    for (tp, xyp), run, plan in pairs:
+        tp, xyp = np.asarray(tp, dtype=float), np.asarray(xyp, dtype=float)
+        te, xye = run[:, 0], run[:, 1:3]
+        path = densify(xyp, spacing)
+        d_exec, _ = cKDTree(path).query(xye)
+        d_plan, _ = cKDTree(densify(xye, spacing)).query(xyp)
+        to_path.append(d_exec)
+        from_path.append(d_plan)
+        p_onset, p_end = _movement(tp, xyp)
+        e_onset, e_end = _movement(te, xye)
+        offset, a, b = _align(tp, xyp, te, xye, e_onset - p_onset, dt)
+        signal, noise = signal + a, noise + b
+        alignments.append(
+            RunAlignment(
+                plan=int(plan),
+                planned_start=float(tp[0]),
+                executed_start=float(tp[0] + offset),
+                planned_duration=float(p_end - p_onset),
+                executed_duration=float(e_end - e_onset),
+                snr_db=_db(a, b),
+            )
+        )
+    d_exec_all = np.concatenate(to_path)
+    return ExecutionComparison(
+        deviation_mean=float(d_exec_all.mean()),
+        deviation_max=float(max(d_exec_all.max(), max(d.max() for d in from_path))),
+        speed_snr_db=_db(signal, noise),
+        planned_duration=sum(r.planned_duration for r in alignments),
+        executed_duration=sum(r.executed_duration for r in alignments),
+        runs=tuple(alignments),
+        planned_runs=len(planned),
+        executed_runs=len(runs_e),
+    )
+
+
+def _db(signal: float, noise: float) -> float:
+    return float(10.0 * np.log10(signal / noise)) if noise > 0 else float("inf")
+
+
+def _movement(t: Array, xy: Array) -> tuple[float, float]:
+    """When a run starts moving and when it stops (see :data:`MOVED`)."""
+    away = np.hypot(*(xy - xy[0]).T) > MOVED
+    near_end = np.hypot(*(xy - xy[-1]).T) > MOVED
+    start = t[np.argmax(away)] if away.any() else t[0]
+    end = t[len(t) - 1 - np.argmax(near_end[::-1])] if near_end.any() else t[-1]
+    return float(start), float(end)
+
+
+def _align(
+    tp: Array, xyp: Array, te: Array, xye: Array, guess: float, dt: float
+) -> tuple[float, float, float]:
+    """The offset (executed t − planned t) near ``guess`` that best matches the velocities,
+    with the planned velocity's energy and the error energy at that offset."""
+    if te[-1] - te[0] >= 3 * dt:
+        grid, ve = recorded_velocity(te, xye, dt)
+    else:
+        grid, ve = te, np.zeros_like(xye)
+    vp_full = np.gradient(xyp, tp, axis=0) if len(tp) > 2 else np.zeros_like(xyp)
+
+    def energies(offset: float) -> tuple[float, float]:
+        t_plan = grid - offset
+        vp = np.column_stack(
+            [np.interp(t_plan, tp, vp_full[:, i], left=0.0, right=0.0) for i in (0, 1)]
+        )
+        err = ve - vp
+        return float(np.sum(vp * vp)), float(np.sum(err * err))
+
+    best = (np.inf, 0.0, 0.0, guess)
+    for width, count in ((0.1, 41), (0.005, 21), (0.0005, 21)):
+        for offset in best[3] + np.linspace(-width, width, count):
+            a, b = energies(offset)
+            if b < best[0]:
+                best = (b, a, b, offset)
+    _, a, b, offset = best
+    return float(offset), a, b

@@ -21,7 +21,9 @@ How it follows the firmware (Grbl 1.1h ``serial.c``, ``protocol.c``, ``system.c`
   the ring fills. When the ring runs dry Grbl starts the cycle (auto cycle start).
 - **Pen.** ``M3 S..``/``M4``/``M5`` (and a new S while the spindle runs) wait until all queued
   motion has finished, then take effect; ``G4 P..`` dwells. The pen is down while the spindle runs
-  with S > 0 (``pen="spindle"``) or while Z is below ``pen_z_below`` (``pen="z"``).
+  with S > 0 (``pen="spindle"``; with ``pen_servo=(down, up)`` S values, while it runs nearer
+  the down value: servo pens are M3 S<down> / M3 S<up>) or while Z is below ``pen_z_below``
+  (``pen="z"``).
 - **States** Idle, Run, Hold, Jog, Alarm, Check, Sleep; soft reset prints ``ALARM:3`` first if
   it stopped motion (the machine then stays locked, G-code answers ``error:9``, until ``$X``),
   then the welcome banner, then ``[MSG:'$H'|'$X' to unlock]`` in the Alarm state. A machine with
@@ -188,6 +190,7 @@ class SimulatedGrbl:
         clock: str = "simulated",
         pen: str = "spindle",
         pen_z_below: float = 0.0,
+        pen_servo: tuple[float, float] | None = None,
         position_mm: tuple[float, float, float] = (0.0, 0.0, 0.0),
     ) -> None:
         if clock not in ("simulated", "real"):
@@ -202,7 +205,12 @@ class SimulatedGrbl:
         self.clock = clock
         self.pen_source = pen
         self.pen_z_below = float(pen_z_below)
+        self.pen_servo = None if pen_servo is None else (float(pen_servo[0]), float(pen_servo[1]))
         self.executor = GrblExecutor(self._grbl_settings(), position_mm, auto_start=False)
+        self.executor.on_cycle_stop = self._cycle_stopped
+        self.starvation: list[float] = []
+        """Times the planner ran dry and the machine stopped though no line asked it to (no
+        pen change, dwell or program end waiting): the host did not send lines fast enough."""
         self._wall_start = time.monotonic()
         self._output: deque[tuple[float, bytes]] = deque()
         self._rx: deque[int] = deque()
@@ -362,6 +370,11 @@ class SimulatedGrbl:
         else:
             times = np.array([t for t, _ in self._pen_events])
             values = np.array([v for _, v in self._pen_events])
+            if self.pen_servo is not None:  # on, and nearer the down S value than the up one
+                down, up = self.pen_servo
+                values = (values > 0) & (np.abs(values - down) < np.abs(values - up))
+            else:
+                values = values > 0
             pen[:] = values[np.searchsorted(times, base[:, 0], side="right") - 1]
         return np.column_stack([base, pen])
 
@@ -518,6 +531,11 @@ class SimulatedGrbl:
             self.executor.cycle_start()
             self._ovr_counter = 0
 
+    def _cycle_stopped(self) -> None:
+        waiting = any(isinstance(a, _Wait) and a.item is None for a in self._actions)
+        if not waiting and self.executor._dwell is None:
+            self.starvation.append(self.now)
+
     def _busy(self) -> bool:
         frozen = self.silent or self._critical  # lines will not move until the host acts
         lines = not frozen and (self._actions or 0x0A in self._rx or 0x0D in self._rx)
@@ -596,7 +614,7 @@ class SimulatedGrbl:
         new = step.state
         spindle_on = new.spindle in ("M3", "M4")
         if new.spindle != old.spindle or (spindle_on and new.spindle_speed != old.spindle_speed):
-            pen = 1.0 if spindle_on and new.spindle_speed > 0 else 0.0
+            pen = new.spindle_speed if spindle_on else 0.0
             self._actions.append(_Wait(None))
             self._actions.append(lambda: self._set_pen(pen))
             self._actions.append(self._touch_ovr)

@@ -174,6 +174,8 @@ class GrblExecutor:
         self._lock_until: float | None = None  # step idle delay running: main loop frozen
         self._pending_hold = False
         self.recorder: Recorder | None = Recorder(0.0, self.position_mm) if record else None
+        self.on_cycle_stop: Callable[[], None] | None = None
+        """Called when motion runs out of blocks and the machine stops (Run → Idle)."""
 
     # -- public state ------------------------------------------------------------------------
 
@@ -480,6 +482,8 @@ class GrblExecutor:
         elif self.state == RUN:
             self.state = IDLE
             self._end_motion = False
+            if self.on_cycle_stop is not None:
+                self.on_cycle_stop()
             if self.planner.current_block() is not None:  # pragma: no cover - defensive
                 self._auto_cycle_start()
             else:

@@ -38,6 +38,11 @@ class Serial(SerialBase):
         self._link = Link(device, self._speed or self._baudrate)
         self.is_open = True
 
+    @property
+    def clock(self) -> _LinkClock:
+        """The simulated clock (``now()``, ``sleep_until(t)``): hosts take deadlines from it."""
+        return _LinkClock(self)
+
     def _on_drop(self) -> None:
         self._dropped = True
 
@@ -139,3 +144,18 @@ class Serial(SerialBase):
 
 
 __all__ = ["Serial"]
+
+
+class _LinkClock:
+    """The port's simulated time; waiting moves the line and the device on."""
+
+    def __init__(self, port: Serial) -> None:
+        self._port = port
+
+    def now(self) -> float:
+        return self._port._live_link().now
+
+    def sleep_until(self, t: float) -> None:
+        link = self._port._live_link()
+        if t > link.now:
+            link.advance_to(t)
