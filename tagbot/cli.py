@@ -16,7 +16,7 @@ from typing import Any, TypeVar
 import click
 
 from tagbot.errors import TagbotError
-from tagbot.plotter.cli import gcode_command
+from tagbot.plotter.cli import gcode_command, profile_options, sim_grbl_command
 
 __all__ = ["cli", "main"]
 
@@ -229,6 +229,151 @@ def vary(plan: str, count: int, seed: int | None, output: str) -> None:
 
 
 cli.add_command(gcode_command)
+
+
+@cli.command(name="draw")
+@click.argument("source", metavar="INPUT|PLAN", type=click.Path(dir_okay=False, exists=True))
+@click.option(
+    "--device",
+    type=click.Choice(["grbl", "dynamixel"]),
+    default="grbl",
+    show_default=True,
+    help="grbl: a pen plotter; dynamixel: the servo arm.",
+)
+@click.option(
+    "--port",
+    metavar="PORT",
+    default=None,
+    help="Serial port or pyserial URL of the machine. Without it the run is simulated: "
+    "nothing moves.",
+)
+@profile_options
+@click.option(
+    "--out",
+    metavar="DIR",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="The run folder (default: runs/<input>-<device>-<time> under the current directory).",
+)
+@click.option(
+    "--send-and-wait",
+    is_flag=True,
+    help="Grbl: send one line at a time (slower) instead of character counting.",
+)
+@click.option(
+    "--unlock",
+    "unlock",
+    flag_value="unlock",
+    default=None,
+    help="Grbl: unlock ($X) a machine found in Alarm. Check it first.",
+)
+@click.option(
+    "--home",
+    "unlock",
+    flag_value="home",
+    help="Grbl: home ($H) a machine found in Alarm.",
+)
+@click.option(
+    "--resume-from",
+    metavar="LINE",
+    type=click.IntRange(min=2),
+    default=None,
+    help="Grbl: resume an interrupted job at this line of program.gcode (needs --position-known).",
+)
+@click.option(
+    "--position-known",
+    is_flag=True,
+    help="Confirm the machine's position is right (homed or checked) for --resume-from.",
+)
+@click.option("--no-pictures", is_flag=True, help="Do not render pictures into the run folder.")
+def draw_command(
+    source: str,
+    device: str,
+    port: str | None,
+    profile: str | None,
+    overrides: tuple[str, ...],
+    out: str | None,
+    send_and_wait: bool,
+    unlock: str | None,
+    resume_from: int | None,
+    position_known: bool,
+    no_pictures: bool,
+) -> None:
+    """Draw a tag on a machine and write a run folder (plan, motion, program, executed trace,
+    report, pictures).
+
+    INPUT is a plan file, or a trace file (GML, SVG, points) that is fitted first. Without
+    --port the machine is simulated: the default never moves hardware. A device fault stops
+    the machine safely (pen up) and is reported with the exact line or tick.
+    """
+    import time
+    from pathlib import Path
+
+    from tagbot.draw import draw
+    from tagbot.errors import InputError
+    from tagbot.plotter.cli import load_tag
+
+    if resume_from is not None and not position_known:
+        raise InputError(
+            "--resume-from: the machine's position must be known first (home it or check it), "
+            "then add --position-known"
+        )
+    options: dict[str, Any] = {}
+    if device == "grbl":
+        options = {
+            "mode": "wait" if send_and_wait else "count",
+            "unlock": unlock or "never",
+            "resume_from": resume_from,
+        }
+    elif send_and_wait or unlock or resume_from:
+        raise InputError("--send-and-wait, --unlock, --home and --resume-from are Grbl options")
+    tag = load_tag(source)
+    if out is None:
+        stem = Path(source).name.split(".")[0]
+        out = str(Path("runs") / f"{stem}-{device}-{time.strftime('%Y%m%d-%H%M%S')}")
+    where = "the simulator" if port is None else port
+    click.echo(f"drawing {source} on {device} ({where}) into {out}", err=True)
+    with click.progressbar(length=1, label="streaming", file=sys.stderr) as bar:
+
+        def progress(done: int, total: int) -> None:
+            bar.length = total
+            bar.update(done - bar.pos)
+
+        try:
+            result = draw(
+                tag,
+                out,
+                device=device,
+                port=port,
+                profile=profile,
+                overrides=overrides,
+                progress=progress,
+                pictures=not no_pictures,
+                **options,
+            )
+        except (TagbotError, KeyboardInterrupt):
+            click.echo(f"\nrun folder (partial): {out}", err=True)
+            raise
+    click.echo(_draw_summary(result.report, out), err=True)
+
+
+def _draw_summary(report: dict[str, Any], out: str) -> str:
+    parts = [f"wrote {out}"]
+    if "speed_snr_db" in report:
+        parts.append(
+            f"path deviation {report['path_deviation_mean_mm']:.3f} mm mean, "
+            f"{report['path_deviation_max_mm']:.3f} mm max; speed SNR "
+            f"{report['speed_snr_db']:.1f} dB; drawing time x{report['drawing_duration_ratio']:.3f}"
+        )
+    return "; ".join(parts)
+
+
+@cli.group(name="sim")
+def sim_group() -> None:
+    """Serve simulated machines on pseudo-terminals (for any sender, or tagbot draw --port)."""
+
+
+sim_group.add_command(sim_grbl_command)
 
 
 def _one_line(message: str) -> str:

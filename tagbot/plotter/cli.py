@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import click
 
 if TYPE_CHECKING:
     from tagbot.model.plan import Tag
 
-__all__ = ["gcode_command", "load_tag"]
+__all__ = ["gcode_command", "load_tag", "profile_options", "sim_grbl_command"]
 
 
 def load_tag(path: str) -> Tag:
@@ -30,6 +30,23 @@ def load_tag(path: str) -> Tag:
     return fit(read_traces_bytes(data, path))
 
 
+def profile_options(f: Any) -> Any:
+    """``--profile`` and ``--set``, shared by the machine commands."""
+    f = click.option(
+        "--set",
+        "overrides",
+        metavar="KEY=VALUE",
+        multiple=True,
+        help="Override one profile value, e.g. --set bed.margin=5 (repeatable).",
+    )(f)
+    return click.option(
+        "--profile",
+        metavar="NAME|PATH",
+        default=None,
+        help="A packaged machine profile or a TOML file layered on the defaults.",
+    )(f)
+
+
 @click.command(name="gcode")
 @click.argument("source", metavar="INPUT|PLAN", type=click.Path(dir_okay=False, exists=True))
 @click.option(
@@ -40,21 +57,10 @@ def load_tag(path: str) -> Tag:
     required=True,
     help="Where to write the G-code program.",
 )
-@click.option(
-    "--profile",
-    metavar="NAME|PATH",
-    default="default",
-    show_default=True,
-    help="A packaged machine profile (default, zpen) or a TOML file layered on the defaults.",
-)
-@click.option(
-    "--set",
-    "overrides",
-    metavar="KEY=VALUE",
-    multiple=True,
-    help="Override one profile value, e.g. --set bed.margin=5 --set pen.type=z (repeatable).",
-)
-def gcode_command(source: str, output: str, profile: str, overrides: tuple[str, ...]) -> None:
+@profile_options
+def gcode_command(
+    source: str, output: str, profile: str | None, overrides: tuple[str, ...]
+) -> None:
     """Place and retime a tag on a Grbl pen plotter and write the G-code program.
 
     INPUT is a plan file, or a trace file (GML, SVG, points) that is fitted first. The tag is
@@ -71,3 +77,30 @@ def gcode_command(source: str, output: str, profile: str, overrides: tuple[str, 
     program = build_program(place(tag, machine), machine)
     program.write(output)
     click.echo(f"wrote {output}: {program.summary()}", err=True)
+
+
+@click.command(name="grbl")
+@profile_options
+def sim_grbl_command(profile: str | None, overrides: tuple[str, ...]) -> None:
+    """Serve a simulated Grbl 1.1h on a pseudo-terminal until Ctrl-C.
+
+    The machine's settings ($100/$101, $110/$111, $120/$121, $11) and pen come from the
+    profile. Prints the device path: point any G-code sender, or `tagbot draw --port PATH`,
+    at it.
+    """
+    import threading
+
+    from sim.grbl import SimulatedGrbl
+    from sim.grbl.transport import serve_pty
+    from tagbot.plotter.machine import simulated_pen
+    from tagbot.plotter.profile import device_settings, load_profile
+
+    machine = load_profile(profile, overrides)
+    device = SimulatedGrbl(device_settings(machine), clock="real", **simulated_pen(machine))
+    path, stop = serve_pty(device)
+    try:
+        click.echo(path)
+        click.echo("simulated Grbl 1.1h serving; Ctrl-C stops it", err=True)
+        threading.Event().wait()
+    finally:
+        stop()

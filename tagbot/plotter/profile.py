@@ -8,7 +8,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -20,12 +20,22 @@ from tagbot.config import (
     NUMBER,
     POSITIVE,
     LayeredProfile,
+    convert,
     load_layered,
     packaged_names,
 )
 from tagbot.errors import ProfileError
 
-__all__ = ["SCHEMA", "Profile", "ProfileError", "load_profile", "packaged_profiles"]
+__all__ = [
+    "DEVICE_SETTINGS",
+    "SCHEMA",
+    "Profile",
+    "ProfileError",
+    "device_settings",
+    "load_profile",
+    "packaged_profiles",
+    "with_device_settings",
+]
 
 ALIGNS = ("center", "bottom-left", "bottom-right", "top-left", "top-right")
 PEN_TYPES = ("servo", "z")
@@ -146,3 +156,34 @@ def _check(p: Profile) -> None:
         need(p["pen.down"] >= 0, ("pen.down",), "must be >= 0 (an M3 S value)")
     else:
         need(p["pen.up"] > p["pen.down"], ("pen.down", "pen.up"), "must be > pen.down (Z up)")
+
+
+DEVICE_SETTINGS = {
+    100: "limits.x_steps_per_mm",
+    101: "limits.y_steps_per_mm",
+    110: "limits.x_max_feed",
+    111: "limits.y_max_feed",
+    120: "limits.x_acceleration",
+    121: "limits.y_acceleration",
+    11: "limits.junction_deviation",
+}
+"""The Grbl settings (``$$``) that ``limits.from_device`` takes from the machine."""
+
+
+def with_device_settings(profile: Profile, settings: Mapping[int, float]) -> Profile:
+    """``profile`` with its limits replaced by the controller's ``$$`` values (source ``$$``)."""
+    values = {section: dict(table) for section, table in profile.values.items()}
+    sources = dict(profile.sources)
+    for number, key in DEVICE_SETTINGS.items():
+        if number in settings:
+            section, name = key.split(".")
+            values[section][name] = convert("$$", key, SCHEMA[section][name], settings[number])
+            sources[key] = "$$"
+    result = Profile(values=values, sources=sources, layers=(*profile.layers, "$$"))
+    _check(result)
+    return result
+
+
+def device_settings(profile: Profile) -> dict[int, float]:
+    """The ``$$`` values a controller matching ``profile`` has (for a simulated machine)."""
+    return {number: float(profile[key]) for number, key in DEVICE_SETTINGS.items()}
