@@ -1,0 +1,263 @@
+"""Animation: the tag painted progressively at fixed time steps, as a GIF or an MP4.
+
+Paper §5: the model's samples are spaced in proportion to its speed, so sweeping the brush over
+them at a fixed time step animates the gesture as it was made. Frame ``k`` (``k = 1..n``) shows the
+motion up to ``t_k = t_0 + k · speed / fps`` (``speed`` > 1 plays faster than real time), so::
+
+    frames = ceil(duration · fps / speed) + round(hold · fps)
+
+where ``duration`` is the motion's (first to last sample, pen lifts included) and the last
+``round(hold · fps)`` frames hold the finished tag for ``hold`` seconds. Drips run down over
+``Brush.drip_grow`` seconds of the tag's clock from the moment their slow sample is painted, and
+are complete in the last frame.
+
+Each frame adds only the brush pieces painted since the previous one (joined to it by one sample),
+accumulated by the maximum of coverages, so the cost grows with the frames, not their square.
+
+GIF (Pillow): frame delays are whole centiseconds; each frame's delay is rounded so that the delays
+add up to ``frames / fps`` exactly (to the centisecond). Pillow merges consecutive identical frames
+(pen lifts, the hold) into one frame with their delays added, so a GIF can hold fewer frames than
+counted above but always lasts as long. Rates above 50 fps are refused: browsers slow down GIF
+frames shorter than 20 ms. The palette is the 256 mixes of the background and the ink, exact.
+
+MP4 (H.264, yuv420p) needs the optional ``imageio-ffmpeg`` package (``pip install
+'tagbot[video]'``), which ships its own ffmpeg; the picture's sides are rounded up to even numbers.
+GIF and MP4 have no transparency: a transparent background becomes white.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import os
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tagbot.render.brush import Painting, RenderError
+from tagbot.render.raster import (
+    Rasteriser,
+    View,
+    compose,
+    compound,
+    drip_path,
+    parse_color,
+    stroke_path,
+    texture_field,
+)
+
+__all__ = ["MAX_GIF_FPS", "Timing", "frame_times", "gif_delays", "paint_frames", "write_animation"]
+
+MAX_GIF_FPS = 50.0
+"""GIF frames shorter than 20 ms are slowed down by browsers."""
+
+MAX_FRAMES = 20_000
+"""Refuse animations with more frames than this."""
+
+Progress = Callable[[int, int], None]
+"""Called with (frames done, frames in all) as frames are painted."""
+
+
+@dataclass(frozen=True)
+class Timing:
+    """The frames of an animation: ``drawing`` frames at ``times``, then ``hold`` frames."""
+
+    fps: float
+    speed: float
+    drawing: int
+    hold: int
+    times: NDArray[np.float64]
+    """``t_k`` of the drawing frames, seconds on the motion's clock."""
+
+    @property
+    def frames(self) -> int:
+        return self.drawing + self.hold
+
+    @property
+    def seconds(self) -> float:
+        """How long the animation plays."""
+        return self.frames / self.fps
+
+
+def frame_times(
+    t0: float, duration: float, fps: float, speed: float = 1.0, hold: float = 1.0
+) -> Timing:
+    """The frame schedule of a motion starting at ``t0`` and lasting ``duration`` seconds."""
+    for name, value in (("fps", fps), ("speed", speed)):
+        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            raise RenderError(f"{name}: must be a positive number, got {value!r}")
+    if not (isinstance(hold, int | float) and math.isfinite(hold) and hold >= 0):
+        raise RenderError(f"hold: must be a number of seconds >= 0, got {hold!r}")
+    drawing = max(1, math.ceil(duration * fps / speed - 1e-9))
+    held = round(hold * fps)
+    if drawing + held > MAX_FRAMES:
+        raise RenderError(
+            f"fps: {drawing + held} frames for {duration:.3g} s at {fps:g} fps and speed"
+            f" {speed:g} (max {MAX_FRAMES}); lower --fps or raise --speed"
+        )
+    times = t0 + np.arange(1, drawing + 1) * (speed / fps)
+    return Timing(float(fps), float(speed), drawing, held, times)
+
+
+def gif_delays(frames: int, fps: float) -> list[int]:
+    """Per-frame GIF delays in ms, whole centiseconds adding up to ``frames / fps``."""
+    ticks = np.round(np.arange(frames + 1) * (100.0 / fps)).astype(np.int64)
+    return [int(d) * 10 for d in np.diff(ticks)]
+
+
+def paint_frames(
+    painting: Painting,
+    view: View,
+    timing: Timing,
+    *,
+    texture: bool = False,
+    seed: int | None = None,
+    progress: Progress | None = None,
+) -> Iterator[NDArray[np.float32]]:
+    """The ink opacity ``(height, width)`` of every frame, in order (hold frames included)."""
+    raster = Rasteriser(view)
+    factor = None
+    if texture:
+        if seed is None:
+            raise RenderError("seed: the textured brush needs a seed")
+        factor = texture_field(
+            painting, view, seed, where=raster.coverage(stroke_path(painting)) > 0
+        )
+    scale = timing.fps / timing.speed
+    first_frame = [
+        np.clip(np.ceil((run.t - painting.t0) * scale - 1e-9), 1, timing.drawing).astype(np.int64)
+        for run in painting.runs
+    ]
+    drip_t = np.array([d.t for d in painting.drips])
+    strokes = np.zeros((view.height, view.width), dtype=np.float32)
+    total = timing.frames
+    last_drips: tuple[float, ...] | None = None
+    drips = np.zeros_like(strokes)
+    frame = strokes
+    for k in range(1, total + 1):
+        if k <= timing.drawing:
+            pieces = []
+            for run, frames in zip(painting.runs, first_frame, strict=True):
+                a, b = np.searchsorted(frames, [k, k + 1])
+                if b > a:
+                    pieces += run.pieces(max(int(a) - 1, 0), int(b))
+            if pieces:
+                np.maximum(strokes, raster.coverage(compound(*pieces)), out=strokes)
+            now = float(timing.times[k - 1])
+        else:
+            now = float(timing.times[-1]) + (k - timing.drawing) / scale
+        if len(drip_t):
+            grown = np.clip((now - drip_t) / painting.brush.drip_grow, 0.0, 1.0)
+            grown[drip_t > now] = 0.0
+            if k == total:
+                grown[:] = 1.0
+            state = tuple(np.round(grown, 4).tolist())
+            if state != last_drips:
+                drips = raster.coverage(drip_path(painting, list(state)))
+                last_drips = state
+        frame = strokes * factor if factor is not None else strokes
+        if len(drip_t):
+            frame = frame + drips - frame * drips
+        if progress is not None:
+            progress(k, total)
+        yield frame
+
+
+def _palette(color: object, background: object) -> bytes:
+    """The 256 mixes of background and ink, as a GIF palette."""
+    if parse_color(background, "background") is None:
+        background = "white"
+    ramp = np.linspace(0.0, 1.0, 256, dtype=np.float32)[None, :]
+    return compose(ramp, color, background)[0, :, :3].tobytes()
+
+
+def write_animation(
+    frames: Iterator[NDArray[np.float32]],
+    path: str | os.PathLike[str],
+    view: View,
+    timing: Timing,
+    *,
+    color: object = "#111111",
+    background: object = "white",
+) -> None:
+    """Write frames (ink opacities) as a GIF or MP4, by the suffix of ``path``."""
+    suffix = os.fspath(path).lower().rsplit(".", 1)[-1]
+    if suffix == "gif":
+        _write_gif(frames, path, timing, _palette(color, background))
+    elif suffix == "mp4":
+        _write_mp4(frames, path, view, timing, color, background)
+    else:
+        raise RenderError(f"{os.fspath(path)}: an animation is a .gif or an .mp4")
+
+
+def check_animation(path: str | os.PathLike[str], fps: float) -> None:
+    """Refuse what cannot be written before any frame is painted."""
+    name = os.fspath(path)
+    if name.lower().endswith(".gif") and fps > MAX_GIF_FPS:
+        raise RenderError(f"fps: {fps:g} is too fast for a GIF (at most {MAX_GIF_FPS:g})")
+    if name.lower().endswith(".mp4") and importlib.util.find_spec("imageio_ffmpeg") is None:
+        raise RenderError(
+            f"{name}: MP4 needs the optional package imageio-ffmpeg"
+            " (pip install 'tagbot[video]'), or write a .gif"
+        )
+
+
+def _write_gif(
+    frames: Iterator[NDArray[np.float32]],
+    path: str | os.PathLike[str],
+    timing: Timing,
+    palette: bytes,
+) -> None:
+    from PIL import Image
+
+    def images() -> Iterator[Image.Image]:
+        for alpha in frames:
+            index = np.round(np.clip(alpha, 0.0, 1.0) * 255.0).astype(np.uint8)
+            image = Image.frombytes("P", (index.shape[1], index.shape[0]), index.tobytes())
+            image.putpalette(palette)
+            yield image
+
+    sequence = images()
+    first = next(sequence)
+    first.save(
+        path,
+        format="GIF",
+        save_all=True,
+        append_images=sequence,
+        duration=gif_delays(timing.frames, timing.fps),
+        loop=0,
+        optimize=False,
+        disposal=1,
+    )
+
+
+def _write_mp4(
+    frames: Iterator[NDArray[np.float32]],
+    path: str | os.PathLike[str],
+    view: View,
+    timing: Timing,
+    color: object,
+    background: object,
+) -> None:
+    import imageio_ffmpeg
+
+    if parse_color(background, "background") is None:
+        background = "white"
+    writer = imageio_ffmpeg.write_frames(
+        os.fspath(path),
+        (view.width, view.height),
+        fps=timing.fps,
+        codec="libx264",
+        pix_fmt_out="yuv420p",
+        macro_block_size=2,
+        ffmpeg_log_level="error",
+        output_params=["-movflags", "+faststart"],
+    )
+    writer.send(None)
+    try:
+        for alpha in frames:
+            writer.send(np.ascontiguousarray(compose(alpha, color, background)[..., :3]).tobytes())
+    finally:
+        writer.close()

@@ -1,0 +1,172 @@
+"""Speed and action-plan plots, and the pictures of a `tagbot draw` run folder."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from tagbot.errors import InputError
+from tagbot.inputs import load_traces
+from tagbot.io.motionfile import write_motion_csv
+from tagbot.model import Tag
+from tagbot.render import pictures_for_run, plot
+from tagbot.render.brush import RenderError
+from tagbot.render.plots import (
+    executed_speed,
+    load_run,
+    run_speed_curves,
+    speed_curves,
+)
+from tests.render.conftest import MM_PER_UNIT, TIME_SCALE, write_run_folder
+
+
+def colours(path: Path) -> np.ndarray:
+    with Image.open(path) as image:
+        return np.asarray(image.convert("RGB")).reshape(-1, 3).astype(int)
+
+
+def has_colour(pixels: np.ndarray, hex_: str, tolerance: int = 40, count: int = 50) -> bool:
+    rgb = np.array([int(hex_[i : i + 2], 16) for i in (1, 3, 5)])
+    return int(np.count_nonzero(np.abs(pixels - rgb).max(axis=1) < tolerance)) >= count
+
+
+def assert_not_blank(path: Path) -> np.ndarray:
+    pixels = colours(path)
+    assert np.count_nonzero(pixels.min(axis=1) < 200) > 0.01 * len(pixels)
+    return pixels
+
+
+@pytest.mark.parametrize("name", ["cae", "letter_b"])
+def test_speed_plot_shows_each_strokes_lognormal(
+    tmp_path: Path, name: str, request: pytest.FixtureRequest
+) -> None:
+    tag: Tag = request.getfixturevalue(name)
+    curves = speed_curves(tag)
+    assert len(curves.strokes) == tag.n_strokes
+    # |Σ v_j| <= Σ |v_j|: the total speed never exceeds the sum of the stroke components (drawn
+    # where above 0.1% of their peak).
+    total = np.zeros_like(curves.speed.t)
+    for c in curves.strokes:
+        total[np.searchsorted(curves.speed.t, c.t)] += c.y
+    speed = np.nan_to_num(curves.speed.y)
+    assert np.all(speed <= total + 2e-3 * speed.max())
+    # Each component's area is its stroke's length (the lognormal has unit area).
+    lengths = np.concatenate([p.geometry.length for p in tag.plans])
+    areas = [np.trapezoid(c.y, c.t) for c in curves.strokes]
+    np.testing.assert_allclose(areas, lengths, rtol=2e-3)
+    out = tmp_path / "speed.png"
+    plot(tag, out, kind="speed")
+    pixels = assert_not_blank(out)
+    assert has_colour(pixels, "#c62828")  # total speed
+    assert has_colour(pixels, "#2bb3a8")  # strokes
+
+
+@pytest.mark.parametrize("name", ["cae", "letter_b"])
+def test_plan_plot(tmp_path: Path, name: str, request: pytest.FixtureRequest) -> None:
+    tag: Tag = request.getfixturevalue(name)
+    out = tmp_path / "plan.png"
+    plot(tag, out, kind="plan")
+    pixels = assert_not_blank(out)
+    assert has_colour(pixels, "#f28e2b")  # targets
+    assert has_colour(pixels, "#2bb3a8")  # tangent handles
+    assert has_colour(pixels, "#2e9e44", count=20)  # dt handles
+
+
+def test_recorded_speed_is_aligned_with_the_model(tmp_path: Path, letter_b: Tag) -> None:
+    """A trace recorded from the tag itself (its motion CSV, slowed 1.5 times) comes back on the
+    model's clock at the model's speed."""
+    motion = letter_b.sample(0.01)
+
+    class Slowed:
+        t = motion.t * 1.5
+        xy = motion.xy
+        v = motion.v / 1.5
+        speed = motion.speed / 1.5
+        pen = motion.pen
+
+    recording = tmp_path / "recording.csv"
+    write_motion_csv(Slowed, recording)
+    traces = load_traces(recording)
+    curves = speed_curves(letter_b, traces=traces)
+    assert len(curves.measured) == 1
+    measured = curves.measured[0]
+    model = np.interp(measured.t, curves.speed.t, np.nan_to_num(curves.speed.y))
+    assert np.max(np.abs(measured.y - model)) < 0.1 * np.nanmax(curves.speed.y)
+    out = tmp_path / "speed.png"
+    plot(letter_b, out, traces=traces)
+    assert has_colour(assert_not_blank(out), "#f28e2b")
+
+
+def test_executed_speed_is_smoothed_over_a_window() -> None:
+    t = np.arange(0.0, 1.0, 0.001)
+    rng = np.random.default_rng(0)
+    x = 40.0 * t + rng.normal(0.0, 0.002, len(t))  # 40 mm/s with 2 µm of jitter
+    curve = executed_speed(t, np.column_stack([x, 0 * x]))
+    assert curve is not None
+    assert np.all(np.abs(curve.y - 40.0) < 2.0)
+    assert np.diff(curve.t).min() == pytest.approx(0.005)  # half the 10 ms window
+    coarse = executed_speed(t[::20], np.column_stack([x, 0 * x])[::20])
+    assert coarse is not None and np.diff(coarse.t).min() == pytest.approx(0.02)
+    assert executed_speed(t[:3], np.zeros((3, 2))) is None
+
+
+def test_run_folder_speed_is_aligned_and_in_machine_units(run_dir: Path, cae: Tag) -> None:
+    run = load_run(run_dir)
+    assert run.mm_per_unit == MM_PER_UNIT and run.time_scale == TIME_SCALE
+    curves = run_speed_curves(run)
+    assert curves.units == "mm"
+    assert len(curves.measured) == len(cae.plans)
+    planned = np.nan_to_num(curves.speed.y)
+    for measured in curves.measured:
+        expected = np.interp(measured.t, curves.speed.t, planned)
+        assert np.max(np.abs(measured.y - expected)) < 0.05 * planned.max()
+    # The strokes' lognormals on the machine clock and in mm/s: still under the total speed's
+    # envelope, with areas equal to the strokes' lengths in mm.
+    assert len(curves.strokes) == cae.n_strokes
+    total = np.zeros_like(curves.speed.t)
+    for c in curves.strokes:
+        total[np.searchsorted(curves.speed.t, c.t)] += c.y
+    assert np.all(planned <= total + 2e-3 * planned.max())
+    lengths = np.concatenate([p.geometry.length for p in cae.plans]) * MM_PER_UNIT
+    areas = [np.trapezoid(c.y, c.t) for c in curves.strokes]
+    np.testing.assert_allclose(areas, lengths, rtol=2e-2)
+
+
+def test_pictures_for_run(run_dir: Path) -> None:
+    written = pictures_for_run(run_dir)
+    assert [p.name for p in written] == ["tag.png", "speed.png", "plan.png"]
+    for path in written:
+        assert path.parent == run_dir
+        assert_not_blank(path)
+    assert has_colour(colours(run_dir / "speed.png"), "#f28e2b")  # executed speed
+
+
+def test_pictures_for_a_run_that_did_not_execute(tmp_path: Path, letter_b: Tag) -> None:
+    folder = tmp_path / "dry"
+    write_run_folder(folder, letter_b, executed=False)
+    written = pictures_for_run(folder)
+    assert len(written) == 3
+    (folder / "plan.json").unlink()
+    (folder / "report.json").unlink()
+    assert [p.name for p in pictures_for_run(folder)] == ["tag.png", "speed.png"]
+
+
+def test_bad_run_folders(tmp_path: Path, run_dir: Path) -> None:
+    with pytest.raises(InputError, match="not a run folder"):
+        load_run(tmp_path / "empty-does-not-exist")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match=r"no plan\.json or motion\.csv"):
+        load_run(tmp_path / "empty")
+    (run_dir / "report.json").write_text(json.dumps({"placement": {"time_scale": -1}}))
+    with pytest.raises(InputError, match="time_scale"):
+        load_run(run_dir)
+    (run_dir / "report.json").write_text("{}")
+    (run_dir / "executed.csv").write_text("time,x\n1,2\n")
+    with pytest.raises(InputError, match=r"executed\.csv:1: expected header"):
+        load_run(run_dir)
+    with pytest.raises(RenderError, match="a plot is a"):
+        plot(run_dir, tmp_path / "plot.jpg")
