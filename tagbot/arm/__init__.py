@@ -1,0 +1,35 @@
+"""A drawing arm of DYNAMIXEL X-series servos: profiles, kinematics, placement, streaming.
+
+Usage::
+
+    from tagbot.arm import load_profile, draw_arm
+    profile = load_profile("default", overrides=["motion.rate=200"])
+    run = draw_arm(tag, profile)                 # a simulated servo chain, in simulated time
+    run = draw_arm(tag, profile, "/dev/ttyUSB0")  # the real arm (or a `tagbot sim arm` pty)
+    run.setpoints, run.joints, run.executed, run.stats
+
+:func:`~tagbot.arm.place.build_program` alone places, retimes and checks a tag without any
+device (PlacementError before the first packet).
+"""
+
+from tagbot.arm.kinematics import Arm
+from tagbot.arm.place import ArmProgram, Placement, Setpoints, build_program, check_program, place
+from tagbot.arm.profile import ArmProfile, ProfileError, load_profile, packaged_profiles
+from tagbot.arm.run import ArmRun, draw_arm, draw_backend
+
+__all__ = [
+    "Arm",
+    "ArmProfile",
+    "ArmProgram",
+    "ArmRun",
+    "Placement",
+    "ProfileError",
+    "Setpoints",
+    "build_program",
+    "check_program",
+    "draw_arm",
+    "draw_backend",
+    "load_profile",
+    "packaged_profiles",
+    "place",
+]

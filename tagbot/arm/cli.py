@@ -1,0 +1,63 @@
+"""``tagbot sim arm``: serve a simulated servo chain for the arm on a pseudo-terminal.
+
+The chain has the profile's servo IDs, models and baud rate, and its geometry (for the
+simulator's pen-tip recorder); it runs in real time until Ctrl-C. Any program opens the printed
+device path like a USB adapter: ``tagbot draw … --device dynamixel --port PATH``, the unmodified
+``dynamixel_sdk.PortHandler(PATH)``, or DYNAMIXEL Wizard-like tools that accept a device file.
+"""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+__all__ = ["sim_arm_command"]
+
+
+def _wait_for_interrupt() -> None:
+    """Sleep until Ctrl-C (KeyboardInterrupt); tests replace it."""
+    while True:
+        time.sleep(0.5)
+
+
+@click.command(name="arm")
+@click.option(
+    "--profile",
+    metavar="NAME|PATH",
+    default="default",
+    show_default=True,
+    help="A packaged arm profile or a TOML file layered on the defaults.",
+)
+@click.option(
+    "--set",
+    "overrides",
+    metavar="KEY=VALUE",
+    multiple=True,
+    help="Override one profile value, e.g. --set pen.id=4 (repeatable).",
+)
+def sim_arm_command(profile: str, overrides: tuple[str, ...]) -> None:
+    """Serve a simulated DYNAMIXEL chain for the arm on a pseudo-terminal until Ctrl-C.
+
+    Prints the device path (e.g. /dev/pts/3) on stdout; the servos answer Protocol 2.0 at the
+    profile's bus.baud in real time.
+    """
+    from sim.dynamixel import serve_pty
+    from tagbot.arm.profile import load_profile
+    from tagbot.arm.run import simulated_chain
+
+    machine = load_profile(profile, overrides)
+    chain = simulated_chain(machine, real_time=True)
+    path, stop = serve_pty(chain)
+    servos = ", ".join(f"{id} {model}" for id, model in machine.servos.items())
+    click.echo(path)
+    click.echo(
+        f"serving servos {servos} at {machine['bus.baud']} bps on {path}; Ctrl-C stops", err=True
+    )
+    try:
+        _wait_for_interrupt()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        stop()
+    click.echo("stopped", err=True)

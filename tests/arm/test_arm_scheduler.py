@@ -1,0 +1,99 @@
+"""Absolute-deadline scheduling on a fake clock: no drift, lateness measured, resync on stalls."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+from tagbot.arm.driver import MonotonicClock, Scheduler
+
+
+class FakeClock:
+    """Time moves only when the scheduler sleeps or a tick 'works' (``work``)."""
+
+    def __init__(self, t: float = 1000.0) -> None:
+        self.t = t
+        self.sleeps: list[float] = []
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep_until(self, t: float) -> None:
+        self.sleeps.append(t)
+        self.t = max(self.t, t)
+
+    def work(self, seconds: float) -> None:
+        self.t += seconds
+
+
+def test_no_drift_over_100000_ticks_with_jittery_work() -> None:
+    clock = FakeClock()
+    period = 0.002
+    scheduler = Scheduler(clock, period)
+    t0 = scheduler.start()
+    rng = np.random.default_rng(7)
+    work = rng.uniform(0.0, 0.9 * period, 100_000)
+    for k in range(100_000):
+        late = scheduler.wait(k)
+        assert late == 0.0
+        clock.work(work[k])
+    # Every deadline is t0 + k·period exactly as computed, never an accumulated sum.
+    deadlines = np.array(clock.sleeps)
+    assert np.array_equal(deadlines, t0 + np.arange(100_000) * period)
+    assert scheduler.ticks == 100_000 and scheduler.late_ticks == 0 and scheduler.resyncs == 0
+    assert scheduler.deadline(100_000) - t0 == pytest.approx(200.0, abs=1e-9)
+
+
+def test_lateness_is_measured_and_late_ticks_catch_up() -> None:
+    clock = FakeClock(0.0)
+    scheduler = Scheduler(clock, 0.01)  # late after 2.5 ms, resync after 10 ms
+    scheduler.start(0.0)
+    overrun = {3: 0.014, 10: 0.0141, 20: 0.0259}
+    for k in range(30):
+        scheduler.wait(k)
+        clock.work(overrun.get(k, 0.001))
+    lateness = np.array(scheduler.lateness)
+    assert lateness[4] == pytest.approx(0.004)  # tick 3 ended at 0.044: tick 4 is 4 ms late
+    assert lateness[5] == 0.0  # caught up on its own deadline
+    assert lateness[11] == pytest.approx(0.0041)
+    assert lateness[21] == pytest.approx(0.0159)  # > one period: resync
+    assert scheduler.late_ticks == 3 and scheduler.resyncs == 1
+    assert scheduler.max_lateness == pytest.approx(0.0159)
+    # After the resync the deadlines moved by the lateness: tick 22 is due 10 ms after tick 21's
+    # waking, and nothing is late any more.
+    assert scheduler.deadline(22) == pytest.approx(0.22 + 0.0159)
+    assert np.all(lateness[22:] == 0.0)
+
+
+def test_resync_threshold_is_configurable() -> None:
+    clock = FakeClock(0.0)
+    scheduler = Scheduler(clock, 0.002, late_after=0.001, resync_after=0.005)
+    scheduler.start(0.0)
+    scheduler.wait(0)
+    clock.work(0.006)  # ticks 1 and 2 wake 4 and 2 ms late, then catch up: tick 3 on time
+    for k in range(1, 5):
+        scheduler.wait(k)
+    assert scheduler.late_ticks == 2 and scheduler.resyncs == 0
+    assert scheduler.lateness[3] == 0.0
+    clock.work(0.0075)
+    scheduler.wait(5)
+    assert scheduler.resyncs == 1
+
+
+def test_bad_period_is_refused() -> None:
+    with pytest.raises(ValueError, match="period"):
+        Scheduler(FakeClock(), 0.0)
+
+
+def test_monotonic_clock_never_wakes_early() -> None:
+    clock = MonotonicClock()
+    start = clock.now()
+    late = []
+    for k in range(1, 101):
+        deadline = start + k * 0.001
+        clock.sleep_until(deadline)
+        late.append(time.perf_counter() - deadline)
+    assert min(late) >= 0.0
+    assert np.median(late) < 0.002  # generous: shared CI machines
