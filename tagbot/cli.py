@@ -15,8 +15,10 @@ from typing import Any, TypeVar
 
 import click
 
+from tagbot.arm.cli import sim_arm_command
 from tagbot.errors import TagbotError
 from tagbot.plotter.cli import gcode_command, profile_options, sim_grbl_command
+from tagbot.render.cli import plot_command, render_command
 
 __all__ = ["cli", "main"]
 
@@ -229,6 +231,8 @@ def vary(plan: str, count: int, seed: int | None, output: str) -> None:
 
 
 cli.add_command(gcode_command)
+cli.add_command(render_command)
+cli.add_command(plot_command)
 
 
 @cli.command(name="draw")
@@ -374,6 +378,7 @@ def sim_group() -> None:
 
 
 sim_group.add_command(sim_grbl_command)
+sim_group.add_command(sim_arm_command, name="arm")
 
 
 def _one_line(message: str) -> str:

@@ -24,26 +24,44 @@ import importlib
 import json
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from tagbot.errors import InputError
-from tagbot.io.motionfile import write_motion_csv
+from tagbot.io.motionfile import MotionTable, write_motion_csv
 from tagbot.io.planfile import save_plan
 from tagbot.metrics import compare_execution
 from tagbot.model import Tag
 
-__all__ = ["DEVICES", "DrawResult", "draw", "write_executed_csv"]
+__all__ = ["DEVICES", "DrawResult", "MachineRun", "draw", "write_executed_csv"]
 
 DEVICES: dict[str, str] = {
     "grbl": "tagbot.plotter.machine:draw_backend",
     "dynamixel": "tagbot.arm:draw_backend",
 }
 """Back ends by name: ``module:function`` taking ``(tag, out, profile=, overrides=, port=,
-progress=, **options)`` and returning a :class:`~tagbot.plotter.machine.MachineRun`."""
+progress=, **options)`` and returning a :class:`MachineRun`."""
+
+
+@dataclass
+class MachineRun:
+    """What a back end planned and what the machine did, for the run folder and its report."""
+
+    device: str
+    motion: MotionTable
+    """Planned setpoints in machine mm: t, xy, v, speed, pen."""
+    planned_runs: list[tuple[np.ndarray, np.ndarray]]
+    """Per pen-down run: planned times and positions."""
+    plans: list[int]
+    executed: np.ndarray
+    """``(N, 4)``: t, x, y, pen as executed (empty if nothing ran)."""
+    placement: dict[str, Any]
+    report: dict[str, Any] = field(default_factory=dict)
+    error: BaseException | None = None
+    """The fault that stopped the run (re-raised once the run folder is written)."""
 
 
 @dataclass(frozen=True)

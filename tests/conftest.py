@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Iterator
@@ -25,3 +26,35 @@ def no_leaked_threads() -> Iterator[None]:
     if leaked:
         names = ", ".join(sorted(f"{t.name} (daemon={t.daemon})" for t in leaked))
         pytest.fail(f"test left {len(leaked)} thread(s) running: {names}", pytrace=False)
+
+
+def _open_ports() -> set[str]:
+    """File descriptors open on serial-like devices: pseudo-terminals and ttys."""
+    folder = "/proc/self/fd"
+    if not os.path.isdir(folder):  # pragma: no cover - not Linux
+        return set()
+    found = set()
+    for fd in os.listdir(folder):
+        try:
+            target = os.readlink(os.path.join(folder, fd))
+        except OSError:
+            continue
+        if target.startswith(("/dev/pts/", "/dev/ptmx", "/dev/tty")):
+            found.add(f"{fd} -> {target}")
+    return found
+
+
+@pytest.fixture(autouse=True)
+def no_leaked_ports() -> Iterator[None]:
+    """Fail a test that leaves a serial port or pseudo-terminal open."""
+    before = _open_ports()
+    yield
+    deadline = time.monotonic() + THREAD_GRACE_SECONDS
+    leaked = _open_ports() - before
+    while leaked and time.monotonic() < deadline:
+        time.sleep(0.05)
+        leaked = _open_ports() - before
+    if leaked:
+        pytest.fail(
+            f"test left {len(leaked)} port(s) open: {', '.join(sorted(leaked))}", pytrace=False
+        )

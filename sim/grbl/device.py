@@ -209,8 +209,11 @@ class SimulatedGrbl:
         self.executor = GrblExecutor(self._grbl_settings(), position_mm, auto_start=False)
         self.executor.on_cycle_stop = self._cycle_stopped
         self.starvation: list[float] = []
-        """Times the planner ran dry and the machine stopped though no line asked it to (no
-        pen change, dwell or program end waiting): the host did not send lines fast enough."""
+        self._ran_dry: float | None = None
+        self._flowing = False
+        """Times the planner fell to its last block (so it planned a stop) though no line asked
+        for a stop (pen change, dwell, program end), before more motion came: the host did not
+        send lines fast enough. Counted when the next move arrives."""
         self._wall_start = time.monotonic()
         self._output: deque[tuple[float, bytes]] = deque()
         self._rx: deque[int] = deque()
@@ -526,15 +529,29 @@ class SimulatedGrbl:
                 return
             if not self._take_line():
                 break
+        if self.executor.state == RUN:
+            self._check_starving()
         # The receive buffer ran dry: protocol_auto_cycle_start.
         if self.executor.queued_blocks and self.executor.idle:
             self.executor.cycle_start()
             self._ovr_counter = 0
 
     def _cycle_stopped(self) -> None:
+        self._check_starving()
+
+    def _check_starving(self) -> None:
+        """Note when the planner is down to its last block (it must plan a stop) with no line
+        asking for that (pen change, dwell, program end): starvation if more motion follows."""
+        queued = self.executor.queued_blocks
+        if queued > 1:
+            self._flowing = True  # a motion sequence is under way (the first block is priming)
+            return
         waiting = any(isinstance(a, _Wait) and a.item is None for a in self._actions)
-        if not waiting and self.executor._dwell is None:
-            self.starvation.append(self.now)
+        if waiting or self.executor._dwell is not None:
+            self._flowing = False
+        elif self._flowing and self._ran_dry is None:
+            self._ran_dry = self.now
+            self._flowing = False
 
     def _busy(self) -> bool:
         frozen = self.silent or self._critical  # lines will not move until the host acts
@@ -587,6 +604,9 @@ class SimulatedGrbl:
                         return False
                 elif not self.executor.submit(action.item):
                     return False
+                elif self._ran_dry is not None and isinstance(action.item, MotionBlock):
+                    self.starvation.append(self._ran_dry)
+                    self._ran_dry = None
             elif callable(action):
                 action()
             else:

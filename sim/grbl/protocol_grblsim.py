@@ -41,7 +41,7 @@ class Serial(SerialBase):
     @property
     def clock(self) -> _LinkClock:
         """The simulated clock (``now()``, ``sleep_until(t)``): hosts take deadlines from it."""
-        return _LinkClock(self)
+        return _LinkClock(self._live_link())
 
     def _on_drop(self) -> None:
         self._dropped = True
@@ -147,15 +147,15 @@ __all__ = ["Serial"]
 
 
 class _LinkClock:
-    """The port's simulated time; waiting moves the line and the device on."""
+    """The simulated time of one open link; waiting moves the line and the device on. It keeps
+    telling the time after the port closes or the device drops the connection."""
 
-    def __init__(self, port: Serial) -> None:
-        self._port = port
+    def __init__(self, link: Link) -> None:
+        self._link = link
 
     def now(self) -> float:
-        return self._port._live_link().now
+        return self._link.now
 
     def sleep_until(self, t: float) -> None:
-        link = self._port._live_link()
-        if t > link.now:
-            link.advance_to(t)
+        if t > self._link.now:
+            self._link.advance_to(t)

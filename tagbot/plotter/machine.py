@@ -11,13 +11,13 @@ from __future__ import annotations
 import itertools
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import serial
 
+from tagbot.draw import MachineRun
 from tagbot.errors import ConnectionLost, DeviceError
 from tagbot.io.motionfile import MotionTable
 from tagbot.model import Tag
@@ -26,27 +26,9 @@ from tagbot.plotter.profile import Profile, device_settings, with_device_setting
 from tagbot.plotter.program import Program, build_program, pen_down, pen_up
 from tagbot.plotter.stream import GrblStreamer, StreamOptions, StreamReport, resume_lines
 
-__all__ = ["MachineRun", "draw_backend", "executed_from_statuses", "run_grbl", "setpoint_motion"]
+__all__ = ["draw_backend", "executed_from_statuses", "run_grbl", "setpoint_motion"]
 
 _names = itertools.count()
-
-
-@dataclass
-class MachineRun:
-    """What a back end planned and what the machine did, for the run folder and its report."""
-
-    device: str
-    motion: MotionTable
-    """Planned setpoints in machine mm: t, xy, v, speed, pen."""
-    planned_runs: list[tuple[np.ndarray, np.ndarray]]
-    """Per pen-down run: planned times and positions."""
-    plans: list[int]
-    executed: np.ndarray
-    """``(N, 4)``: t, x, y, pen as executed (empty if nothing ran)."""
-    placement: dict[str, Any]
-    report: dict[str, Any] = field(default_factory=dict)
-    error: BaseException | None = None
-    """The fault that stopped the run (re-raised once the run folder is written)."""
 
 
 def setpoint_motion(setpoints: Setpoints) -> MotionTable:

@@ -384,9 +384,12 @@ class GrblStreamer:
             self._stop_after_fault(pen_up, report)
             raise
         except DeviceError as e:
-            report.errors.append(str(e))
+            fault = e if e.where else type(e)(str(e), self._acked_where(report))
+            report.errors.append(str(fault))
             self._stop_after_fault(pen_up, report, alarm="ALARM:" in str(e))
-            raise
+            if fault is e:
+                raise
+            raise fault from e
         finally:
             report.finished = self.clock.now()
             self._report = None
@@ -530,30 +533,30 @@ class GrblStreamer:
     def safe_stop(self, pen_up: Sequence[str] = (), *, alarm: bool = False) -> None:
         """Feed hold, wait for the stop, soft reset (flushes Grbl's buffers), pen up.
 
-        A machine in Alarm already stands still and is locked: only checked, left locked.
+        After an alarm the machine has stopped by itself and may wait in a critical state
+        (``[MSG:Reset to continue]``, answering nothing): it gets the soft reset only, which
+        leaves it locked in Alarm (unlocking is the operator's decision; G-code, pen commands
+        included, is refused until then).
         """
         self._report = None
         deadline = 5.0
         if not alarm:
             self._write(bytes([Realtime.FEED_HOLD]))
-        status = self._wait_for(
-            lambda m: (
-                isinstance(m, Status)
-                and (
-                    m.state in (State.IDLE, State.ALARM)
-                    or (m.state == State.HOLD and m.substate == 0)
-                )
-            ),
-            "stop after the feed hold",
-            deadline,
-            poll=True,
-        )
-        assert isinstance(status, Status)
-        if status.state == State.ALARM:
-            return
+            self._wait_for(
+                lambda m: (
+                    isinstance(m, Status)
+                    and (
+                        m.state in (State.IDLE, State.ALARM)
+                        or (m.state == State.HOLD and m.substate == 0)
+                    )
+                ),
+                "stop after the feed hold",
+                deadline,
+                poll=True,
+            )
         self._write(bytes([Realtime.SOFT_RESET]))
         self._wait_for(lambda m: isinstance(m, Welcome), "welcome after the reset", deadline)
-        if self._after_reset():
+        if self._after_reset() or alarm:
             return  # locked: leave it to the operator
         for line in pen_up:
             self.command(line.strip(), timeout=deadline)

@@ -15,6 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from firmware_protocols.grbl import State
 from sim.grbl.device import RX_CAPACITY, SimulatedGrbl
 
 WELCOME = b"\r\nGrbl 1.1h ['$' for help]\r\n"
@@ -395,6 +396,8 @@ def test_every_line_gets_exactly_one_answer(lines):
         answers += sum(1 for text in out if text == "ok" or text.startswith("error:"))
         if any(text.startswith("ALARM") for text in out):
             break
+        if device.state == State.HOLD:
+            break  # M0 paused the program: Grbl reads no line until a cycle start
     else:
         assert answers == len(lines)
 
