@@ -372,6 +372,40 @@ def _draw_summary(report: dict[str, Any], out: str) -> str:
     return "; ".join(parts)
 
 
+@cli.command(name="demo")
+@click.option(
+    "--out",
+    metavar="DIR",
+    type=click.Path(file_okay=False),
+    default="tagbot-demo",
+    show_default=True,
+    help="Folder for everything the demo makes.",
+)
+@click.option(
+    "--seed",
+    type=click.IntRange(min=0),
+    default=7,
+    show_default=True,
+    help="Seed of the variations, drips and brush texture.",
+)
+def demo_command(out: str, seed: int) -> None:
+    """The whole pipeline on a real tag that ships with tagbot: fit a DustTag capture, plot its
+    plan and speed, vary it, paint and animate it, and draw it on the simulated pen plotter and
+    the simulated servo arm. Nothing moves: no hardware is used."""
+    import time
+
+    from tagbot.demo import run_demo
+
+    started = time.perf_counter()
+
+    def progress(step: str, index: int, count: int) -> None:
+        click.echo(f"[{index}/{count}] {step} ...", err=True)
+
+    result = run_demo(out, seed=seed, progress=progress)
+    click.echo(result.summary())
+    click.echo(f"done in {time.perf_counter() - started:.1f} s", err=True)
+
+
 @cli.group(name="sim")
 def sim_group() -> None:
     """Serve simulated machines on pseudo-terminals (for any sender, or tagbot draw --port)."""

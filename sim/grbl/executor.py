@@ -127,7 +127,7 @@ class Recorder:
         kt, kp = self.knots()
         n = math.floor((kt[-1] - kt[0]) / dt + 1e-9) + 1
         t = kt[0] + dt * np.arange(n)
-        if t[-1] < kt[-1]:
+        if kt[-1] - t[-1] > 1e-6:  # not a float's hair after the last grid sample
             t = np.append(t, kt[-1])
         out = np.empty((len(t), 4))
         out[:, 0] = t

@@ -79,7 +79,7 @@ class MotionLike(Protocol):
 class Brush:
     """The brush's parameters; see the module docstring for the laws they enter."""
 
-    width: float = 0.035
+    width: float = 0.022
     """Widest brush (at rest), as a fraction of the tag's size."""
     thin: float = 0.2
     """Narrowest brush (at full speed), as a fraction of the widest."""

@@ -1,0 +1,168 @@
+"""``tagbot demo``: the whole pipeline on a tag the project ships, into one folder.
+
+1. **fit**: the real DustTag capture ``examples/dusttag-142.json`` (a phone capture with timing)
+   becomes a ΓΛ* plan (``plan.json``), with its shape error and velocity SNR;
+2. **plots**: the action plan over the trace (``plan.png``) and the speed with each stroke's
+   lognormal and the recorded speed (``speed.png``);
+3. **variations**: plausible instances (``variations/*.json``) and a contact sheet
+   (``variations.png``);
+4. **render**: the tag painted with a speed-dependent brush and drips (``tag.png``,
+   ``tag.svg``) and drawn progressively (``tag.gif``);
+5. **plotter**: drawn on the simulated Grbl plotter (run folder ``plotter/``);
+6. **arm**: drawn by the simulated DYNAMIXEL arm (run folder ``arm/``);
+
+then ``summary.json`` and a short summary of where everything is. Nothing touches hardware.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["DEMO_INPUT", "DemoResult", "run_demo"]
+
+DEMO_INPUT = "dusttag-142.json"
+"""The shipped capture the demo starts from (public domain, see examples/README.md)."""
+
+STEPS = ("fit", "plots", "variations", "render", "plotter", "arm")
+
+
+@dataclass
+class DemoResult:
+    """Where the demo put things, and the headline figures."""
+
+    folder: Path
+    files: dict[str, str] = field(default_factory=dict)
+    figures: dict[str, Any] = field(default_factory=dict)
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def summary(self) -> str:
+        f = self.figures
+        lines = [f"demo folder: {self.folder}"]
+        lines.append(
+            f"  fit        {f['strokes']} strokes in {f['plans']} plans, shape error "
+            f"{100 * f['shape_error_mean']:.2f} % mean of the size -> {self.files['plan']}"
+        )
+        lines.append(f"  plots      {self.files['plan_plot']}, {self.files['speed_plot']}")
+        lines.append(
+            f"  variations {f['variations']} plans (seed {f['seed']}) -> "
+            f"{self.files['variations_sheet']}"
+        )
+        lines.append(f"  render     {self.files['png']}, {self.files['svg']}, {self.files['gif']}")
+        for device in ("plotter", "arm"):
+            r = f[device]
+            lines.append(
+                f"  {device:<10} run folder {self.files[device]}: path deviation "
+                f"{r['path_deviation_mean_mm']:.3f} mm mean / {r['path_deviation_max_mm']:.3f} "
+                f"mm max, speed SNR {r['speed_snr_db']:.1f} dB"
+            )
+        return "\n".join(lines)
+
+
+def run_demo(
+    out: str | Path,
+    *,
+    seed: int = 7,
+    variations: int = 6,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> DemoResult:
+    """Run every step into ``out`` (created); ``progress(step, index, count)`` before each."""
+    from tagbot.draw import draw
+    from tagbot.gesture import fit, vary
+    from tagbot.inputs import read_traces_bytes
+    from tagbot.io.planfile import save_plan
+    from tagbot.metrics import fit_report
+    from tagbot.render import plot, render
+
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    result = DemoResult(folder)
+
+    def step(name: str) -> None:
+        if progress is not None:
+            progress(name, STEPS.index(name) + 1, len(STEPS))
+
+    def timed(name: str, started: float) -> None:
+        result.seconds[name] = round(time.perf_counter() - started, 3)
+
+    started = time.perf_counter()
+    step("fit")
+    data = (resources.files("tagbot") / "examples" / DEMO_INPUT).read_bytes()
+    traces = read_traces_bytes(data, DEMO_INPUT)
+    tag = fit(traces)
+    report = fit_report(traces, tag)
+    save_plan(tag, folder / "plan.json")
+    result.files["plan"] = "plan.json"
+    result.figures.update(
+        plans=len(tag.plans),
+        strokes=report.strokes,
+        shape_error_mean=report.shape.mean,
+        shape_error_max=report.shape.max,
+        velocity_snr_db=report.velocity_snr_db,
+    )
+    timed("fit", started)
+
+    started = time.perf_counter()
+    step("plots")
+    plot(tag, folder / "plan.png", kind="plan", traces=traces)
+    plot(tag, folder / "speed.png", kind="speed", traces=traces)
+    result.files.update(plan_plot="plan.png", speed_plot="speed.png")
+    timed("plots", started)
+
+    started = time.perf_counter()
+    step("variations")
+    instances = vary(tag, variations, seed)
+    (folder / "variations").mkdir(exist_ok=True)
+    for i, instance in enumerate(instances, start=1):
+        save_plan(instance, folder / "variations" / f"variation-{i}.json")
+    _contact_sheet([tag, *instances], folder / "variations.png", seed)
+    result.files["variations_sheet"] = "variations.png"
+    result.figures.update(variations=variations, seed=seed)
+    timed("variations", started)
+
+    started = time.perf_counter()
+    step("render")
+    render(tag, folder / "tag.png", drips=True, seed=seed, size=1600)
+    render(tag, folder / "tag.svg", drips=True, seed=seed)
+    render(tag, folder / "tag.gif", seed=seed, size=480, fps=20)
+    result.files.update(png="tag.png", svg="tag.svg", gif="tag.gif")
+    timed("render", started)
+
+    for device, name in (("grbl", "plotter"), ("dynamixel", "arm")):
+        started = time.perf_counter()
+        step(name)
+        run = draw(tag, folder / name, device=device)
+        keys = ("path_deviation_mean_mm", "path_deviation_max_mm", "speed_snr_db")
+        result.figures[name] = {k: run.report.get(k) for k in keys}
+        result.files[name] = f"{name}/"
+        timed(name, started)
+
+    summary = {"files": result.files, "figures": result.figures, "seconds": result.seconds}
+    (folder / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    return result
+
+
+def _contact_sheet(tags: list[Any], path: Path, seed: int, cell: int = 400) -> None:
+    """The tags side by side (the original first), on a common scale, as one PNG."""
+    from PIL import Image
+
+    from tagbot.render import render_array
+
+    points = np.concatenate([p.targets for t in tags for p in t.plans])
+    low, high = points.min(axis=0), points.max(axis=0)
+    margin = 0.15 * float(np.max(high - low))
+    bounds = (low[0] - margin, low[1] - margin, high[0] + margin, high[1] + margin)
+    columns = 4 if len(tags) > 4 else len(tags)
+    rows = -(-len(tags) // columns)
+    sheet = Image.new("RGBA", (columns * cell, rows * cell), "white")
+    for i, tag in enumerate(tags):
+        pixels = render_array(tag, size=(cell, cell), bounds=bounds, drips=True, seed=seed + i)
+        sheet.paste(Image.fromarray(pixels), ((i % columns) * cell, (i // columns) * cell))
+    sheet.convert("RGB").save(path)
