@@ -12,7 +12,7 @@ from __future__ import annotations
 import time
 from typing import Protocol
 
-__all__ = ["Clock", "MonotonicClock", "port_clock"]
+__all__ = ["Clock", "MonotonicClock", "port_clock", "simulated_clock"]
 
 
 class Clock(Protocol):
@@ -24,24 +24,31 @@ class Clock(Protocol):
 
 
 class MonotonicClock:
-    """The wall clock (``time.monotonic``); ``sleep_until`` sleeps, then spins the last 0.5 ms."""
+    """The wall clock (``time.perf_counter``); ``sleep_until`` sleeps most of the way, then
+    yields (``time.sleep(0)``) until the deadline, so other threads (a pty server) still run."""
 
-    SPIN = 0.0005
+    SPIN = 0.0003
+    """Seconds before a deadline when sleeping turns into yielding."""
 
     def now(self) -> float:
-        return time.monotonic()
+        return time.perf_counter()
 
     def sleep_until(self, t: float) -> None:
-        remaining = t - time.monotonic()
-        if remaining > self.SPIN:
-            time.sleep(remaining - self.SPIN)
-        while time.monotonic() < t:
-            pass
+        while True:
+            remaining = t - time.perf_counter()
+            if remaining <= 0:
+                return
+            time.sleep(remaining - self.SPIN if remaining > 2 * self.SPIN else 0)
+
+
+def simulated_clock(port: object) -> Clock | None:
+    """The port's own clock (``now()`` and ``sleep_until(t)``) if it has one, else None."""
+    clock = getattr(port, "clock", None)
+    if callable(getattr(clock, "now", None)) and callable(getattr(clock, "sleep_until", None)):
+        return clock  # type: ignore[return-value]
+    return None
 
 
 def port_clock(port: object) -> Clock:
-    """The clock a port runs on: its own ``clock`` attribute when it has one, else the wall's."""
-    clock = getattr(port, "clock", None)
-    if clock is not None and callable(getattr(clock, "now", None)):
-        return clock
-    return MonotonicClock()
+    """The clock a port runs on: its own when it has one, else the wall clock."""
+    return simulated_clock(port) or MonotonicClock()

@@ -58,11 +58,10 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import dynamixel_sdk as sdk
 import numpy as np
@@ -78,12 +77,11 @@ from firmware_protocols.dynamixel import (
 from firmware_protocols.dynamixel.control_table import MODELS, DriveMode
 from tagbot.arm.kinematics import angles_to_ticks
 from tagbot.arm.profile import ArmProfile
+from tagbot.clock import Clock, MonotonicClock, simulated_clock
 from tagbot.errors import ConnectionLost, DeviceError, DeviceFault, DeviceTimeout
 
 __all__ = [
     "ArmDriver",
-    "Clock",
-    "MonotonicClock",
     "Scheduler",
     "StreamResult",
     "UrlPortHandler",
@@ -115,32 +113,6 @@ ARRIVED = 20
 
 HISTORY = 32
 """Bus operations kept for the debug log when something fails."""
-
-
-class Clock(Protocol):
-    """Where deadlines are kept: seconds from an arbitrary origin."""
-
-    def now(self) -> float: ...
-
-    def sleep_until(self, t: float) -> None: ...
-
-
-class MonotonicClock:
-    """The wall clock for real hardware and the pseudo-terminal: ``time.perf_counter`` and a
-    sleep that sleeps most of the way, then yields until the deadline."""
-
-    SPIN = 0.0003
-    """Seconds before a deadline when sleeping turns into yielding (``time.sleep(0)``)."""
-
-    def now(self) -> float:
-        return time.perf_counter()
-
-    def sleep_until(self, t: float) -> None:
-        while True:
-            remaining = t - time.perf_counter()
-            if remaining <= 0:
-                return
-            time.sleep(remaining - self.SPIN if remaining > 2 * self.SPIN else 0)
 
 
 class Scheduler:
@@ -237,7 +209,7 @@ class UrlPortHandler(sdk.PortHandler):
             self.port_name, baudrate=self.baudrate, bytesize=serial.EIGHTBITS, timeout=READ_WAIT
         )
         self.is_open = True
-        self.clock = _clock_of(self.ser)
+        self.clock = simulated_clock(self.ser)
         self.ser.reset_input_buffer()
         self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
         return True
@@ -247,14 +219,6 @@ class UrlPortHandler(sdk.PortHandler):
         if self.clock is not None:
             return self.clock.now() * 1000.0
         return super().getCurrentTime()  # type: ignore[no-any-return]
-
-
-def _clock_of(ser: Any) -> Clock | None:
-    """``ser.clock`` if it has ``now()`` and ``sleep_until(t)`` (a simulated port), else None."""
-    clock = getattr(ser, "clock", None)
-    if callable(getattr(clock, "now", None)) and callable(getattr(clock, "sleep_until", None)):
-        return clock  # type: ignore[no-any-return]
-    return None
 
 
 def _u32(value: int) -> list[int]:

@@ -7,7 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from tagbot.arm.driver import MonotonicClock, Scheduler
+from tagbot.arm.driver import Scheduler
+from tagbot.clock import MonotonicClock
 
 
 class FakeClock:
