@@ -39,7 +39,7 @@ from tagbot.arm.kinematics import Arm, angles_to_ticks, ticks_to_angles, unwrap_
 from tagbot.arm.profile import ArmProfile, Joint
 from tagbot.errors import PlacementError
 from tagbot.model import Tag
-from tagbot.model.motion import evaluate_plan
+from tagbot.model.motion import evaluate_plan, sample_plan
 
 __all__ = [
     "ArmProgram",
@@ -171,15 +171,6 @@ def _reachable(xy: Array, profile: ArmProfile, arm: Arm) -> NDArray[np.bool_]:
 # -- placement -------------------------------------------------------------------------------
 
 
-def _plan_motion(tag: Tag, k: int, step: float) -> tuple[Array, Array, Array]:
-    """Times, positions and velocities (tag units) of plan ``k`` every ``step`` s of its clock."""
-    plan = tag.plans[k]
-    count = math.ceil((plan.end(tag.size) - plan.start) / step - 1e-9) + 1
-    t = plan.start + np.arange(count) * step
-    xy, v = evaluate_plan(plan, t, tag.size)
-    return t, xy, v
-
-
 def _box_template(per_side: int = 48, interior: int = 8) -> Array:
     """Points of the unit square centred on 0: its boundary densely, its inside on a grid."""
     u = np.linspace(-0.5, 0.5, per_side + 1)
@@ -289,7 +280,7 @@ def place(tag: Tag, profile: ArmProfile) -> Placement:
     arm = Arm.from_profile(profile)
     theta = math.radians(profile["place.rotation"])
     rotation = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
-    points = np.concatenate([_plan_motion(tag, k, FINE_STEP)[1] for k in range(len(tag.plans))])
+    points = np.concatenate([sample_plan(tag, k, FINE_STEP)[1] for k in range(len(tag.plans))])
     turned = points @ rotation.T
     low, high = turned.min(axis=0), turned.max(axis=0)
     extent = high - low
@@ -407,7 +398,7 @@ def _time_scale(
     limits = {"speed": 1.0, "acceleration": 1.0}
     worst: dict[str, str] = {}
     for k in range(len(tag.plans)):
-        t, xy, v = _plan_motion(tag, k, FINE_STEP)
+        t, xy, v = sample_plan(tag, k, FINE_STEP)
         xy = xy @ placement.matrix.T + placement.offset
         v = v @ placement.matrix.T
         q = _run_angles(xy, arm, joints)

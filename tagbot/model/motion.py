@@ -15,6 +15,7 @@ nothing, after it its whole chord. Cost is linear in the number of (sample, acti
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -117,6 +118,16 @@ def _check_dt(dt: float) -> float:
     if not (np.isfinite(value) and value > 0.0):
         raise PlanError(f"dt: must be a finite number of seconds > 0, got {dt!r}")
     return value
+
+
+def sample_plan(tag: Tag, k: int, step: float) -> tuple[Array, Array, Array]:
+    """Times, positions and velocities of plan ``k`` of ``tag`` every ``step`` seconds of the
+    tag's clock, from its start to its end (the last sample at or just past the end)."""
+    plan = tag.plans[k]
+    count = math.ceil((plan.end(tag.size) - plan.start) / step - 1e-9) + 1
+    t = plan.start + np.arange(count) * step
+    xy, v = evaluate_plan(plan, t, tag.size)
+    return t, xy, v
 
 
 def evaluate_plan(plan: Plan, t: ArrayLike, size: float | None = None) -> tuple[Array, Array]:

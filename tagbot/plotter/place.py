@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 
 from tagbot.errors import PlacementError
 from tagbot.model import Tag
-from tagbot.model.motion import evaluate_plan
+from tagbot.model.motion import sample_plan
 from tagbot.plotter.profile import Profile
 
 __all__ = ["PlacementError", "Run", "Setpoints", "limit_scale", "place"]
@@ -85,7 +85,7 @@ class Setpoints:
 def place(tag: Tag, profile: Profile) -> Setpoints:
     """Place ``tag`` on the bed of ``profile`` and retime it; see the module docstring."""
     matrix, offset, size = _transform(tag, profile)
-    fine = [_plan_motion(tag, k, FINE_STEP) for k in range(len(tag.plans))]
+    fine = [sample_plan(tag, k, FINE_STEP) for k in range(len(tag.plans))]
     _check_bed(profile, [xy @ matrix.T + offset for _, xy, _ in fine])
     limits = {"speed": 1.0, "acceleration": 1.0, "segment": 1.0}
     for _, _, v in fine:
@@ -97,7 +97,7 @@ def place(tag: Tag, profile: Profile) -> Setpoints:
     for _ in range(100):
         runs = []
         for k in range(len(tag.plans)):
-            t, xy, v = _plan_motion(tag, k, dt / scale)
+            t, xy, v = sample_plan(tag, k, dt / scale)
             runs.append(
                 Run(k, (t - tag.start) * scale, xy @ matrix.T + offset, v @ matrix.T / scale)
             )
@@ -216,22 +216,13 @@ def _direction_acceleration(d: Array, amax: Array) -> Array:
     return np.where(norm > 0, a, float(np.min(amax)))
 
 
-def _plan_motion(tag: Tag, k: int, step: float) -> tuple[Array, Array, Array]:
-    """Times, positions and velocities of plan ``k`` every ``step`` s of the tag's clock."""
-    plan = tag.plans[k]
-    count = math.ceil((plan.end(tag.size) - plan.start) / step - 1e-9) + 1
-    t = plan.start + np.arange(count) * step
-    xy, v = evaluate_plan(plan, t, tag.size)
-    return t, xy, v
-
-
 def _transform(tag: Tag, profile: Profile) -> tuple[Array, Array, float]:
     """``(matrix, offset, mm per unit)`` placing the tag's pen-down extent on the bed."""
     x_min, x_max, y_min, y_max = profile.bed
     margin = profile["bed.margin"]
     theta = math.radians(profile["place.rotation"])
     rotation = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
-    points = np.concatenate([_plan_motion(tag, k, FINE_STEP)[1] for k in range(len(tag.plans))])
+    points = np.concatenate([sample_plan(tag, k, FINE_STEP)[1] for k in range(len(tag.plans))])
     turned = points @ rotation.T
     low, high = turned.min(axis=0), turned.max(axis=0)
     extent = high - low

@@ -11,9 +11,10 @@ import pytest
 
 import tagbot
 from tagbot.arm import Arm, build_program, check_program, load_profile, place
-from tagbot.arm.place import FINE_STEP, _plan_motion, approach, safe
+from tagbot.arm.place import FINE_STEP, approach, safe
 from tagbot.errors import PlacementError
 from tagbot.model import evaluate_plan
+from tagbot.model.motion import sample_plan
 
 from .conftest import small_tag, two_plan_tag
 
@@ -21,7 +22,7 @@ EXAMPLES = Path(tagbot.__file__).parent / "examples"
 
 
 def _pen_down_points(tag, placement) -> np.ndarray:
-    points = np.concatenate([_plan_motion(tag, k, FINE_STEP)[1] for k in range(len(tag.plans))])
+    points = np.concatenate([sample_plan(tag, k, FINE_STEP)[1] for k in range(len(tag.plans))])
     return points @ placement.matrix.T + placement.offset
 
 
