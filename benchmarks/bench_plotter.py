@@ -19,7 +19,8 @@ of the pen), streamed with character counting. The tags:
 
 From each run's ``report.json`` (the issue's goals in brackets):
 
-- lines of G-code, the uniform time scale of the retiming and the limit that set it;
+- lines of G-code, the uniform time scale of the retiming and the limit that set it (from
+  ``placement.limits``; every limit within 1 % of the scale is named);
 - speed SNR executed vs planned, dB (≥ 20);
 - pen-down path deviation mean / max, mm (max ≤ 0.1);
 - drawing duration executed / planned, pen-down runs from first to last movement (≤ 1.05),
@@ -157,6 +158,7 @@ def run_tag(name: str, tag: tagbot.Tag, dt: float, keep: Path | None) -> dict[st
     r = result.report
     limits = r["placement"]["limits"]
     capacity = r["baud_limit_bytes_per_s"]
+    scale = max(limits.values())
     return {
         "tag": name,
         "dt": dt,
@@ -164,7 +166,11 @@ def run_tag(name: str, tag: tagbot.Tag, dt: float, keep: Path | None) -> dict[st
         "acked": r["lines_acknowledged"],
         "errors": len(r["errors"]),
         "time_scale": r["time_scale"],
-        "limit": max(limits, key=limits.get),
+        # which limit set the scale: every one within 1 % of it (the speed limit and the
+        # short-segment cap are often within a rounding of each other)
+        "limit": "/".join(
+            k for k in sorted(limits, key=limits.get, reverse=True) if limits[k] >= 0.99 * scale
+        ),
         "mm_per_unit": r["placement"]["mm_per_unit"],
         "snr_db": r["speed_snr_db"],
         "run_snr_min_db": min(run["speed_snr_db"] for run in r["runs"]),

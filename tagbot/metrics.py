@@ -301,7 +301,8 @@ def compare_execution(
     """Executed pen-down runs against the planned ones (``(t, xy)`` per run, in order).
 
     Runs are matched in order. Each executed run is aligned in time to its planned run (the
-    offset that maximises their speed agreement, searched around the movement onsets), then:
+    offset that best matches their velocities, searched within ±1 s of the offset between their
+    movement onsets), then:
     path deviation (closest-point distances, paths densified to ``spacing``), velocity SNR on a
     ``dt`` grid (executed velocity by central differences), and the time each run takes from
     its first to its last movement.
@@ -382,8 +383,10 @@ def _align(
         err = ve - vp
         return float(np.sum(vp * vp)), float(np.sum(err * err))
 
+    # The onsets only guess the offset: a machine lags most in a stroke's slow start, so the
+    # search spans ±1 s (10 ms steps) before refining.
     best = (np.inf, 0.0, 0.0, guess)
-    for width, count in ((0.1, 41), (0.005, 21), (0.0005, 21)):
+    for width, count in ((1.0, 201), (0.01, 21), (0.001, 21)):
         for offset in best[3] + np.linspace(-width, width, count):
             a, b = energies(offset)
             if b < best[0]:

@@ -166,7 +166,7 @@ def _report(
         "port": "simulator" if device is not None else url,
         "lines_total": len(program.lines),
         "planned_duration_s": program.duration,
-        "planned_drawing_s": program.drawing_time,
+        "program_drawing_s": program.drawing_time,
         "time_scale": program.scale,
         "dt": profile.dt,
         "baud": baud,

@@ -59,6 +59,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "x_steps_per_mm": POSITIVE,
         "min_feed": POSITIVE,
         "slowest_step": POSITIVE,
+        "step_idle_delay": NON_NEGATIVE,
         "y_steps_per_mm": POSITIVE,
         "planner_blocks": INT,
     },
@@ -139,6 +140,11 @@ def _check(p: Profile) -> None:
     )
     need(p.dt <= 1.0, ("motion.dt",), "must be <= 1 s (one G-code line per step)")
     # F = 60/dt must fit Grbl's 8 digits at 3 decimals; Grbl cannot parse lines faster anyway.
+    need(
+        p["limits.step_idle_delay"] < 0.255,
+        ("limits.step_idle_delay",),
+        "must be < 0.255 s (Grbl $1 is 0-254 ms; 255 keeps the motors on: use 0)",
+    )
     need(p.dt >= 0.001, ("motion.dt",), "must be >= 0.001 s (F = 60/dt needs <= 8 digits)")
     if p["motion.park"]:
         need(
@@ -159,6 +165,7 @@ def _check(p: Profile) -> None:
 
 
 DEVICE_SETTINGS = {
+    1: "limits.step_idle_delay",
     100: "limits.x_steps_per_mm",
     101: "limits.y_steps_per_mm",
     110: "limits.x_max_feed",
@@ -169,6 +176,19 @@ DEVICE_SETTINGS = {
 }
 """The Grbl settings (``$$``) that ``limits.from_device`` takes from the machine."""
 
+_MS = 1000.0
+"""``$1`` is in milliseconds (255: motors always on, no delay); the profile's key in seconds."""
+
+
+def _from_device(number: int, value: float) -> float:
+    if number == 1:
+        return 0.0 if value >= 255 else value / _MS
+    return value
+
+
+def _to_device(number: int, value: float) -> float:
+    return round(value * _MS) if number == 1 else value
+
 
 def with_device_settings(profile: Profile, settings: Mapping[int, float]) -> Profile:
     """``profile`` with its limits replaced by the controller's ``$$`` values (source ``$$``)."""
@@ -177,7 +197,8 @@ def with_device_settings(profile: Profile, settings: Mapping[int, float]) -> Pro
     for number, key in DEVICE_SETTINGS.items():
         if number in settings:
             section, name = key.split(".")
-            values[section][name] = convert("$$", key, SCHEMA[section][name], settings[number])
+            value = _from_device(number, settings[number])
+            values[section][name] = convert("$$", key, SCHEMA[section][name], value)
             sources[key] = "$$"
     result = Profile(values=values, sources=sources, layers=(*profile.layers, "$$"))
     _check(result)
@@ -186,4 +207,4 @@ def with_device_settings(profile: Profile, settings: Mapping[int, float]) -> Pro
 
 def device_settings(profile: Profile) -> dict[int, float]:
     """The ``$$`` values a controller matching ``profile`` has (for a simulated machine)."""
-    return {number: float(profile[key]) for number, key in DEVICE_SETTINGS.items()}
+    return {number: _to_device(number, profile[key]) for number, key in DEVICE_SETTINGS.items()}

@@ -30,7 +30,9 @@ Grbl facts behind it:
   dominant axis (``limits.slowest_step``): about 23 mm/min at 80 steps/mm. A line that should
   take longer (the slow tails of a lognormal) is preceded by a ``G4`` dwell for the surplus and
   sent at the slowest rate Grbl really executes, so the line still ends at its setpoint time.
-  (G4 waits for the queue to empty; near rest that costs nothing but Grbl's step idle delay.)
+  G4 waits for the queue to empty and then for Grbl's step idle delay (``$1``,
+  ``limits.step_idle_delay``): the dwell is shortened by that delay, and a surplus shorter than
+  it is not dwelt but carried into the next line's duration.
 - ``M3``/``M5`` and ``G4`` wait for the queued moves: pen commands are pauses, so they stand only
   between runs. A Z pen (``G1Z..``) stays in the motion stream, moved under G94.
 """
@@ -117,8 +119,9 @@ def build_program(setpoints: Setpoints, profile: Profile) -> Program:
     travel_feed = profile["motion.travel_feed"]
     up, down = pen_up(profile), pen_down(profile)
     dwell = profile["pen.dwell"]
+    idle_delay = profile["limits.step_idle_delay"]
     lines += up
-    pen_time = dwell
+    pen_time = dwell + idle_delay
     drawing = 0.0
     travel = 0.0
     here: tuple[int, int] | None = None
@@ -147,7 +150,7 @@ def build_program(setpoints: Setpoints, profile: Profile) -> Program:
         travel_to(run.xy[0])
         lines += down
         lines.append("G93\n")
-        last_time = float(run.t[0])
+        last_time = last_sent = float(run.t[0])
         for k in range(1, len(run.t)):
             x, y = run.xy[k]
             key = step_position(x, y)
@@ -158,20 +161,28 @@ def build_program(setpoints: Setpoints, profile: Profile) -> Program:
             events = max(abs(key[i] - here[i]) for i in range(2))
             # The longest this move can take in Grbl: its minimum feed rate, its slowest step.
             slowest = min(60.0 * moved / min_feed, events * slowest_step)
+            early = 0.0
             if duration > slowest:
-                # Grbl would run this move faster than planned: dwell first
-                # (near rest, so the stop G4 forces costs nothing), then move at that rate.
-                if duration - slowest >= 0.5 * 10**-DECIMALS:  # never a pointless G4P0 stop
-                    lines.append(gcode.dwell(duration - slowest, decimals=DECIMALS))
+                # Grbl would run this move faster than planned: dwell first (near rest, so the
+                # stop G4 forces costs little), then move at that rate. The stop also costs
+                # Grbl's step idle delay ($1), so the dwell is that much shorter; a surplus too
+                # short for a dwell is made up on the next line instead.
+                surplus = duration - slowest
+                if surplus - idle_delay >= 0.5 * 10**-DECIMALS:
+                    lines.append(gcode.dwell(surplus - idle_delay, decimals=DECIMALS))
+                else:
+                    early = surplus
                 duration = slowest
             lines.append(gcode.move(float(x), float(y), feed=60.0 / duration, decimals=DECIMALS))
             indices.append(len(lines) - 1)
             times.append(float(run.t[k]))
-            here, position, last_time = key, run.xy[k].astype(float), float(run.t[k])
-        drawing += last_time - float(run.t[0])
+            here, position = key, run.xy[k].astype(float)
+            last_time = float(run.t[k]) - early
+            last_sent = float(run.t[k])
+        drawing += last_sent - float(run.t[0])
         lines.append("G94\n")
         lines += up
-        pen_time += 2 * dwell
+        pen_time += 2 * (dwell + idle_delay)  # each pen change waits for a full stop
     if profile["motion.park"]:
         travel_to(np.array([profile["motion.park_x"], profile["motion.park_y"]]))
     lines += ["M5\n", "M2\n"]

@@ -42,7 +42,6 @@ G1X94.691Y25F1200
 G1X94.898Y25F1200
 G1X94.966Y25F1200
 G1X94.989Y25F1200
-G4P0.017
 G1X94.996Y25F1834.862
 G94
 M3S50
@@ -60,8 +59,9 @@ def test_straight_stroke_byte_for_byte(tiny):
     # The first setpoint (t = 0.05 s) does not move: it is merged into the next line (F600 =
     # 0.1 s), so each line's end time is still the setpoint time. At 100 steps/mm, 94.996 is one
     # step after 94.989 (9499 → 9500): 0.05 s for one step is slower than Grbl's slowest step
-    # (0.0327 s), so a 0.017 s dwell comes first and the step runs at F = 60/0.0327. The last
-    # setpoints (94.999, 95) round to the same step and are not sent.
+    # (0.0327 s), so the step runs at F = 60/0.0327; the 0.017 s surplus is shorter than Grbl's
+    # step idle delay ($1, 25 ms) that a G4 would cost, so no dwell: the line ends early. The
+    # last setpoints (94.999, 95) round to the same step and are not sent.
     assert program.setpoint_times[:3] == pytest.approx([0.1, 0.15, 0.2])
     assert [program.lines[i] for i in program.setpoint_lines[:2]] == [
         "G1X5.939Y25F600\n",
@@ -70,7 +70,18 @@ def test_straight_stroke_byte_for_byte(tiny):
     durations = np.diff(np.concatenate([[0.0], program.setpoint_times]))
     feeds = [float(re.search(r"F([0-9.]+)", program.lines[i])[1]) for i in program.setpoint_lines]
     assert np.allclose(feeds[:-1], 60.0 / durations[:-1])
-    assert 0.017 + 60.0 / feeds[-1] == pytest.approx(durations[-1], abs=1e-3)  # dwell + step
+    assert 0.017 + 60.0 / feeds[-1] == pytest.approx(durations[-1], abs=1e-3)  # early by 17 ms
+
+
+def test_slow_moves_dwell_less_grbls_step_idle_delay(tiny_file):
+    """A G4 costs its P plus Grbl's step idle delay ($1): the dwell is shortened by it."""
+    profile = load_profile(tiny_file, ["limits.step_idle_delay=0.005"])
+    program = build_program(place(straight_tag(), profile), profile)
+    assert "G4P0.012\nG1X94.996Y25F1834.862\n" in program.text
+    none = load_profile(tiny_file, ["limits.step_idle_delay=0"])
+    assert (
+        "G4P0.017\nG1X94.996Y25F1834.862\n" in build_program(place(straight_tag(), none), none).text
+    )
 
 
 def test_z_pen_sequence(tiny_file):
