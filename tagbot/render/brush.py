@@ -34,12 +34,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tagbot.errors import TagbotError
+from tagbot.io.motionfile import MotionLike
 
 __all__ = [
     "Brush",
@@ -60,19 +60,6 @@ DISC_VERTICES = 24
 
 class RenderError(TagbotError, ValueError):
     """A rendering or plotting request is invalid (size, format, brush parameter, colour...)."""
-
-
-class MotionLike(Protocol):
-    """What the brush needs: samples ``t``, ``xy``, ``v`` and ``pen`` (a Motion or MotionTable)."""
-
-    @property
-    def t(self) -> np.ndarray: ...
-    @property
-    def xy(self) -> np.ndarray: ...
-    @property
-    def v(self) -> np.ndarray: ...
-    @property
-    def pen(self) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
