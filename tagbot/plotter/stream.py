@@ -380,7 +380,7 @@ class GrblStreamer:
             if wait_idle:
                 self._wait_idle(report)
         except KeyboardInterrupt:
-            report.errors.append(f"interrupted at {self._where(report, lines)}")
+            report.errors.append(f"interrupted {self._acked_where(report)}")
             self._stop_after_fault(pen_up, report)
             raise
         except DeviceError as e:
@@ -396,12 +396,6 @@ class GrblStreamer:
         return report
 
     last_report: StreamReport | None = None
-
-    def _where(self, report: StreamReport, lines: Sequence[str]) -> str:
-        index = report.stopped_at
-        if index is None:
-            return "the end"
-        return f"line {index + 1} ({lines[index].strip()})"
 
     def _stream(
         self,
