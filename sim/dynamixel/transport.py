@@ -38,15 +38,13 @@ bus timing that Grbl's ``Link`` models lives in the chain here.
 from __future__ import annotations
 
 import math
-import os
-import select
 import threading
-import tty
 from collections.abc import Callable
 from urllib.parse import parse_qsl, urlsplit
 
 import serial
 
+from sim import pty
 from sim.dynamixel.chain import SimulatedChain
 
 POLL_QUANTUM = 50e-6
@@ -147,71 +145,30 @@ def wait_step(chain: SimulatedChain, size: int, deadline: float = math.inf) -> N
     chain.advance_to(min(target, deadline))
 
 
-class PtyServer:
-    """The thread behind :func:`serve_pty`; ``stop()`` ends it and closes both descriptors."""
+class PtyServer(pty.PtyServer):
+    """The pump behind :func:`serve_pty`; ``stop()`` ends it and closes the pseudo-terminal."""
+
+    name = "dxlsim-pty"
 
     def __init__(self, chain: SimulatedChain, max_wait: float = 0.005) -> None:
         if chain.clock != "real":
             raise ValueError("chain: serve_pty needs a chain with clock='real'")
         self.chain = chain
         self.max_wait = max_wait
-        self._master: int | None
-        self._slave: int | None
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._master)
-        tty.setraw(self._slave)
-        os.set_blocking(self._master, False)
-        self.path = os.ttyname(self._slave)
-        self._unsent = b""
-        self._stop = threading.Event()
-        self.error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name="dxlsim-pty", daemon=True)
-        self._thread.start()
+        super().__init__()
 
-    def _run(self) -> None:
-        master = self._master
-        assert master is not None
-        chain = self.chain
-        try:
-            while not self._stop.is_set():
-                with chain.lock:
-                    upcoming = chain.next_event()
-                    wait = self.max_wait if upcoming is None else upcoming - chain.now()
-                wait = min(max(wait, 0.0), self.max_wait)
-                if self._unsent:
-                    wait = min(wait, 0.001)
-                ready, _, _ = select.select([master], [], [], wait)
-                data = b""
-                if ready:
-                    try:
-                        data = os.read(master, 4096)
-                    except (BlockingIOError, OSError):
-                        data = b""
-                with chain.lock:
-                    if data:
-                        chain.write(data)
-                    self._unsent += chain.read()
-                if self._unsent:
-                    try:
-                        written = os.write(master, self._unsent)
-                    except BlockingIOError:
-                        written = 0  # the client is not reading: keep the bytes
-                    self._unsent = self._unsent[written:]
-        except BaseException as exc:  # pragma: no cover - reported by stop()
-            self.error = exc
+    def wait_time(self) -> float:
+        """Until the chain's next event (a reply due), at most ``max_wait``."""
+        with self.chain.lock:
+            upcoming = self.chain.next_event()
+            wait = self.max_wait if upcoming is None else upcoming - self.chain.now()
+        return min(max(wait, 0.0), self.max_wait)
 
-    def stop(self) -> None:
-        """Stop the thread, wait for it, close the pseudo-terminal (idempotent)."""
-        self._stop.set()
-        self._thread.join()
-        for name in ("_master", "_slave"):
-            fd = getattr(self, name)
-            if fd is not None:
-                setattr(self, name, None)
-                os.close(fd)
-        if self.error is not None:
-            error, self.error = self.error, None
-            raise RuntimeError("the dxlsim pty server thread failed") from error
+    def exchange(self, data: bytes) -> bytes | None:
+        with self.chain.lock:
+            if data:
+                self.chain.write(data)
+            return self.chain.read()
 
 
 def serve_pty(chain: SimulatedChain) -> tuple[str, Callable[[], None]]:

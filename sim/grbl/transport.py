@@ -24,16 +24,14 @@ wall clock. ``serial.Serial(path)`` or any G-code sender opens the slave ``path`
 from __future__ import annotations
 
 import math
-import os
-import select
 import threading
-import tty
 from collections import deque
 from collections.abc import Callable
 from urllib.parse import parse_qsl, urlsplit
 
 import serial
 
+from sim import pty
 from sim.grbl.device import SimulatedGrbl
 
 BITS_PER_BYTE = 10
@@ -192,74 +190,29 @@ class Link:
         self._to_device_free = self.now
 
 
-class PtyServer:
-    """The thread behind :func:`serve_pty`; ``stop()`` ends it and closes both file descriptors."""
+class PtyServer(pty.PtyServer):
+    """The pump behind :func:`serve_pty`; ``stop()`` ends it and closes the pseudo-terminal."""
+
+    name = "grblsim-pty"
 
     def __init__(self, device: SimulatedGrbl, poll_interval: float = 0.001) -> None:
         if device.clock != "real":
             raise ValueError("device: serve_pty needs a device with clock='real'")
         self.device = device
         self.poll_interval = poll_interval
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._master)
-        tty.setraw(self._slave)
-        os.set_blocking(self._master, False)
-        self._unsent = b""
-        self.path = os.ttyname(self._slave)
-        self._stop = threading.Event()
-        self._dropped = threading.Event()
-        self.error: BaseException | None = None
-        device.on_close.append(self._dropped.set)
-        self._thread = threading.Thread(target=self._run, name="grblsim-pty", daemon=True)
-        self._thread.start()
+        super().__init__()
 
-    def _run(self) -> None:
-        master = self._master
-        try:
-            while not self._stop.is_set() and not self._dropped.is_set():
-                ready, _, _ = select.select([master], [], [], self.poll_interval)
-                data = b""
-                if ready:
-                    try:
-                        data = os.read(master, 4096)
-                    except OSError:
-                        data = b""  # no client has the slave open: nothing to read
-                with self.device.lock:
-                    if self.device.closed:
-                        break
-                    self.device.poll()
-                    if data:
-                        self.device.write(data)
-                    self._unsent += self.device.read()
-                if self._unsent:
-                    try:
-                        written = os.write(master, self._unsent)
-                    except BlockingIOError:
-                        written = 0  # the client is not reading: keep the bytes
-                    self._unsent = self._unsent[written:]
-        except BaseException as exc:  # pragma: no cover - reported through stop()
-            self.error = exc
-        finally:
-            if self._dropped.is_set():
-                self._close_fds()
+    def wait_time(self) -> float:
+        return self.poll_interval
 
-    def _close_fds(self) -> None:
-        for name in ("_master", "_slave"):
-            fd = getattr(self, name)
-            if fd is not None:
-                setattr(self, name, None)
-                os.close(fd)
-
-    def stop(self) -> None:
-        """Stop the thread, wait for it, close the pseudo-terminal (idempotent)."""
-        self._stop.set()
-        self._thread.join()
-        self._close_fds()
-        if self._dropped.set in self.device.on_close:
-            self.device.on_close.remove(self._dropped.set)
-        if self.error is not None:
-            error, self.error = self.error, None
-            raise RuntimeError("the pty server thread failed") from error
+    def exchange(self, data: bytes) -> bytes | None:
+        with self.device.lock:
+            if self.device.closed:
+                return None
+            self.device.poll()
+            if data:
+                self.device.write(data)
+            return self.device.read()
 
 
 def serve_pty(device: SimulatedGrbl) -> tuple[str, Callable[[], None]]:
