@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import math
 
-from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
+from serial.serialutil import PortNotOpenError, SerialException, to_bytes
 
 from sim.dynamixel.chain import SimulatedChain
 from sim.dynamixel.transport import BusClock, chain_from_url, wait_step
+from sim.serial_port import SimulatedSerialBase
 
 
-class Serial(SerialBase):
+class Serial(SimulatedSerialBase):
     """A ``serial.SerialBase`` whose far end is a :class:`SimulatedChain` (``self.chain``)."""
 
     def __init__(self, *args, **kwargs) -> None:
@@ -93,39 +94,8 @@ class Serial(SerialBase):
     def out_waiting(self) -> int:
         return self._live().out_waiting
 
-    def cancel_read(self) -> None:
-        pass
-
-    def cancel_write(self) -> None:
-        pass
-
     def send_break(self, duration: float = 0.25) -> None:
         self._live()
-
-    def _update_break_state(self) -> None:
-        pass
-
-    def _update_rts_state(self) -> None:
-        pass
-
-    def _update_dtr_state(self) -> None:
-        pass
-
-    @property
-    def cts(self) -> bool:
-        return True
-
-    @property
-    def dsr(self) -> bool:
-        return True
-
-    @property
-    def ri(self) -> bool:
-        return False
-
-    @property
-    def cd(self) -> bool:
-        return True
 
 
 __all__ = ["Serial"]

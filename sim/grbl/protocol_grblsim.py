@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import math
 
-from serial.serialutil import PortNotOpenError, SerialBase, SerialException
+from serial.serialutil import PortNotOpenError, SerialException
 
 from sim.grbl.device import SimulatedGrbl
 from sim.grbl.transport import POLL_QUANTUM, Link, device_from_url
+from sim.serial_port import SimulatedSerialBase
 
 
-class Serial(SerialBase):
+class Serial(SimulatedSerialBase):
     """A ``serial.SerialBase`` whose far end is a :class:`SimulatedGrbl` (``self.device``)."""
 
     def __init__(self, *args, **kwargs) -> None:
@@ -108,39 +109,8 @@ class Serial(SerialBase):
     def out_waiting(self) -> int:
         return self._live_link().sending
 
-    def cancel_read(self) -> None:
-        pass
-
-    def cancel_write(self) -> None:
-        pass
-
     def send_break(self, duration: float = 0.25) -> None:
         self._live_link()
-
-    def _update_break_state(self) -> None:
-        pass
-
-    def _update_rts_state(self) -> None:
-        pass
-
-    def _update_dtr_state(self) -> None:
-        pass
-
-    @property
-    def cts(self) -> bool:
-        return True
-
-    @property
-    def dsr(self) -> bool:
-        return True
-
-    @property
-    def ri(self) -> bool:
-        return False
-
-    @property
-    def cd(self) -> bool:
-        return True
 
 
 __all__ = ["Serial"]
