@@ -98,7 +98,7 @@ def timing(rates: list[int], seconds: float) -> list[dict[str, float]]:
 
 
 def _tags() -> list[tuple[str, tagbot.Tag]]:
-    from tagbot.plotter.cli import load_tag
+    from tagbot.source import load_tag
 
     return [(path.name, load_tag(str(path))) for path in sorted(EXAMPLES.glob("*.json"))]
 

@@ -13,7 +13,7 @@ Grbl 1.1h (128-byte receive buffer, 15-block look-ahead planner, stepper segment
 of the pen), streamed with character counting. The tags:
 
 - the shipped examples ``tagbot/examples/*.json`` (plan files as they are; other inputs, such as
-  the DustTag capture, fitted first by :func:`tagbot.plotter.cli.load_tag`);
+  the DustTag capture, fitted first by :func:`tagbot.source.load_tag`);
 - with ``--gml N`` (default 5) and the shared data present, N tags of ``gml/dev`` evenly spaced
   in name order, fitted with ``tagbot.fit(tagbot.load_traces(path))``.
 
@@ -53,7 +53,7 @@ import numpy as np
 
 import tagbot
 from tagbot.draw import draw
-from tagbot.plotter.cli import load_tag
+from tagbot.source import load_tag
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "tagbot" / "examples"

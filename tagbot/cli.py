@@ -315,7 +315,7 @@ def draw_command(
 
     from tagbot.draw import draw
     from tagbot.errors import InputError
-    from tagbot.plotter.cli import load_tag
+    from tagbot.source import load_tag
 
     if resume_from is not None and not position_known:
         raise InputError(

@@ -1,4 +1,4 @@
-"""``tagbot gcode``: a plan or trace file to a Grbl program for any G-code sender."""
+"""The plotter's commands: `tagbot gcode` (a Grbl program for any sender) and `tagbot sim grbl`."""
 
 from __future__ import annotations
 
@@ -7,27 +7,9 @@ from typing import TYPE_CHECKING, Any
 import click
 
 if TYPE_CHECKING:
-    from tagbot.model.plan import Tag
+    pass
 
-__all__ = ["gcode_command", "load_tag", "profile_options", "sim_grbl_command"]
-
-
-def load_tag(path: str) -> Tag:
-    """A plan file as is; any other input (GML, SVG, points...) is fitted first."""
-    import json
-
-    from tagbot.gesture import fit
-    from tagbot.inputs import read_input, read_traces_bytes
-    from tagbot.io.planfile import tag_from_dict
-
-    data = read_input(path)  # bounded like every input
-    try:
-        document = json.loads(data.decode("utf-8-sig"))
-    except (ValueError, UnicodeDecodeError):
-        document = None
-    if isinstance(document, dict) and document.get("format") == "tagbot-plan":
-        return tag_from_dict(document)
-    return fit(read_traces_bytes(data, path))
+__all__ = ["gcode_command", "profile_options", "sim_grbl_command"]
 
 
 def profile_options(f: Any) -> Any:
@@ -73,6 +55,8 @@ def gcode_command(
     from tagbot.plotter.program import build_program
 
     machine = load_profile(profile, overrides)
+    from tagbot.source import load_tag
+
     tag = load_tag(source)
     program = build_program(place(tag, machine), machine)
     program.write(output)

@@ -38,24 +38,16 @@ class PixelSize(click.ParamType):
 
 
 def load_source(path: str, model: str | None = None) -> tuple[Tag, list[Trace] | None]:
-    """A plan file as is, or a trace file fitted with ``model`` (with its traces)."""
-    from tagbot.errors import InputError
-    from tagbot.gesture import fit
-    from tagbot.inputs import read_input, read_traces_bytes
-    from tagbot.plotter.cli import load_tag
+    """:func:`tagbot.source.load_source`, noting when ``--model`` cannot apply (a plan file)."""
+    from tagbot.source import load_source as load
 
-    try:
-        traces = read_traces_bytes(read_input(path), path)
-    except InputError:
-        # Not a trace file: a plan file, or neither (load_tag then says why).
-        tag = load_tag(path)
-        if model is not None and model != tag.model:
-            click.echo(
-                f"note: --model applies to traces; {path} is a {tag.model} plan, drawn as is",
-                err=True,
-            )
-        return tag, None
-    return fit(traces, model=model or "gamma"), traces
+    tag, traces = load(path, model)
+    if traces is None and model is not None and model != tag.model:
+        click.echo(
+            f"note: --model applies to traces; {path} is a {tag.model} plan, drawn as is",
+            err=True,
+        )
+    return tag, traces
 
 
 def _model_option(f: Any) -> Any:
