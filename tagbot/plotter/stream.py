@@ -168,6 +168,8 @@ class GrblStreamer:
         self._requests: deque[bytes] = deque()
         self._requests_lock = threading.Lock()
         self._report: StreamReport | None = None
+        self.last_report: StreamReport | None = None
+        """The report of the latest :meth:`stream` call, also when it raised."""
         self.port.timeout = self.options.read_timeout
 
     # -- wire -------------------------------------------------------------------------------
@@ -394,8 +396,6 @@ class GrblStreamer:
             report.finished = self.clock.now()
             self._report = None
         return report
-
-    last_report: StreamReport | None = None
 
     def _stream(
         self,
