@@ -33,9 +33,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from tagbot.errors import PlanError
 from tagbot.gesture import contour
-from tagbot.gesture.refine import refine
+from tagbot.gesture.refine import RefineOptions, refine
+from tagbot.gesture.strokes import Strokes
 from tagbot.model.euler import wrap_angle
-from tagbot.model.motion import evaluate_plan
 from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, MODELS, Model, Plan, Tag, sequence
 
 Array = NDArray[np.float64]
@@ -120,7 +120,55 @@ def fit(traces: Sequence[Any], model: Model = "gamma", **options: Any) -> Tag:
     size = float(np.hypot(*np.ptp(points, axis=0)))
     if size == 0.0:
         size = 1.0  # only dots, all at one place: any scale will do
-    return sequence([fit_trace(xy, size, model, opts) for xy in polylines], opts.lift, model)
+    return sequence(fit_plans(polylines, size, model, opts), opts.lift, model)
+
+
+def fit_trace(xy: ArrayLike, size: float, model: Model, opts: FitOptions) -> Plan:
+    """One trace → one plan (start 0). ``size`` is the whole tag's, which sets every scale."""
+    return fit_plans([np.asarray(xy, dtype=float)], size, model, opts)[0]
+
+
+def fit_plans(polylines: list[Array], size: float, model: Model, opts: FitOptions) -> list[Plan]:
+    """Each polyline → one plan (start 0), all fitted together (one numpy pass per step)."""
+    sections = [_analyse(xy, size, model, opts) for xy in polylines]
+    drawn = [k for k, s in enumerate(sections) if isinstance(s, _Sections)]
+    plans: list[Plan | None] = [s if isinstance(s, Plan) else None for s in sections]
+    if drawn:
+        parts = [sections[k] for k in drawn]
+        assert all(isinstance(p, _Sections) for p in parts)
+        strokes = Strokes(
+            targets=np.concatenate([p.curve[p.dominant] for p in parts]),
+            onsets=np.concatenate([np.cumsum(p.dt) for p in parts]),
+            mu=np.full(sum(len(p.dt) for p in parts), opts.mu),
+            sigma=np.full(sum(len(p.dt) for p in parts), opts.sigma),
+            phi1=np.concatenate([p.phi1 for p in parts]),
+            phi2=np.concatenate([p.phi2 for p in parts]),
+            counts=np.array([len(p.dt) for p in parts], dtype=np.intp),
+        )
+        tolerance = np.array([p.ds for p in parts]) * opts.tolerance
+        strokes = correct_targets(strokes, size, tolerance, opts.iterations)
+        if opts.refine:
+            refine_options = RefineOptions(
+                onset_slack=max(0.5 * (opts.dt_max - opts.dt_min), 1e-3),
+                arcs_only=model == "sigma",
+            )
+            strokes = refine(strokes, [p.curve for p in parts], size, refine_options)
+        for k, plan in zip(drawn, strokes.plans(), strict=True):
+            plans[k] = plan
+    return [p for p in plans if p is not None]
+
+
+@dataclass(frozen=True, eq=False)
+class _Sections:
+    """A trace's contour cut at its dominant points, with each section's stroke estimates."""
+
+    curve: Array
+    dominant: NDArray[np.intp]
+    phi1: Array
+    phi2: Array
+    dt: Array
+    ds: float
+    """The resampling step."""
 
 
 def _polyline(trace: Any, index: int) -> Array:
@@ -132,10 +180,10 @@ def _polyline(trace: Any, index: int) -> Array:
     return xy
 
 
-def fit_trace(xy: ArrayLike, size: float, model: Model, opts: FitOptions) -> Plan:
-    """One trace → one plan (start 0). ``size`` is the whole tag's, which sets every scale."""
+def _analyse(xy: Array, size: float, model: Model, opts: FitOptions) -> _Sections | Plan:
+    """§6.1–6.3 for one trace: its sections and their estimates, or a dot's plan."""
     step = opts.step * size
-    xy = contour.decimate(contour.prefilter(np.asarray(xy, dtype=float), step), 0.5 * step)
+    xy = contour.decimate(contour.prefilter(xy, step), 0.5 * step)
     length = contour.arc_length(xy)[-1]
     if length < 0.5 * opts.dot * size:
         return _dot(xy[0], size, opts)
@@ -158,14 +206,7 @@ def fit_trace(xy: ArrayLike, size: float, model: Model, opts: FitOptions) -> Pla
         cuts = [None] * (len(dominant) - 1)
     phi1, phi2 = _deviations(curve, dominant, cuts)
     dt = _onset_delays(curve, dominant, support, opts)
-    n = len(dominant) - 1
-    mu, sigma = np.full(n, opts.mu), np.full(n, opts.sigma)
-    plan = _correct_targets(
-        curve, dominant, dt, mu, sigma, phi1, phi2, opts.iterations, ds * opts.tolerance
-    )
-    if not opts.refine:
-        return plan
-    return refine(plan, curve, (opts.dt_min, opts.dt_max), arcs_only=model == "sigma")
+    return _Sections(curve, dominant, phi1, phi2, dt, ds)
 
 
 def _dot(point: Array, size: float, opts: FitOptions) -> Plan:
@@ -216,43 +257,70 @@ def _onset_delays(
     return dt
 
 
-def _correct_targets(
-    curve: Array,
-    dominant: NDArray[np.intp],
-    dt: Array,
-    mu: Array,
-    sigma: Array,
-    phi1: Array,
-    phi2: Array,
-    iterations: int,
-    tolerance: float,
-) -> Plan:
-    """Eq. 22: move each interior target by ``p(z_j) − c_j`` until the moves are small.
+def correct_targets(
+    strokes: Strokes, size: float, tolerance: Array, iterations: int
+) -> Strokes:
+    """Eq. 22 for every trace at once: move each interior target by ``p(z_j) − c_j`` until the
+    largest move of its trace is below ``tolerance[trace]``, at most ``iterations`` times.
 
-    All targets move at once; with strongly overlapping strokes a full move can overshoot, so each
-    iteration takes the largest step of 1, ½, ¼ or ⅛ of it that lowers the largest error (and
-    stops when none does).
+    The wanted points ``p(z_j)`` are where the targets start. All targets of a trace move at
+    once; with strongly overlapping strokes a full move can overshoot, so each iteration takes,
+    per trace, the largest step of 1, ½, ¼ or ⅛ of it that lowers the trace's largest error (and
+    the trace stops when none does).
     """
-    wanted = curve[dominant]
-    plan = Plan(wanted, dt, mu, sigma, phi1, phi2)
-    error = wanted - critical_points(plan)
-    worst = float(np.max(np.hypot(*error.T)))
+    inner = strokes.interior
+    if not inner.size:
+        return strokes
+    wanted = strokes.targets[inner]
+    owner = strokes.trace[np.searchsorted(strokes.start_target, inner)]
+    traces = len(strokes.counts)
+
+    def errors(candidate: Strokes) -> tuple[Array, Array]:
+        error = wanted - _critical_points(candidate, inner, size)
+        worst = np.zeros(traces)
+        np.maximum.at(worst, owner, np.hypot(error[:, 0], error[:, 1]))
+        return error, worst
+
+    error, worst = errors(strokes)
+    moving = worst >= tolerance
     for _ in range(iterations):
-        if worst < tolerance:
+        if not moving.any():
             break
+        pending = moving.copy()
         for step in (1.0, 0.5, 0.25, 0.125):
-            try:
-                trial = Plan(plan.targets + step * error, dt, mu, sigma, phi1, phi2)
-            except PlanError:  # targets collapsed onto each other
-                continue
-            trial_error = wanted - critical_points(trial)
-            trial_worst = float(np.max(np.hypot(*trial_error.T)))
-            if trial_worst < worst:
-                plan, error, worst = trial, trial_error, trial_worst
+            targets = strokes.targets.copy()
+            shift = np.where(pending[owner], step, 0.0)[:, None] * error
+            targets[inner] += shift
+            trial = strokes.replace(targets=targets)
+            chord = np.abs(trial.chords)
+            collapsed = np.zeros(traces, dtype=bool)
+            np.logical_or.at(collapsed, trial.trace, chord <= 1e-9 * size)
+            trial_error, trial_worst = errors(trial) if not collapsed.all() else (error, worst)
+            better = pending & ~collapsed & (trial_worst < worst)
+            if better.any():
+                keep = better[owner]
+                kept = strokes.targets.copy()
+                kept[inner[keep]] = targets[inner[keep]]
+                strokes = strokes.replace(targets=kept)
+                error[keep] = trial_error[keep]
+                worst[better] = trial_worst[better]
+                pending &= ~better
+            if not pending.any():
                 break
-        else:
-            break
-    return plan
+        moving &= ~pending & (worst >= tolerance)
+    return strokes
+
+
+def _critical_points(strokes: Strokes, inner: NDArray[np.intp], size: float) -> Array:
+    """The trajectory's position at the critical instant of each target in ``inner``."""
+    b = np.searchsorted(strokes.start_target, inner)
+    times = _crossings(strokes, b - 1, b)
+    trace = strokes.trace[b]
+    order = np.lexsort((times, trace))
+    xy = strokes.evaluate(trace[order], times[order], size).xy
+    points = np.empty_like(xy)
+    points[order] = xy
+    return points
 
 
 def critical_points(plan: Plan) -> Array:
@@ -262,58 +330,63 @@ def critical_points(plan: Plan) -> Array:
     profiles of strokes ``j − 1`` and ``j`` cross (between their peaks), or the later peak if they
     do not.
     """
-    times = crossing_times(plan)
-    order = np.argsort(times)
-    xy, _ = evaluate_plan(plan, times[order])
-    points = np.empty_like(xy)
-    points[order] = xy
-    points[0], points[-1] = plan.targets[0], plan.targets[-1]
+    strokes = Strokes.of([plan.at(0.0)])
+    points = plan.targets.copy()
+    size = float(np.hypot(*np.ptp(plan.targets, axis=0)))
+    points[1:-1] = _critical_points(strokes, strokes.interior, size)
     return points
 
 
 def crossing_times(plan: Plan) -> Array:
     """Critical instants per target: plan start, speed-profile crossings, and the plan's end."""
     m = len(plan.targets)
-    length = plan.geometry.length
     peaks = plan.onsets + np.exp(plan.mu - plan.sigma**2)
     times = np.empty(m)
     times[0] = plan.start
-    times[-1] = float(np.max(peaks)) if m > 2 else peaks[0]
+    times[-1] = float(np.max(peaks))
     if m > 2:
-        j = np.arange(1, m - 1)
-        a, b = j - 1, j
-        lo, hi = np.minimum(peaks[a], peaks[b]), np.maximum(peaks[a], peaks[b])
-
-        # Compare log-speeds: log(D Λ(t)) = log D − log σ − ℓ − (ℓ − μ)²/2σ², ℓ = log(t − t0).
-        offset_a = np.log(length[a]) - np.log(plan.sigma[a])
-        offset_b = np.log(length[b]) - np.log(plan.sigma[b])
-        tiny = np.finfo(float).tiny
-
-        def excess(t: Array) -> tuple[Array, Array]:
-            """The log-speed difference and its derivative in t."""
-            ea = np.maximum(t - plan.onsets[a], tiny)
-            eb = np.maximum(t - plan.onsets[b], tiny)
-            la, lb = np.log(ea), np.log(eb)
-            za = (la - plan.mu[a]) / plan.sigma[a]
-            zb = (lb - plan.mu[b]) / plan.sigma[b]
-            value = (offset_a - la - 0.5 * za * za) - (offset_b - lb - 0.5 * zb * zb)
-            slope = (1.0 + zb / plan.sigma[b]) / eb - (1.0 + za / plan.sigma[a]) / ea
-            return value, slope
-
-        # Near an onset the slope overflows: the Newton step is then refused and we bisect.
-        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-            bracket = (excess(lo)[0] > 0) & (excess(hi)[0] < 0)
-            t = 0.5 * (lo + hi)
-            for _ in range(_CROSSING_STEPS):  # Newton's method, kept inside the bracket
-                value, slope = excess(t)
-                positive = value > 0
-                lo = np.where(bracket & positive, t, lo)
-                hi = np.where(bracket & ~positive, t, hi)
-                step = t - value / slope
-                inside = (step > lo) & (step < hi)
-                t = np.where(inside, step, 0.5 * (lo + hi))
-        times[1:-1] = np.where(bracket, t, np.maximum(peaks[a], peaks[b]))
+        strokes = Strokes.of([plan])
+        b = np.arange(1, m - 1)
+        times[1:-1] = plan.start + _crossings(strokes, b - 1, b)
     return times
+
+
+def _crossings(strokes: Strokes, a: NDArray[np.intp], b: NDArray[np.intp]) -> Array:
+    """Where the speed profiles of strokes ``a`` and ``b`` cross, between their peaks (the later
+    peak if they do not), on their traces' clocks."""
+    onsets, mu, sigma = strokes.onsets, strokes.mu, strokes.sigma
+    peaks = onsets + np.exp(mu - sigma**2)
+    lo, hi = np.minimum(peaks[a], peaks[b]), np.maximum(peaks[a], peaks[b])
+    # Compare log-speeds: log(D Λ(t)) = log D − log σ − ℓ − (ℓ − μ)²/2σ², ℓ = log(t − t0).
+    log_length = np.log(strokes.lengths)
+    offset_a = log_length[a] - np.log(sigma[a])
+    offset_b = log_length[b] - np.log(sigma[b])
+    tiny = np.finfo(float).tiny
+
+    def excess(t: Array) -> tuple[Array, Array]:
+        """The log-speed difference and its derivative in t."""
+        ea = np.maximum(t - onsets[a], tiny)
+        eb = np.maximum(t - onsets[b], tiny)
+        la, lb = np.log(ea), np.log(eb)
+        za = (la - mu[a]) / sigma[a]
+        zb = (lb - mu[b]) / sigma[b]
+        value = (offset_a - la - 0.5 * za * za) - (offset_b - lb - 0.5 * zb * zb)
+        slope = (1.0 + zb / sigma[b]) / eb - (1.0 + za / sigma[a]) / ea
+        return value, slope
+
+    # Near an onset the slope overflows: the Newton step is then refused and we bisect.
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        bracket = (excess(lo)[0] > 0) & (excess(hi)[0] < 0)
+        t = 0.5 * (lo + hi)
+        for _ in range(_CROSSING_STEPS):  # Newton's method, kept inside the bracket
+            value, slope = excess(t)
+            positive = value > 0
+            lo = np.where(bracket & positive, t, lo)
+            hi = np.where(bracket & ~positive, t, hi)
+            step = t - value / slope
+            inside = (step > lo) & (step < hi)
+            t = np.where(inside, step, 0.5 * (lo + hi))
+    return np.where(bracket, t, hi)
 
 
 _CROSSING_STEPS = 8

@@ -1,217 +1,374 @@
-"""Least-squares refinement of a reconstructed plan against its contour (beyond the paper).
+"""Least-squares refinement of reconstructed plans against their contours (beyond the paper).
 
 The paper's reconstruction (§6) places targets so that the trajectory passes through the
 dominant points at the critical instants, with tangents and overlaps estimated once from the
 contour. Overlapping strokes then bend the trajectory away from the contour between those points.
-This step polishes targets, tangents and onset delays together so that the trajectory follows the
-whole contour, ICP-style:
+This step polishes targets, tangents and onsets together so that the trajectory follows the whole
+contour: a Levenberg-Marquardt fit of every trace at once (:mod:`tagbot.gesture.strokes`) whose
+residuals are
 
-1. give each contour sample the time at which the trajectory passes closest to it, and each of
-   as many trajectory instants its closest contour point;
-2. solve the non-linear least-squares problem ``trajectory(τ_k) ≈ goal_k`` over the plan's
-   parameters, with a few evaluations (scipy's trust-region reflective method, ``dt`` kept inside
-   ``[dt_min, dt_max]``);
-3. repeat from 1 a few times.
+* contour samples against the trajectory at instants of their own, which are unknowns of the
+  fit too (orthogonal distance regression: the trajectory may not skip part of the contour), and
+* trajectory instants on a uniform grid against the contour point nearest to them, re-matched at
+  every evaluation (the trajectory may not wander off the contour between those instants).
 
-Each residual depends only on the strokes active at its time, so the Jacobian is sparse and banded;
-scipy's grouped finite differences then cost about (strokes overlapping × parameters per stroke)
-evaluations per Jacobian, whatever the number of strokes.
+The Jacobian is exact for the targets (the trajectory is linear in them) and the onsets and
+instants (minus or plus a velocity), and a forward difference of the unit-chord shapes for the
+tangents. Each residual depends only on the strokes active at its instant, so the normal
+equations are sparse; an iteration costs one evaluation of the active (instant, stroke) pairs and
+two evaluations of shapes, whatever the number of strokes.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
-from scipy.sparse import coo_matrix
+from scipy.linalg import cho_factor, cho_solve
+from scipy.sparse import csr_matrix, diags
+from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
-from tagbot.errors import PlanError
-from tagbot.model.motion import evaluate_plan
-from tagbot.model.plan import Plan
+from tagbot.gesture.strokes import Evaluation, Strokes, evaluate_shapes
+from tagbot.model.plan import unit_strokes
 
 Array = NDArray[np.float64]
-_PHI_LIMIT = 3.0
+Index = NDArray[np.intp]
+
+PHI_LIMIT = 3.0
 """Tangent deviations stay within ±3 rad while refining (away from the ±π ambiguity)."""
-_PATTERN_TOLERANCE = 1e-3
-"""Influence below this fraction of the size is left out of the Jacobian's pattern."""
+_ANGLE_STEP = 1e-6
+"""Forward-difference step for the tangents' Jacobian columns, radians."""
 
 
-def _onset_slack(dt_range: tuple[float, float]) -> float:
-    """How far an onset may move while refining, seconds."""
-    return max(0.5 * (dt_range[1] - dt_range[0]), 1e-3)
+@dataclass(frozen=True)
+class RefineOptions:
+    """How hard the refinement works."""
+
+    iterations: int = 8
+    """Levenberg-Marquardt iterations at most."""
+    contour_samples: int = 16
+    """Contour samples per stroke that the trajectory must pass near."""
+    path_samples: int = 8
+    """Trajectory instants per stroke that must lie near the contour."""
+    onset_slack: float = 0.125
+    """How far each onset may move from where it started, seconds."""
+    arcs_only: bool = False
+    """Keep ΣΛ* strokes circular (``phi1 = -phi2``)."""
 
 
-def refine(
-    plan: Plan,
-    curve: Array,
-    dt_range: tuple[float, float],
-    arcs_only: bool = False,
-    rounds: int = 2,
-    evaluations: int = 6,
-    residuals_per_stroke: int = 24,
-) -> Plan:
-    """``plan`` with targets, tangents and delays adjusted to follow ``curve`` (see module doc).
+def refine(strokes: Strokes, curves: list[Array], size: float, options: RefineOptions) -> Strokes:
+    """``strokes`` (one plan per curve) adjusted to follow ``curves`` (see the module doc).
 
-    The first and last targets stay on the contour's ends and the first stroke's ``dt`` at 0.
-    ``arcs_only`` keeps ΣΛ* strokes circular (``phi1 = -phi2``).
+    The first and last target of each trace stay on its contour's ends and its first onset at 0.
     """
-    m = len(plan.targets)
-    n = m - 1
-    count = min(len(curve), max(residuals_per_stroke * n, 32))
-    goal_all = curve[np.linspace(0, len(curve) - 1, count).round().astype(np.intp)]
-    layout = _Layout(m, arcs_only)
-    lower, upper = layout.bounds(plan, dt_range)
-    contour_tree = cKDTree(curve)
-    for _ in range(rounds):
-        size = float(np.hypot(*np.ptp(plan.targets, axis=0)))
-        grid = np.linspace(plan.start, plan.end(size), 8 * count)
-        points, _ = evaluate_plan(plan, grid)
-        # Both ways, like the shape error: each contour sample to the trajectory's closest
-        # instant, and the trajectory (every 8th grid instant) to its closest contour point, so
-        # that a loop between matched instants is not free.
-        _, nearest = cKDTree(points).query(goal_all)
-        back = np.arange(0, len(grid), 8)
-        _, onto = contour_tree.query(points[back])
-        tau = np.concatenate([grid[nearest], grid[back]])
-        goal = np.concatenate([goal_all, curve[onto]])
-        order = np.argsort(tau, kind="stable")
-        tau, goal = tau[order], goal[order]
-        sparsity = layout.sparsity(plan, tau, size, _onset_slack(dt_range))
-        x0 = np.clip(layout.pack(plan), lower, upper)
+    problem = _Problem.build(strokes, curves, size, options)
+    layout = _Layout(strokes, options.arcs_only, len(problem.goal))
+    tau = problem.initial_instants(strokes)
+    x = layout.pack(strokes, tau)
+    end = problem.trace_end[problem.goal_trace]
+    lower, upper = layout.bounds(strokes, options.onset_slack, end)
+    current = problem.evaluate(strokes, tau)
+    cost = current.cost
+    damping = 1e-3
+    system = None
+    for _ in range(options.iterations):
+        if system is None:
+            system = _NormalEquations(problem.jacobian(layout, strokes, current), current)
+        step = system.solve(damping)
+        trial_x = np.clip(x + step, lower, upper)
+        trial_strokes, trial_tau = layout.unpack(strokes, trial_x)
+        trial = problem.evaluate(trial_strokes, trial_tau) if problem.valid(trial_strokes) else None
+        trial_cost = np.inf if trial is None else trial.cost
+        if trial_cost < cost:
+            improvement = 1.0 - trial_cost / cost
+            x, strokes, tau, current, cost = trial_x, trial_strokes, trial_tau, trial, trial_cost
+            damping = max(damping / 3.0, 1e-7)
+            system = None
+            if improvement < 1e-3:
+                break
+        else:
+            damping *= 4.0
+            if damping > 1e6:
+                break
+    return strokes
 
-        residuals = _residuals(layout, plan, tau, goal, size)
 
-        solution = least_squares(
-            residuals,
-            x0,
-            jac_sparsity=sparsity,
-            bounds=(lower, upper),
-            max_nfev=evaluations,
-            x_scale="jac",
-            # scipy's "trf" with bounds cannot take a single parameter (a one-arc plan's phi).
-            method="trf" if layout.size > 1 else "dogbox",
+@dataclass(frozen=True, eq=False)
+class _Residuals:
+    evaluation: Evaluation
+    order: Index
+    """Evaluation row → residual instant (forward instants first, then the grid)."""
+    residual: NDArray[np.complex128]
+    """Per instant (forward instants first), trajectory minus goal as a complex number."""
+    velocity: NDArray[np.complex128]
+    """The trajectory's velocity at each forward instant."""
+
+    @property
+    def cost(self) -> float:
+        return float(np.sum(self.residual.real**2 + self.residual.imag**2))
+
+
+@dataclass(frozen=True, eq=False)
+class _Problem:
+    """The contours, the goals and the instants of a refinement."""
+
+    size: float
+    contour: Array
+    tree: cKDTree
+    """Nearest contour point per (x, y, trace·far)."""
+    far: float
+    goal: Array
+    """Contour samples the trajectory must pass near, per forward instant."""
+    goal_trace: Index
+    grid: Array
+    """Fixed trajectory instants that must lie near the contour."""
+    grid_trace: Index
+    trace_end: Array
+    counts: Index
+
+    @classmethod
+    def build(
+        cls, strokes: Strokes, curves: list[Array], size: float, options: RefineOptions
+    ) -> _Problem:
+        counts = strokes.counts
+        contour = np.concatenate(curves)
+        trace = np.repeat(np.arange(len(curves)), [len(c) for c in curves])
+        far = 4.0 * size
+        tree = cKDTree(np.column_stack([contour, trace * far]))
+        goal, goal_trace = [], []
+        for k, curve in enumerate(curves):
+            count = min(len(curve), max(options.contour_samples * int(counts[k]), 32))
+            pick = np.linspace(0, len(curve) - 1, count).round().astype(np.intp)
+            goal.append(curve[pick])
+            goal_trace.append(np.full(count, k))
+        ends = strokes.ends(size)
+        grid, grid_trace = [], []
+        for k in range(len(curves)):
+            count = max(options.path_samples * int(counts[k]), 16)
+            grid.append(np.linspace(0.0, ends[k], count))
+            grid_trace.append(np.full(count, k))
+        return cls(
+            size=size,
+            contour=contour,
+            tree=tree,
+            far=far,
+            goal=np.concatenate(goal),
+            goal_trace=np.concatenate(goal_trace),
+            grid=np.concatenate(grid),
+            grid_trace=np.concatenate(grid_trace),
+            trace_end=ends,
+            counts=counts,
         )
-        try:
-            candidate = layout.unpack(plan, solution.x)
-        except PlanError:
-            break
-        if solution.cost >= 0.5 * float(np.sum(residuals(x0) ** 2)):
-            break
-        plan = candidate
-    return plan
+
+    def initial_instants(self, strokes: Strokes) -> Array:
+        """Each goal's instant: the closest of a dense grid along its trace's trajectory."""
+        fine = 4
+        per = np.bincount(self.grid_trace, minlength=len(self.counts)) * fine
+        trace = np.repeat(np.arange(len(per)), per)
+        first = np.concatenate([[0], np.cumsum(per)])
+        fraction = (np.arange(first[-1]) - np.repeat(first[:-1], per)) / np.repeat(per - 1, per)
+        t = fraction * self.trace_end[trace]
+        xy = strokes.evaluate(trace, t, self.size).xy
+        tree = cKDTree(np.column_stack([xy, trace * self.far]))
+        _, nearest = tree.query(np.column_stack([self.goal, self.goal_trace * self.far]))
+        return t[nearest]
+
+    def valid(self, strokes: Strokes) -> bool:
+        """No two consecutive targets of a trace (nearly) coincide."""
+        return bool(np.all(np.abs(strokes.chords) > 1e-6 * self.size))
+
+    def evaluate(self, strokes: Strokes, tau: Array) -> _Residuals:
+        trace = np.concatenate([self.goal_trace, self.grid_trace])
+        t = np.concatenate([tau, self.grid])
+        order = np.lexsort((t, trace))
+        evaluation = strokes.evaluate(trace[order], t[order], self.size)
+        xy = np.empty_like(evaluation.xy)
+        xy[order] = evaluation.xy
+        on_grid = xy[len(tau) :]
+        _, nearest = self.tree.query(np.column_stack([on_grid, self.grid_trace * self.far]))
+        goal = np.concatenate([self.goal, self.contour[nearest]])
+        residual = (xy[:, 0] - goal[:, 0]) + 1j * (xy[:, 1] - goal[:, 1])
+        v = np.empty_like(evaluation.v)
+        v[order] = evaluation.v
+        return _Residuals(evaluation, order, residual, v[: len(tau), 0] + 1j * v[: len(tau), 1])
+
+    def jacobian(self, layout: _Layout, strokes: Strokes, current: _Residuals) -> csr_matrix:
+        """The residuals' Jacobian in the plan's parameters, complex (row per instant, columns as
+        in :class:`_Layout` up to the instants)."""
+        ev, order = current.evaluation, current.order
+        pairs = ev.pairs
+        g = pairs.gx + 1j * pairs.gy
+        rows, cols, values = [], [], []
+
+        # Targets: x = Σ_i p_i (G_{i-1} − G_i), complex-linear in each interior target p_i.
+        inner = layout.inner
+        b = np.searchsorted(strokes.start_target, inner)  # the stroke leaving each target
+        a = b - 1
+        lo = np.minimum(ev.begin[a], ev.begin[b])
+        span = np.maximum(ev.stop[a], ev.stop[b]) - lo
+        which = np.repeat(np.arange(len(inner)), span)
+        row = np.arange(int(span.sum())) - np.repeat(np.cumsum(span) - span - lo, span)
+        coefficient = self._shape_at(ev, g, a[which], row) - self._shape_at(ev, g, b[which], row)
+        rows += [row, row]
+        cols += [2 * which, 2 * which + 1]
+        values += [coefficient, 1j * coefficient]
+
+        # Onsets: moving stroke j's onset later moves its contribution back by its velocity.
+        free = layout.onset_column[pairs.stroke]
+        has = free >= 0
+        rows.append(pairs.sample[has])
+        cols.append(free[has])
+        values.append(-(pairs.chord * pairs.velocity)[has])
+
+        # Tangents: forward differences of the unit shapes at the same CDF values.
+        columns, phi1, phi2 = layout.angle_steps(strokes, _ANGLE_STEP)
+        copies = len(columns)
+        shapes = unit_strokes(phi1, phi2)  # the stepped shapes, ``copies`` blocks of strokes
+        n = len(strokes.onsets)
+        counts = np.tile(np.diff(pairs.offsets), copies)
+        stroke = np.concatenate([pairs.stroke + c * n for c in range(copies)])
+        gx, gy, _, _ = evaluate_shapes(shapes, stroke, counts, np.tile(pairs.w, copies))
+        change = np.tile(pairs.chord, copies) * ((gx + 1j * gy) - np.tile(g, copies))
+        rows.append(np.tile(pairs.sample, copies))
+        cols.append(np.concatenate([column[pairs.stroke] for column in columns]))
+        values.append(change / _ANGLE_STEP)
+
+        # Rows by instant rather than by evaluation order.
+        return csr_matrix(
+            (np.concatenate(values), (order[np.concatenate(rows)], np.concatenate(cols))),
+            shape=(len(order), layout.instant_column),
+        )
+
+    @staticmethod
+    def _shape_at(
+        ev: Evaluation, g: NDArray[np.complex128], stroke: Index, row: Index
+    ) -> NDArray[np.complex128]:
+        """Stroke shapes at evaluation rows: 0 before their windows, 1 after, ``g`` inside."""
+        begin, stop = ev.begin[stroke], ev.stop[stroke]
+        inside = (row >= begin) & (row < stop)
+        out = np.where(row >= stop, 1.0 + 0j, 0j)
+        out[inside] = g[ev.pairs.offsets[stroke[inside]] + row[inside] - begin[inside]]
+        return out
 
 
-def _residuals(
-    layout: _Layout, plan: Plan, tau: Array, goal: Array, size: float
-) -> Callable[[Array], Array]:
-    """Trajectory minus contour at the times ``tau``, as a function of the solver's vector."""
+class _NormalEquations:
+    """Damped Gauss-Newton steps with the instants eliminated (a Schur complement).
 
-    def residuals(x: Array) -> Array:
-        try:
-            trial = layout.unpack(plan, x)
-        except PlanError:  # targets collapsed: a large penalty
-            return np.full(2 * len(tau), 1e3 * size)
-        xy, _ = evaluate_plan(trial, tau, size)
-        return (xy - goal).ravel()
+    With the complex Jacobian ``C`` (a row per instant) the real normal matrix is
+    ``Re(Cᴴ C)``. Each forward instant's own column is the trajectory's velocity ``v`` at it, in
+    its row alone, so that block of the normal matrix is diagonal (``|v|²``) and the instants
+    drop out: the system left is the size of the plan's parameters, solved densely (or sparse
+    when large).
+    """
 
-    return residuals
+    def __init__(self, jacobian: csr_matrix, current: _Residuals) -> None:
+        forward = len(current.velocity)
+        r = current.residual
+        v = current.velocity
+        self.speed2 = np.maximum(v.real**2 + v.imag**2, 1e-300)
+        ch = jacobian.conj().T.tocsr()
+        # Per forward instant: Re(conj(v)·row), the coupling of its instant to the parameters.
+        self.u = (diags(np.conj(v)) @ jacobian[:forward]).real.tocsr()
+        self.a = (ch @ jacobian).real
+        self.b = self.u.T @ diags(1.0 / self.speed2) @ self.u
+        diagonal = self.a.diagonal()
+        self.scale = np.maximum(diagonal, 1e-12 * max(float(diagonal.max(initial=0.0)), 1e-300))
+        self.g_p = (ch @ r).real
+        self.g_t = (np.conj(v) * r[:forward]).real
+        if self.a.shape[0] <= _DENSE_LIMIT:
+            self.a, self.b = self.a.toarray(), self.b.toarray()
+
+    def solve(self, damping: float) -> Array:
+        """The step for the parameters and the instants at this damping."""
+        d = self.speed2 * (1.0 + damping)
+        rhs = -self.g_p + self.u.T @ (self.g_t / d)
+        if isinstance(self.a, np.ndarray):
+            schur = self.a - self.b / (1.0 + damping)
+            schur[np.diag_indices_from(schur)] += damping * self.scale
+            step_p = cho_solve(cho_factor(schur, check_finite=False), rhs, check_finite=False)
+        else:
+            schur = self.a - self.b / (1.0 + damping) + diags(damping * self.scale)
+            step_p = spsolve(schur.tocsc(), rhs)
+        step_t = (-self.g_t - self.u @ step_p) / d
+        return np.concatenate([step_p, step_t])
+
+
+_DENSE_LIMIT = 800
+"""Plan parameters up to which the reduced normal equations are solved densely."""
 
 
 class _Layout:
-    """How a plan's free parameters sit in the solver's vector.
+    """How the free parameters sit in the solver's vector.
 
-    ``[interior targets (x, y)…, phi1/phi2 (or phi) per stroke…, onsets of strokes 1..n−1]``.
-    Onsets rather than delays: a delay moves every later stroke, an onset only its own, which
-    keeps the Jacobian banded. Delays that would turn negative are clamped to 0.
+    ``[interior targets (x, y)…, phi1/phi2 (or phi) per stroke…, onsets of all but each trace's
+    first stroke…, forward instants…]``. Onsets rather than delays: a delay moves every later
+    stroke, an onset only its own. Delays that would turn negative are clamped to 0.
     """
 
-    def __init__(self, m: int, arcs_only: bool) -> None:
-        self.m, self.n = m, m - 1
+    def __init__(self, strokes: Strokes, arcs_only: bool, instants: int) -> None:
+        n = len(strokes.onsets)
         self.arcs_only = arcs_only
-        self.targets = 2 * (m - 2)
-        self.angles = self.n if arcs_only else 2 * self.n
-        self.size = self.targets + self.angles + (self.n - 1)
+        self.inner = strokes.interior
+        self.targets = 2 * len(self.inner)
+        self.angles = n if arcs_only else 2 * n
+        first = np.zeros(n, dtype=bool)
+        first[strokes.first_stroke[:-1]] = True
+        self.free_onsets = np.flatnonzero(~first)
+        self.onset_column = np.full(n, -1)
+        self.onset_column[self.free_onsets] = self.targets + self.angles + np.arange(
+            len(self.free_onsets)
+        )
+        self.instant_column = self.targets + self.angles + len(self.free_onsets)
+        self.size = self.instant_column + instants
 
-    def pack(self, plan: Plan) -> Array:
-        angles = plan.phi2 if self.arcs_only else np.column_stack([plan.phi1, plan.phi2]).ravel()
-        return np.concatenate([plan.targets[1:-1].ravel(), angles, plan.onsets[1:]])
+    def pack(self, strokes: Strokes, tau: Array) -> Array:
+        if self.arcs_only:
+            angles = strokes.phi2
+        else:
+            angles = np.column_stack([strokes.phi1, strokes.phi2]).ravel()
+        return np.concatenate(
+            [strokes.targets[self.inner].ravel(), angles, strokes.onsets[self.free_onsets], tau]
+        )
 
-    def unpack(self, plan: Plan, x: Array) -> Plan:
-        targets = plan.targets.copy()
-        targets[1:-1] = x[: self.targets].reshape(-1, 2)
+    def unpack(self, strokes: Strokes, x: Array) -> tuple[Strokes, Array]:
+        targets = strokes.targets.copy()
+        targets[self.inner] = x[: self.targets].reshape(-1, 2)
         angles = x[self.targets : self.targets + self.angles]
         if self.arcs_only:
             phi1, phi2 = -angles, angles
         else:
             phi1, phi2 = angles[0::2], angles[1::2]
-        onsets = np.concatenate([plan.onsets[:1], x[self.targets + self.angles :]])
-        dt = np.concatenate([plan.dt[:1], np.maximum(np.diff(onsets), 0.0)])
-        return Plan(targets, dt, plan.mu, plan.sigma, phi1, phi2, plan.start)
+        onsets = strokes.onsets.copy()
+        onsets[self.free_onsets] = x[self.targets + self.angles : self.instant_column]
+        # Onsets keep their order within a trace (delays >= 0).
+        offset = strokes.trace * (2.0 * float(np.max(np.abs(onsets))) + 1.0)
+        onsets = np.maximum.accumulate(onsets + offset) - offset
+        changed = strokes.replace(targets=targets, phi1=phi1, phi2=phi2, onsets=onsets)
+        return changed, x[self.instant_column :]
 
-    def bounds(self, plan: Plan, dt_range: tuple[float, float]) -> tuple[Array, Array]:
-        """Tangents within ±3 rad; each onset within half the delay range of where it was."""
-        slack = _onset_slack(dt_range)
-        onsets = plan.onsets[1:]
+    def bounds(self, strokes: Strokes, slack: float, end: Array) -> tuple[Array, Array]:
+        """Tangents within ±3 rad, onsets within ``slack`` of where they were, instants within
+        their trace's motion (``0..end`` each)."""
+        onsets = strokes.onsets[self.free_onsets]
+        instants = len(end)
+        inf = np.full(self.targets, np.inf)
         lower = np.concatenate(
-            [np.full(self.targets, -np.inf), np.full(self.angles, -_PHI_LIMIT), onsets - slack]
+            [-inf, np.full(self.angles, -PHI_LIMIT), onsets - slack, np.zeros(instants)]
         )
         upper = np.concatenate(
-            [np.full(self.targets, np.inf), np.full(self.angles, _PHI_LIMIT), onsets + slack]
+            [inf, np.full(self.angles, PHI_LIMIT), onsets + slack, end]
         )
         return lower, upper
 
-    def sparsity(self, plan: Plan, tau: Array, size: float, slack: float) -> coo_matrix:
-        """Which parameters each residual (x and y at each time in ``tau``) can depend on.
-
-        A residual at time τ depends on the strokes active at τ (their end targets, tangents and
-        onsets) and on the target the last completed stroke reached. "Active" here means within
-        1e-3 of the size of either end (a finer tolerance only widens the band for effects below
-        it), padded by ``slack`` since moving an onset moves its window.
-        """
-        t_on, t_off = plan.windows(size, _PATTERN_TOLERANCE)
-        t_on, t_off = t_on - slack, t_off + slack
-        rows, cols = [], []
-        k = np.arange(len(tau))
-        for j in range(self.n):
-            active = k[(tau >= t_on[j]) & (tau <= t_off[j])]
-            if not active.size:
-                continue
-            params = self._stroke_params(j) + self._target_params(j) + self._target_params(j + 1)
-            params += self._onset_params(j)
-            for p in params:
-                rows.append(active)
-                cols.append(np.full(active.size, p))
-        # The last completed stroke's end target.
-        done_order = np.argsort(t_off)
-        last_done = np.maximum.accumulate(done_order)
-        finished = np.searchsorted(t_off[done_order], tau, side="left")
-        has = finished > 0
-        reached = np.where(has, last_done[np.maximum(finished - 1, 0)] + 1, 0)
-        for w in np.unique(reached[has]):
-            hit = k[has & (reached == w)]
-            for p in self._target_params(int(w)):
-                rows.append(hit)
-                cols.append(np.full(hit.size, p))
-        r = np.concatenate(rows) if rows else np.zeros(0, np.intp)
-        c = np.concatenate(cols) if cols else np.zeros(0, np.intp)
-        # Each time gives two residuals (x, y) with the same dependencies.
-        r2 = np.concatenate([2 * r, 2 * r + 1])
-        c2 = np.concatenate([c, c])
-        data = np.ones(len(r2), dtype=np.int8)
-        matrix = coo_matrix((data, (r2, c2)), shape=(2 * len(tau), self.size)).tocsr()
-        matrix.data[:] = 1
-        return matrix
-
-    def _target_params(self, w: int) -> list[int]:
-        return [2 * (w - 1), 2 * (w - 1) + 1] if 0 < w < self.m - 1 else []
-
-    def _stroke_params(self, j: int) -> list[int]:
+    def angle_steps(self, strokes: Strokes, h: float) -> tuple[list[Index], Array, Array]:
+        """Each angle parameter's column per stroke, and ``(phi1, phi2)`` with one parameter
+        stepped by ``h`` per block of strokes (one block per column list)."""
+        n = len(strokes.onsets)
+        base = self.targets + np.arange(n) * (1 if self.arcs_only else 2)
         if self.arcs_only:
-            return [self.targets + j]
-        return [self.targets + 2 * j, self.targets + 2 * j + 1]
-
-    def _onset_params(self, j: int) -> list[int]:
-        return [self.targets + self.angles + (j - 1)] if j > 0 else []
+            return [base], strokes.phi1 - h, strokes.phi2 + h
+        phi1 = np.concatenate([strokes.phi1 + h, strokes.phi1])
+        phi2 = np.concatenate([strokes.phi2, strokes.phi2 + h])
+        return [base, base + 1], phi1, phi2

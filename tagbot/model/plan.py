@@ -184,24 +184,7 @@ class Plan:
     @cached_property
     def geometry(self) -> Clothoids:
         """Each stroke's curve as a clothoid segment (arcs for ΣΛ* strokes)."""
-        chord = self.chords
-        c = np.hypot(chord[:, 0], chord[:, 1])
-        alpha = np.arctan2(chord[:, 1], chord[:, 0])
-        arc = self.arcs
-        spiral = fit_euler(
-            self.targets[:-1], alpha + self.phi1, self.targets[1:], alpha + self.phi2
-        )
-        # Circular arcs in closed form: exact where the fit's root A would be ~1e-17, not 0.
-        phi = np.where(arc, self.phi2, 0.0)
-        arc_length = c / np.sinc(phi / np.pi)
-        return Clothoids(
-            x0=self.targets[:-1, 0].copy(),
-            y0=self.targets[:-1, 1].copy(),
-            theta0=np.where(arc, alpha - phi, spiral.theta0),
-            kappa0=np.where(arc, 2.0 * phi / arc_length, spiral.kappa0),
-            dkappa=np.where(arc, 0.0, spiral.dkappa),
-            length=np.where(arc, arc_length, spiral.length),
-        )
+        return place_strokes(unit_strokes(self.phi1, self.phi2), self.targets)
 
     def windows(self, size: float, tol: float = END_TOLERANCE) -> tuple[Array, Array]:
         """Each stroke's active window ``(t_on, t_off)``.
@@ -210,12 +193,8 @@ class Plan:
         the pen by at most ``tol × size`` in total: each of the ``n`` strokes of length ``D`` gets
         the budget ``eps = tol·size / (n·D)`` on either side.
         """
-        length = self.geometry.length
-        eps = np.minimum(tol * size / (self.n_strokes * length), 1e-2)
-        z = -ndtri(eps)
-        return self.onsets + np.exp(self.mu - self.sigma * z), self.onsets + np.exp(
-            self.mu + self.sigma * z
-        )
+        budget = tol * size / (self.n_strokes * self.geometry.length)
+        return stroke_windows(self.onsets, self.mu, self.sigma, budget)
 
     def end(self, size: float, tol: float = END_TOLERANCE) -> float:
         """When the plan's motion ends: the path left to travel is below ``tol × size``."""
@@ -223,6 +202,52 @@ class Plan:
 
 
 _STROKE_FIELDS = ("dt", "mu", "sigma", "phi1", "phi2")
+
+
+def unit_strokes(phi1: ArrayLike, phi2: ArrayLike) -> Clothoids:
+    """Each stroke's shape on the unit chord ``(0, 0) → (1, 0)``: all that ``phi1, phi2`` set.
+
+    A stroke's curve is its shape scaled by the chord's length and turned to its direction
+    (:func:`place_strokes`). ΣΛ* strokes (``phi1 == -phi2``, ``|phi2| < π``) are circular arcs in
+    closed form, exact where the spiral fit's root would be ~1e-17 rather than 0.
+    """
+    phi1, phi2 = np.asarray(phi1, dtype=float), np.asarray(phi2, dtype=float)
+    arc = (phi1 == -phi2) & (np.abs(phi2) < np.pi)
+    zeros = np.zeros(phi1.shape + (2,))
+    spiral = fit_euler(zeros, phi1, zeros + [1.0, 0.0], phi2)
+    phi = np.where(arc, phi2, 0.0)
+    arc_length = 1.0 / np.sinc(phi / np.pi)
+    return Clothoids(
+        x0=np.zeros(phi1.shape),
+        y0=np.zeros(phi1.shape),
+        theta0=np.where(arc, -phi, spiral.theta0),
+        kappa0=np.where(arc, 2.0 * phi / arc_length, spiral.kappa0),
+        dkappa=np.where(arc, 0.0, spiral.dkappa),
+        length=np.where(arc, arc_length, spiral.length),
+    )
+
+
+def place_strokes(shapes: Clothoids, targets: Array) -> Clothoids:
+    """Unit-chord ``shapes`` (:func:`unit_strokes`) stretched between consecutive ``targets``."""
+    chord = np.diff(targets, axis=0)
+    c = np.hypot(chord[:, 0], chord[:, 1])
+    return Clothoids(
+        x0=targets[:-1, 0].copy(),
+        y0=targets[:-1, 1].copy(),
+        theta0=np.arctan2(chord[:, 1], chord[:, 0]) + shapes.theta0,
+        kappa0=shapes.kappa0 / c,
+        dkappa=shapes.dkappa / (c * c),
+        length=shapes.length * c,
+    )
+
+
+def stroke_windows(
+    onsets: Array, mu: Array, sigma: Array, budget: ArrayLike
+) -> tuple[Array, Array]:
+    """Active windows ``(t_on, t_off)`` of lognormal strokes outside which each is within
+    ``budget`` (a fraction of its length, capped at 1 %) of not started or of complete."""
+    z = -ndtri(np.minimum(budget, 1e-2))
+    return onsets + np.exp(mu - sigma * z), onsets + np.exp(mu + sigma * z)
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,244 @@
+"""Every trace's strokes side by side, evaluated in one numpy pass (the fitter's working form).
+
+Reconstruction works on all the traces of a tag at once: each trace's plan keeps its own clock
+(starting at 0), and a sample belongs to one trace. Per stroke, the curve is its unit-chord shape
+(:func:`~tagbot.model.plan.unit_strokes`, set by ``phi1, phi2`` alone) times its chord, so in
+complex numbers the pen of one trace is
+
+    x(t) = p_0 + Σ_j (p_{j+1} − p_j) · G_j(W_j(t))
+
+with ``G_j`` the shape (``G_j(0) = 0``, ``G_j(1) = 1``) and ``W_j`` the stroke's lognormal CDF.
+That is linear in the targets, which gives the refinement an exact Jacobian for them; the onsets'
+columns are minus each stroke's velocity.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import ndtr
+
+from tagbot.model.euler import Clothoids
+from tagbot.model.plan import END_TOLERANCE, Plan, stroke_windows, unit_strokes
+
+Array = NDArray[np.float64]
+Index = NDArray[np.intp]
+_INV_SQRT_2PI = 1.0 / float(np.sqrt(2.0 * np.pi))
+
+
+@dataclass(frozen=True, eq=False)
+class Strokes:
+    """The strokes of several plans (one per trace), flattened.
+
+    Trace ``k`` has targets ``targets[first_target[k] : first_target[k + 1]]`` and strokes
+    ``first_stroke[k] : first_stroke[k + 1]``; stroke ``j`` runs from target ``j + trace[j]``.
+    ``onsets`` are on each trace's own clock.
+    """
+
+    targets: Array
+    onsets: Array
+    mu: Array
+    sigma: Array
+    phi1: Array
+    phi2: Array
+    counts: Index
+    """Strokes per trace."""
+
+    @classmethod
+    def of(cls, plans: list[Plan]) -> Strokes:
+        """The strokes of ``plans``, each on its own clock (its start moved to 0)."""
+        return cls(
+            targets=np.concatenate([p.targets for p in plans]),
+            onsets=np.concatenate([p.onsets - p.start for p in plans]),
+            mu=np.concatenate([p.mu for p in plans]),
+            sigma=np.concatenate([p.sigma for p in plans]),
+            phi1=np.concatenate([p.phi1 for p in plans]),
+            phi2=np.concatenate([p.phi2 for p in plans]),
+            counts=np.array([p.n_strokes for p in plans], dtype=np.intp),
+        )
+
+    def replace(self, **changes: Array) -> Strokes:
+        """A copy with some arrays replaced; the unit shapes are reused unless a tangent changed."""
+        fields = {f: getattr(self, f) for f in self.__dataclass_fields__}
+        out = Strokes(**(fields | changes))
+        if "phi1" not in changes and "phi2" not in changes and "shapes" in self.__dict__:
+            out.__dict__["shapes"] = self.shapes
+        return out
+
+    def plans(self) -> list[Plan]:
+        """One plan per trace (start 0); raises PlanError for collapsed targets."""
+        out = []
+        for k in range(len(self.counts)):
+            t, s = self.target_slice(k), self.stroke_slice(k)
+            onsets = self.onsets[s]
+            dt = np.diff(onsets, prepend=0.0)
+            out.append(
+                Plan(self.targets[t], dt, self.mu[s], self.sigma[s], self.phi1[s], self.phi2[s])
+            )
+        return out
+
+    # --- indexing ------------------------------------------------------------------------------
+
+    @cached_property
+    def first_stroke(self) -> Index:
+        return np.concatenate([[0], np.cumsum(self.counts)])
+
+    @cached_property
+    def first_target(self) -> Index:
+        return self.first_stroke + np.arange(len(self.counts) + 1)
+
+    @cached_property
+    def trace(self) -> Index:
+        """Per stroke, its trace."""
+        return np.repeat(np.arange(len(self.counts)), self.counts)
+
+    @cached_property
+    def start_target(self) -> Index:
+        """Per stroke, the index of the target it leaves from."""
+        return np.arange(len(self.onsets)) + self.trace
+
+    def target_slice(self, k: int) -> slice:
+        return slice(int(self.first_target[k]), int(self.first_target[k + 1]))
+
+    def stroke_slice(self, k: int) -> slice:
+        return slice(int(self.first_stroke[k]), int(self.first_stroke[k + 1]))
+
+    @cached_property
+    def interior(self) -> Index:
+        """Targets that are neither the first nor the last of their trace."""
+        inner = np.ones(len(self.targets), dtype=bool)
+        inner[self.first_target[:-1]] = False
+        inner[self.first_target[1:] - 1] = False
+        return np.flatnonzero(inner)
+
+    # --- geometry ------------------------------------------------------------------------------
+
+    @cached_property
+    def shapes(self) -> Clothoids:
+        """Unit-chord shapes of the strokes."""
+        return unit_strokes(self.phi1, self.phi2)
+
+    @cached_property
+    def chords(self) -> NDArray[np.complex128]:
+        """Chord of each stroke as a complex number."""
+        start = self.targets[self.start_target]
+        end = self.targets[self.start_target + 1]
+        return (end[:, 0] - start[:, 0]) + 1j * (end[:, 1] - start[:, 1])
+
+    @cached_property
+    def lengths(self) -> Array:
+        """Arc length of each stroke."""
+        return self.shapes.length * np.abs(self.chords)
+
+    def windows(self, size: float) -> tuple[Array, Array]:
+        """Active windows per stroke, as :meth:`Plan.windows` with the tag's ``size``."""
+        budget = END_TOLERANCE * size / (self.counts[self.trace] * self.lengths)
+        return stroke_windows(self.onsets, self.mu, self.sigma, budget)
+
+    def ends(self, size: float) -> Array:
+        """When each trace's motion ends (on its own clock)."""
+        return np.maximum.reduceat(self.windows(size)[1], self.first_stroke[:-1])
+
+    # --- evaluation ----------------------------------------------------------------------------
+
+    def evaluate(self, trace: Index, t: Array, size: float) -> Evaluation:
+        """Positions and velocities at times ``t`` of traces ``trace`` (sorted by trace, then
+        time), with the (sample, active stroke) pairs kept for Jacobians."""
+        count = len(t)
+        t_on, t_off = self.windows(size)
+        span = 2.0 * (float(np.max(np.abs(t), initial=0.0)) + float(np.max(t_off)) + 1.0)
+        key = trace * span + t
+        base = self.trace * span
+        begin = np.searchsorted(key, base + t_on, side="left")
+        stop = np.searchsorted(key, base + t_off, side="right")
+
+        # Completed strokes contribute their whole chord; each trace starts on its first target.
+        chords = np.column_stack([self.chords.real, self.chords.imag])
+        done = np.zeros((count + 1, 2))
+        np.add.at(done, stop, chords)
+        starts = self.targets[self.first_target[:-1]]
+        ends = self.targets[self.first_target[1:] - 1]
+        first_sample = np.searchsorted(trace, np.arange(len(self.counts)))
+        np.add.at(done, first_sample, starts - np.vstack([[0.0, 0.0], ends[:-1]]))
+        xy = np.cumsum(done[:count], axis=0)
+
+        pairs = self.pairs(begin, stop, t)
+        w = pairs.chord * (pairs.gx + 1j * pairs.gy)
+        v = pairs.chord * pairs.velocity
+        xy[:, 0] += np.bincount(pairs.sample, weights=w.real, minlength=count)
+        xy[:, 1] += np.bincount(pairs.sample, weights=w.imag, minlength=count)
+        vel = np.column_stack(
+            [
+                np.bincount(pairs.sample, weights=v.real, minlength=count),
+                np.bincount(pairs.sample, weights=v.imag, minlength=count),
+            ]
+        )
+        return Evaluation(xy, vel, pairs, begin, stop)
+
+    def pairs(self, begin: Index, stop: Index, t: Array) -> Pairs:
+        """The (sample, stroke) pairs of each stroke's active samples ``begin..stop``, grouped by
+        stroke, with the shape's point ``g``, the lognormal CDF ``w`` and the unit velocity."""
+        counts = stop - begin
+        offsets = np.concatenate([[0], np.cumsum(counts)])
+        stroke = np.repeat(np.arange(len(counts)), counts)
+        sample = np.arange(offsets[-1]) - np.repeat(offsets[:-1] - begin, counts)
+        elapsed = np.maximum(t[sample] - self.onsets[stroke], np.finfo(float).tiny)
+        sigma = self.sigma[stroke]
+        z = (np.log(elapsed) - self.mu[stroke]) / sigma
+        w = ndtr(z)
+        pdf = np.exp(-0.5 * z * z) * _INV_SQRT_2PI / (sigma * elapsed)
+        gx, gy, tx, ty = evaluate_shapes(self.shapes, stroke, counts, w)
+        unit_length = self.shapes.length[stroke]
+        velocity = (tx + 1j * ty) * (unit_length * pdf)
+        return Pairs(sample, stroke, offsets, w, gx, gy, velocity, self.chords[stroke])
+
+
+def evaluate_shapes(
+    shapes: Clothoids, stroke: Index, counts: Index, w: Array
+) -> tuple[Array, Array, Array, Array]:
+    """Points and unit tangents of ``shapes`` at the fractions ``w`` of their lengths, for pairs
+    grouped by stroke (``counts`` per stroke, in stroke order)."""
+    s = shapes.length[stroke] * w
+    order = np.argsort(shapes.kind, kind="stable")
+    if np.all(order == np.arange(len(order))):
+        return shapes.evaluate_runs(np.arange(len(counts)), counts, s)
+    # Regroup the runs so the segments come ordered by kind, evaluate, and put them back.
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    ordered_counts = counts[order]
+    perm = np.arange(int(offsets[-1])) - np.repeat(
+        np.cumsum(ordered_counts) - ordered_counts - offsets[order], ordered_counts
+    )
+    out = shapes.evaluate_runs(order, ordered_counts, s[perm])
+    results = []
+    for values in out:
+        back = np.empty_like(values)
+        back[perm] = values
+        results.append(back)
+    return results[0], results[1], results[2], results[3]
+
+
+@dataclass(frozen=True, eq=False)
+class Pairs:
+    """(sample, active stroke) pairs grouped by stroke; ``offsets[j]`` is stroke j's first."""
+
+    sample: Index
+    stroke: Index
+    offsets: Index
+    w: Array
+    gx: Array
+    gy: Array
+    velocity: NDArray[np.complex128]
+    """d(shape point)/dt on the unit chord."""
+    chord: NDArray[np.complex128]
+
+
+@dataclass(frozen=True, eq=False)
+class Evaluation:
+    xy: Array
+    v: Array
+    pairs: Pairs
+    begin: Index
+    stop: Index
