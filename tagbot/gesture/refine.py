@@ -71,25 +71,28 @@ def refine(strokes: Strokes, curves: list[Array], size: float, options: RefineOp
     lower, upper = layout.bounds(strokes, options.onset_slack, end)
     current = problem.evaluate(strokes, tau)
     cost = current.cost
-    damping = 1e-3
+    damping, grow = 1e-3, 2.0
     system = None
     for _ in range(options.iterations):
         if system is None:
             system = _NormalEquations(problem.jacobian(layout, strokes, current), current)
-        step = system.solve(damping)
+        step, predicted = system.solve(damping)
         trial_x = np.clip(x + step, lower, upper)
         trial_strokes, trial_tau = layout.unpack(strokes, trial_x)
         trial = problem.evaluate(trial_strokes, trial_tau) if problem.valid(trial_strokes) else None
         trial_cost = np.inf if trial is None else trial.cost
-        if trial_cost < cost:
+        gain = (cost - trial_cost) / max(predicted, 1e-300)
+        if gain > 0:  # Nielsen's damping update, from the gain ratio
             improvement = 1.0 - trial_cost / cost
             x, strokes, tau, current, cost = trial_x, trial_strokes, trial_tau, trial, trial_cost
-            damping = max(damping / 3.0, 1e-7)
+            damping *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
+            grow = 2.0
             system = None
             if improvement < 1e-3:
                 break
         else:
-            damping *= 4.0
+            damping *= grow
+            grow *= 2.0
             if damping > 1e6:
                 break
     return strokes
@@ -267,7 +270,10 @@ class _NormalEquations:
         forward = len(current.velocity)
         r = current.residual
         v = current.velocity
-        self.speed2 = np.maximum(v.real**2 + v.imag**2, 1e-300)
+        # Where the pen rests (the ends, a stop) an instant is free to slide a long way at no
+        # cost in the linear model, and far from true in the real one: a floor on its scale.
+        speed2 = v.real**2 + v.imag**2
+        self.speed2 = np.maximum(speed2, _REST * max(float(np.median(speed2)), 1e-300))
         ch = jacobian.conj().T.tocsr()
         # Per forward instant: Re(conj(v)·row), the coupling of its instant to the parameters.
         self.u = (diags(np.conj(v)) @ jacobian[:forward]).real.tocsr()
@@ -280,8 +286,9 @@ class _NormalEquations:
         if self.a.shape[0] <= _DENSE_LIMIT:
             self.a, self.b = self.a.toarray(), self.b.toarray()
 
-    def solve(self, damping: float) -> Array:
-        """The step for the parameters and the instants at this damping."""
+    def solve(self, damping: float) -> tuple[Array, float]:
+        """The step for the parameters and the instants at this damping, and the decrease of
+        the cost that the linear model predicts for it."""
         d = self.speed2 * (1.0 + damping)
         rhs = -self.g_p + self.u.T @ (self.g_t / d)
         if isinstance(self.a, np.ndarray):
@@ -292,9 +299,14 @@ class _NormalEquations:
             schur = self.a - self.b / (1.0 + damping) + diags(damping * self.scale)
             step_p = spsolve(schur.tocsc(), rhs)
         step_t = (-self.g_t - self.u @ step_p) / d
-        return np.concatenate([step_p, step_t])
+        # Cost is Σ|r|², so the model's decrease is δᵀ(λDδ − g) (twice the textbook form).
+        damped = damping * (self.scale @ step_p**2 + (self.speed2 * step_t) @ step_t)
+        predicted = damped - step_p @ self.g_p - step_t @ self.g_t
+        return np.concatenate([step_p, step_t]), float(predicted)
 
 
+_REST = 1e-2
+"""Instants' scale floor, a fraction of the median squared speed (see _NormalEquations)."""
 _DENSE_LIMIT = 800
 """Plan parameters up to which the reduced normal equations are solved densely."""
 
