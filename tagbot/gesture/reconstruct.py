@@ -257,9 +257,7 @@ def _onset_delays(
     return dt
 
 
-def correct_targets(
-    strokes: Strokes, size: float, tolerance: Array, iterations: int
-) -> Strokes:
+def correct_targets(strokes: Strokes, size: float, tolerance: Array, iterations: int) -> Strokes:
     """Eq. 22 for every trace at once: move each interior target by ``p(z_j) − c_j`` until the
     largest move of its trace is below ``tolerance[trace]``, at most ``iterations`` times.
 

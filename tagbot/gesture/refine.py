@@ -329,8 +329,8 @@ class _Layout:
         first[strokes.first_stroke[:-1]] = True
         self.free_onsets = np.flatnonzero(~first)
         self.onset_column = np.full(n, -1)
-        self.onset_column[self.free_onsets] = self.targets + self.angles + np.arange(
-            len(self.free_onsets)
+        self.onset_column[self.free_onsets] = (
+            self.targets + self.angles + np.arange(len(self.free_onsets))
         )
         self.instant_column = self.targets + self.angles + len(self.free_onsets)
         self.size = self.instant_column + instants
@@ -369,9 +369,7 @@ class _Layout:
         lower = np.concatenate(
             [-inf, np.full(self.angles, -PHI_LIMIT), onsets - slack, np.zeros(instants)]
         )
-        upper = np.concatenate(
-            [inf, np.full(self.angles, PHI_LIMIT), onsets + slack, end]
-        )
+        upper = np.concatenate([inf, np.full(self.angles, PHI_LIMIT), onsets + slack, end])
         return lower, upper
 
     def angle_steps(self, strokes: Strokes, h: float) -> tuple[list[Index], Array, Array]:
