@@ -78,6 +78,11 @@ class FitOptions:
     """Pen-up time between consecutive plans, seconds."""
     dot: float = 0.003
     """A trace with no length (a dot) becomes a straight stroke this long, fraction of size."""
+    split_error: float = 0.01
+    """With refinement, a section still farther than this (fraction of the tag's size) from the
+    trajectory gets one more dominant point where it is farthest, and its trace is refitted."""
+    splits: int = 2
+    """Rounds of such splitting at most (0: none)."""
     refine: bool = True
     """Polish targets, tangents and delays by least squares after the paper's steps
     (:mod:`tagbot.gesture.refine`); off, the result is the paper's method alone."""
@@ -91,13 +96,16 @@ class FitOptions:
         for name in positive:
             if getattr(self, name) <= 0:
                 raise PlanError(f"{name}: must be > 0, got {getattr(self, name)!r}")
-        for name in ("dt_min", "lift", "smoothing", "prominence", "inflection_angle"):
+        nonnegative = ("dt_min", "lift", "smoothing", "prominence", "inflection_angle")
+        for name in (*nonnegative, "split_error"):
             if getattr(self, name) < 0:
                 raise PlanError(f"{name}: must be >= 0, got {getattr(self, name)!r}")
         if self.dt_max < self.dt_min:
             raise PlanError(f"dt_max: must be >= dt_min ({self.dt_min}), got {self.dt_max!r}")
-        if self.iterations < 0 or int(self.iterations) != self.iterations:
-            raise PlanError(f"iterations: must be a whole number >= 0, got {self.iterations!r}")
+        for name in ("iterations", "splits"):
+            value = getattr(self, name)
+            if value < 0 or int(value) != value:
+                raise PlanError(f"{name}: must be a whole number >= 0, got {value!r}")
 
 
 def fit(traces: Sequence[Any], model: Model = "gamma", **options: Any) -> Tag:
@@ -129,32 +137,33 @@ def fit_trace(xy: ArrayLike, size: float, model: Model, opts: FitOptions) -> Pla
 
 
 def fit_plans(polylines: list[Array], size: float, model: Model, opts: FitOptions) -> list[Plan]:
-    """Each polyline → one plan (start 0), all fitted together (one numpy pass per step)."""
-    sections = [_analyse(xy, size, model, opts) for xy in polylines]
-    drawn = [k for k, s in enumerate(sections) if isinstance(s, _Sections)]
-    plans: list[Plan | None] = [s if isinstance(s, Plan) else None for s in sections]
-    if drawn:
-        parts = [sections[k] for k in drawn]
-        assert all(isinstance(p, _Sections) for p in parts)
-        strokes = Strokes(
-            targets=np.concatenate([p.curve[p.dominant] for p in parts]),
-            onsets=np.concatenate([np.cumsum(p.dt) for p in parts]),
-            mu=np.full(sum(len(p.dt) for p in parts), opts.mu),
-            sigma=np.full(sum(len(p.dt) for p in parts), opts.sigma),
-            phi1=np.concatenate([p.phi1 for p in parts]),
-            phi2=np.concatenate([p.phi2 for p in parts]),
-            counts=np.array([len(p.dt) for p in parts], dtype=np.intp),
-        )
-        tolerance = np.array([p.ds for p in parts]) * opts.tolerance
-        strokes = correct_targets(strokes, size, tolerance, opts.iterations)
-        if opts.refine:
-            refine_options = RefineOptions(
-                onset_slack=max(0.5 * (opts.dt_max - opts.dt_min), 1e-3),
-                arcs_only=model == "sigma",
-            )
-            strokes = refine(strokes, [p.curve for p in parts], size, refine_options)
-        for k, plan in zip(drawn, strokes.plans(), strict=True):
-            plans[k] = plan
+    """Each polyline → one plan (start 0), all fitted together (one numpy pass per step).
+
+    With refinement on, a section that the refined trajectory still misses by more than
+    ``split_error`` of the size gets one more dominant point where it misses most, and its trace
+    is fitted again (up to ``splits`` times; kept only if it got closer).
+    """
+    analysed = [_analyse(xy, size, model, opts) for xy in polylines]
+    plans: list[Plan | None] = [a if isinstance(a, Plan) else None for a in analysed]
+    todo = {k: a for k, a in enumerate(analysed) if isinstance(a, _Sections)}
+    best: dict[int, float] = {}
+    for round_ in range(opts.splits + 1 if opts.refine else 1):
+        if not todo:
+            break
+        keys = list(todo)
+        fitted, misfits = _fit_sections([todo[k] for k in keys], size, model, opts)
+        retry: dict[int, _Sections] = {}
+        for k, plan, misfit in zip(keys, fitted, misfits, strict=True):
+            worst = float(misfit.max(initial=0.0))
+            if worst < best.get(k, np.inf):
+                plans[k], best[k] = plan, worst
+            elif round_:
+                continue  # splitting did not help this trace: keep its earlier plan
+            if worst > opts.split_error * size and round_ < opts.splits:
+                split = _split(todo[k], misfit, opts.split_error * size, model, opts)
+                if split is not None:
+                    retry[k] = split
+        todo = retry
     return [p for p in plans if p is not None]
 
 
@@ -169,6 +178,56 @@ class _Sections:
     dt: Array
     ds: float
     """The resampling step."""
+    support: int
+    """The support of turning angles, samples."""
+
+
+def _fit_sections(
+    parts: list[_Sections], size: float, model: Model, opts: FitOptions
+) -> tuple[list[Plan], list[Array]]:
+    """The plans of ``parts`` (eq. 22, then refinement if on), and per part how far each contour
+    sample is from the trajectory where the refinement looked (zeros without refinement)."""
+    count = sum(len(p.dt) for p in parts)
+    strokes = Strokes(
+        targets=np.concatenate([p.curve[p.dominant] for p in parts]),
+        onsets=np.concatenate([np.cumsum(p.dt) for p in parts]),
+        mu=np.full(count, opts.mu),
+        sigma=np.full(count, opts.sigma),
+        phi1=np.concatenate([p.phi1 for p in parts]),
+        phi2=np.concatenate([p.phi2 for p in parts]),
+        counts=np.array([len(p.dt) for p in parts], dtype=np.intp),
+    )
+    tolerance = np.array([p.ds for p in parts]) * opts.tolerance
+    strokes = correct_targets(strokes, size, tolerance, opts.iterations)
+    curves = [p.curve for p in parts]
+    if not opts.refine:
+        return strokes.plans(), [np.zeros(len(c)) for c in curves]
+    refine_options = RefineOptions(
+        onset_slack=max(0.5 * (opts.dt_max - opts.dt_min), 1e-3), arcs_only=model == "sigma"
+    )
+    strokes, misfit = refine(strokes, curves, size, refine_options)
+    bounds = np.cumsum([len(c) for c in curves])[:-1]
+    return strokes.plans(), np.split(misfit, bounds)
+
+
+def _split(
+    part: _Sections, misfit: Array, limit: float, model: Model, opts: FitOptions
+) -> _Sections | None:
+    """``part`` with a new dominant point where each section misses by more than ``limit``
+    most (kept a quarter of the section away from its ends), or None if none can be added."""
+    dominant = part.dominant
+    worst = np.maximum.reduceat(misfit, dominant[:-1])
+    added = []
+    for j in np.flatnonzero(worst > limit):
+        a, b = int(dominant[j]), int(dominant[j + 1])
+        margin = (b - a) // 4
+        if margin < 2:
+            continue
+        added.append(a + margin + int(np.argmax(misfit[a + margin : b - margin + 1])))
+    if not added:
+        return None
+    dominant = np.union1d(dominant, added).astype(np.intp)
+    return _estimate(part.curve, dominant, part.ds, part.support, model, opts)
 
 
 def _polyline(trace: Any, index: int) -> Array:
@@ -195,18 +254,31 @@ def _analyse(xy: Array, size: float, model: Model, opts: FitOptions) -> _Section
         curve, support, np.radians(opts.salient_angle), np.radians(opts.prominence)
     )
     dominant = contour.add_turning_points(curve, dominant, np.radians(opts.max_turn), support)
+    return _estimate(curve, dominant, ds, support, model, opts)
+
+
+def _estimate(
+    curve: Array,
+    dominant: NDArray[np.intp],
+    ds: float,
+    support: int,
+    model: Model,
+    opts: FitOptions,
+) -> _Sections:
+    """§6.2–6.3: tangents and delays of the strokes between ``dominant`` points (for the ΣΛ*
+    model, inflections become dominant points first: arcs cannot inflect)."""
     min_turn = np.radians(opts.inflection_angle)
     cuts = [
         contour.inflection(curve, int(a), int(b), support, min_turn)
         for a, b in itertools.pairwise(dominant)
     ]
-    if model == "sigma":  # arcs cannot inflect: inflections become targets
+    if model == "sigma":
         dominant = np.unique(np.concatenate([dominant, [c for c in cuts if c is not None]]))
         dominant = dominant.astype(np.intp)
         cuts = [None] * (len(dominant) - 1)
     phi1, phi2 = _deviations(curve, dominant, cuts)
     dt = _onset_delays(curve, dominant, support, opts)
-    return _Sections(curve, dominant, phi1, phi2, dt, ds)
+    return _Sections(curve, dominant, phi1, phi2, dt, ds, support)
 
 
 def _dot(point: Array, size: float, opts: FitOptions) -> Plan:

@@ -58,8 +58,12 @@ class RefineOptions:
     """Keep ΣΛ* strokes circular (``phi1 = -phi2``)."""
 
 
-def refine(strokes: Strokes, curves: list[Array], size: float, options: RefineOptions) -> Strokes:
-    """``strokes`` (one plan per curve) adjusted to follow ``curves`` (see the module doc).
+def refine(
+    strokes: Strokes, curves: list[Array], size: float, options: RefineOptions
+) -> tuple[Strokes, Array]:
+    """``strokes`` (one plan per curve) adjusted to follow ``curves`` (see the module doc), and
+    the misfit: per sample of the concatenated curves, the largest distance between it and the
+    trajectory that a residual saw there (0 where none looked).
 
     The first and last target of each trace stay on its contour's ends and its first onset at 0.
     """
@@ -95,7 +99,7 @@ def refine(strokes: Strokes, curves: list[Array], size: float, options: RefineOp
             grow *= 2.0
             if damping > 1e6:
                 break
-    return strokes
+    return strokes, problem.misfit(current)
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,6 +111,8 @@ class _Residuals:
     """Per instant (forward instants first), trajectory minus goal as a complex number."""
     velocity: NDArray[np.complex128]
     """The trajectory's velocity at each forward instant."""
+    nearest: Index
+    """The contour sample nearest to each grid instant's point."""
 
     @property
     def cost(self) -> float:
@@ -125,6 +131,8 @@ class _Problem:
     goal: Array
     """Contour samples the trajectory must pass near, per forward instant."""
     goal_trace: Index
+    goal_index: Index
+    """Each goal's index among the contour samples."""
     grid: Array
     """Fixed trajectory instants that must lie near the contour."""
     grid_trace: Index
@@ -140,11 +148,12 @@ class _Problem:
         trace = np.repeat(np.arange(len(curves)), [len(c) for c in curves])
         far = 4.0 * size
         tree = cKDTree(np.column_stack([contour, trace * far]))
-        goal, goal_trace = [], []
+        goal_index, goal_trace = [], []
+        first = np.concatenate([[0], np.cumsum([len(c) for c in curves])])
         for k, curve in enumerate(curves):
             count = min(len(curve), max(options.contour_samples * int(counts[k]), 32))
             pick = np.linspace(0, len(curve) - 1, count).round().astype(np.intp)
-            goal.append(curve[pick])
+            goal_index.append(first[k] + pick)
             goal_trace.append(np.full(count, k))
         ends = strokes.ends(size)
         grid, grid_trace = [], []
@@ -157,8 +166,9 @@ class _Problem:
             contour=contour,
             tree=tree,
             far=far,
-            goal=np.concatenate(goal),
+            goal=contour[np.concatenate(goal_index)],
             goal_trace=np.concatenate(goal_trace),
+            goal_index=np.concatenate(goal_index),
             grid=np.concatenate(grid),
             grid_trace=np.concatenate(grid_trace),
             trace_end=ends,
@@ -195,7 +205,17 @@ class _Problem:
         residual = (xy[:, 0] - goal[:, 0]) + 1j * (xy[:, 1] - goal[:, 1])
         v = np.empty_like(evaluation.v)
         v[order] = evaluation.v
-        return _Residuals(evaluation, order, residual, v[: len(tau), 0] + 1j * v[: len(tau), 1])
+        velocity = v[: len(tau), 0] + 1j * v[: len(tau), 1]
+        return _Residuals(evaluation, order, residual, velocity, nearest)
+
+    def misfit(self, current: _Residuals) -> Array:
+        """Per contour sample, the largest residual that looked at it."""
+        out = np.zeros(len(self.contour))
+        distance = np.abs(current.residual)
+        forward = len(self.goal)
+        np.maximum.at(out, self.goal_index, distance[:forward])
+        np.maximum.at(out, current.nearest, distance[forward:])
+        return out
 
     def jacobian(self, layout: _Layout, strokes: Strokes, current: _Residuals) -> csr_matrix:
         """The residuals' Jacobian in the plan's parameters, complex (row per instant, columns as

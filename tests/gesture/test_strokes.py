@@ -137,7 +137,8 @@ def test_refinement_lowers_the_cost_and_keeps_the_ends():
         problem = _Problem.build(strokes, contours, size, options)
         return problem.evaluate(strokes, problem.initial_instants(strokes)).cost
 
-    done = refine(start, contours, size, options)
+    done, misfit = refine(start, contours, size, options)
+    assert misfit.shape == (sum(len(c) for c in contours),) and np.all(misfit >= 0)
     assert cost(done) < 0.5 * cost(start)
     for k, contour in enumerate(contours):
         s = done.target_slice(k)
