@@ -2,20 +2,28 @@
 dominant points, inflections, circular-segment angles (eq. 19) and contour sharpness (eq. 20).
 
 Every function works on one polyline ``(N, 2)`` with vectorised numpy; lengths are in the trace's
-units.
+units. Per-section quantities come for all sections at once (:func:`inflections`,
+:func:`section_deviations`, :func:`sharpnesses`, :func:`segment_angles`), in a fixed number of numpy
+calls however many sections there are; :func:`inflection`, :func:`arc_deviation`,
+:func:`sharpness` and :func:`segment_angle` are the one-section versions.
 """
 
 from __future__ import annotations
 
-import itertools
+import functools
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import gaussian_filter1d
 from scipy.signal import find_peaks
 
+from tagbot.model.euler import wrap_angle
+
 Array = NDArray[np.float64]
 Indices = NDArray[np.intp]
+
+_EPS = float(np.finfo(float).eps)
 
 
 def arc_length(xy: Array) -> Array:
@@ -27,31 +35,63 @@ def decimate(xy: Array, radius: float) -> Array:
     """Keep a point only once it is at least ``radius`` from the last kept one (and the last).
 
     Removes jitter below ``radius`` that would otherwise inflate the arc length of a densely
-    captured trace. Works through the points in vectorised chunks, so its cost is about
-    (points + kept points) numpy steps of a few dozen points.
+    captured trace. A point less than ``radius`` of path beyond the last kept one is nearer than
+    ``radius``, so the search for the next kept point starts that far along the path; the first
+    candidate of every point is checked at once, and only where it is too near (a bend, or a
+    stretch of jitter) does a kept point search further on its own.
     """
     n = len(xy)
     if n < 3 or radius <= 0:
         return xy
+    s = arc_length(xy)
+    if not np.isfinite(s[-1]):
+        unknown = np.full(n, -1, dtype=np.intp)
+        return xy[_decimate_from(xy, radius, unknown, np.arange(1, n + 1))]
+    # Rounding in the path length and the distances stays far below this margin.
+    margin = 8.0 * n * _EPS * (s[-1] + radius)
+    later = np.arange(1, n + 1)
+    start = np.maximum(np.searchsorted(s, s + (radius - margin)), later)
+    # Every point's first candidate at once: ``found`` is the next kept index (n: none), -1 where
+    # the candidate is too near (the search goes on from the next one).
+    far = np.hypot(*(xy[np.minimum(start, n - 1)] - xy).T) >= radius
+    found = np.where(start >= n, n, np.where(far, start, -1))
+    if (found[:-1] == later[:-1]).all():  # every point is kept
+        return xy.copy()
+    return xy[_decimate_from(xy, radius, found, start + 1)]
+
+
+def _decimate_from(xy: Array, radius: float, found: Indices, start: Indices) -> list[int]:
+    """The kept indices, from each point's next kept index (``found``, or -1 if not yet known:
+    then the first at or after ``start`` at least ``radius`` away)."""
+    n = len(xy)
+    found_list, start_list = found.tolist(), start.tolist()
     kept = [0]
     i = 0
-    chunk = 64
     while True:
-        block = xy[i + 1 : i + 1 + chunk]
-        if not len(block):
+        j = found_list[i]
+        if j < 0:
+            j = _next_far(xy, i, start_list[i], radius)
+        if j >= n:
             break
-        far = np.flatnonzero(np.hypot(*(block - xy[i]).T) >= radius)
-        if far.size:
-            i = i + 1 + int(far[0])
-            kept.append(i)
-            chunk = 64
-        elif i + 1 + chunk >= n:
-            break
-        else:
-            chunk *= 2  # a long stretch of jitter: look further at once
+        kept.append(j)
+        i = j
     if kept[-1] != n - 1:
         kept.append(n - 1)
-    return xy[kept]
+    return kept
+
+
+def _next_far(xy: Array, i: int, start: int, radius: float) -> int:
+    """The first index from ``start`` on at least ``radius`` from ``xy[i]``, or ``len(xy)``."""
+    n = len(xy)
+    chunk = 64
+    while start < n:
+        block = xy[start : start + chunk]
+        far = np.flatnonzero(np.hypot(*(block - xy[i]).T) >= radius)
+        if far.size:
+            return start + int(far[0])
+        start += chunk
+        chunk *= 2  # a long stretch of jitter: look further at once
+    return n
 
 
 def prefilter(xy: Array, step: float) -> Array:
@@ -102,15 +142,42 @@ def turning(xy: Array, support: int = 1) -> Array:
     Counter-clockwise positive; 0 at the ends (and where the support reaches past them, the
     chords are shortened to the ends).
     """
-    n = len(xy)
-    i = np.arange(n)
-    before = xy[i] - xy[np.maximum(i - support, 0)]
-    after = xy[np.minimum(i + support, n - 1)] - xy[i]
-    cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
-    dot = np.einsum("ij,ij->i", before, after)
-    angle = np.arctan2(cross, dot)
+    before = xy - _shifted(xy, -support)
+    after = _shifted(xy, support) - xy
+    angle = _angles(before[:, 0], before[:, 1], after[:, 0], after[:, 1])
     angle[[0, -1]] = 0.0
     return angle
+
+
+def _turning_at(xy: Array, i: Indices, support: Indices, lo: Indices, hi: Indices) -> Array:
+    """:func:`turning` at the points ``i`` only, each with its own ``support``, the chords
+    shortened so as not to reach past ``lo`` and ``hi``."""
+    x, y = xy[:, 0], xy[:, 1]
+    prev, nxt = np.maximum(i - support, lo), np.minimum(i + support, hi)
+    here_x, here_y = x[i], y[i]
+    return _angles(here_x - x[prev], here_y - y[prev], x[nxt] - here_x, y[nxt] - here_y)
+
+
+def _angles(before_x: Array, before_y: Array, after_x: Array, after_y: Array) -> Array:
+    """Signed angles from the vectors ``before`` to the vectors ``after``, in (−π, π]."""
+    cross = before_x * after_y - before_y * after_x
+    # As einsum's dot product, which starts from +0 (so that −0 + −0 is +0: atan2(0, +0) = 0).
+    dot = before_x * after_x + before_y * after_y + 0.0
+    return np.arctan2(cross, dot)
+
+
+def _shifted(xy: Array, k: int) -> Array:
+    """``xy[clip(i + k, 0, n − 1)]`` for every ``i``: the points ``k`` samples on, held at the
+    ends (slices, not a gather)."""
+    n = len(xy)
+    out = np.empty_like(xy)
+    if k >= 0:
+        k = min(k, n)
+        out[: n - k], out[n - k :] = xy[k:], xy[-1]
+    else:
+        k = min(-k, n)
+        out[:k], out[k:] = xy[0], xy[: n - k]
+    return out
 
 
 def heading_changes(xy: Array, support: int = 1) -> Array:
@@ -118,12 +185,10 @@ def heading_changes(xy: Array, support: int = 1) -> Array:
 
     Summing their absolute values gives the total absolute turning at that scale.
     """
-    n = len(xy)
     half = support // 2
-    i = np.arange(n)
-    chords = xy[np.minimum(i + support - half, n - 1)] - xy[np.maximum(i - half, 0)]
+    chords = _shifted(xy, support - half) - _shifted(xy, -half)
     heading = np.arctan2(chords[:, 1], chords[:, 0])
-    change = np.zeros(n)
+    change = np.zeros(len(xy))
     change[1:] = np.angle(np.exp(1j * np.diff(heading)))
     return change
 
@@ -153,19 +218,33 @@ def salient_points(
     # Within one support of an end the chords are cut short: no reliable extremum there.
     peaks = peaks[(peaks >= support) & (peaks <= n - 1 - support)]
     points = [0, *peaks.tolist(), n - 1]
-    while len(points) > 2:
-        idx = np.asarray(points)
-        span = int(reach * support)
-        here = idx[1:-1]
-        near = chord_turn(
-            xy, np.maximum(idx[:-2], here - span), here, np.minimum(idx[2:], here + span)
-        )
-        turns = np.maximum(chord_turn(xy, idx[:-2], here, idx[2:]), near)
+    span = int(reach * support)
+    turns = _salient_turns(xy, points[:-2], points[1:-1], points[2:], span).tolist()
+    while turns:
         weakest = int(np.argmin(turns))
         if turns[weakest] >= threshold:
             break
-        del points[weakest + 1]
+        del points[weakest + 1], turns[weakest]
+        # Only the dropped point's neighbours turn differently now.
+        moved = [k for k in (weakest - 1, weakest) if 0 <= k < len(turns)]
+        if moved:
+            new = _salient_turns(
+                xy,
+                [points[k] for k in moved],
+                [points[k + 1] for k in moved],
+                [points[k + 2] for k in moved],
+                span,
+            )
+            for k, turn in zip(moved, new.tolist(), strict=True):
+                turns[k] = turn
     return np.asarray(points, dtype=np.intp)
+
+
+def _salient_turns(xy: Array, prev: list[int], here: list[int], nxt: list[int], span: int) -> Array:
+    """The turn of candidates ``here`` between ``prev`` and ``nxt`` (:func:`salient_points`)."""
+    p, h, q = (np.asarray(k, dtype=np.intp) for k in (prev, here, nxt))
+    near = chord_turn(xy, np.maximum(p, h - span), h, np.minimum(q, h + span))
+    return np.maximum(chord_turn(xy, p, h, q), near)
 
 
 def add_turning_points(
@@ -177,22 +256,50 @@ def add_turning_points(
     that jitter below that scale does not add up), leaving out half a support at each interior
     salient point: a corner's own turning is the corner's.
     """
+    points = np.asarray(points, dtype=np.intp)
     step_turn = np.abs(heading_changes(xy, support))
     margin = support // 2
-    s = arc_length(xy)
     last = len(xy) - 1
-    out = [int(points[0])]
-    for a, b in itertools.pairwise(points):
-        lo = a + 1 + (margin if a > 0 else 0)
-        hi = b - (margin if b < last else 0)
-        total = float(np.sum(step_turn[lo:hi]))
-        extra = int(total // max_turn)
-        if extra:
-            targets = np.linspace(s[a], s[b], extra + 2)[1:-1]
-            inner = np.clip(np.searchsorted(s, targets), a + 1, b - 1)
-            out.extend(sorted(set(inner.tolist())))
-        out.append(int(b))
-    return np.asarray(sorted(set(out)), dtype=np.intp)
+    a, b = points[:-1], points[1:]
+    lo = a + 1 + np.where(a > 0, margin, 0)
+    hi = b - np.where(b < last, margin, 0)
+    extra = _whole_turns(step_turn, lo, hi, max_turn)
+    more = np.flatnonzero(extra > 0)
+    if not more.size:
+        return np.unique(points)
+    # ⌊θ̂ / max_turn⌋ targets per section, as np.linspace(s[a], s[b], extra + 2)[1:-1].
+    s = arc_length(xy)
+    count = extra[more]
+    first = np.repeat(np.cumsum(count) - count, count)
+    k = (np.arange(int(count.sum())) - first + 1).astype(float)
+    start, span = s[a[more]], s[b[more]] - s[a[more]]
+    div = (count + 1).astype(float)
+    step = np.repeat(span / div, count)
+    offset = np.where(step == 0, k / np.repeat(div, count) * np.repeat(span, count), k * step)
+    targets = offset + np.repeat(start, count)
+    inner = np.minimum(
+        np.maximum(np.searchsorted(s, targets), np.repeat(a[more] + 1, count)),
+        np.repeat(b[more] - 1, count),
+    )
+    return np.unique(np.concatenate([points, inner]))
+
+
+def _whole_turns(values: Array, lo: Indices, hi: Indices, unit: float) -> Indices:
+    """``⌊sum(values[lo:hi]) / unit⌋`` per range (Python slices), exactly as with ``np.sum``.
+
+    The sums come from one cumulative sum; the few that fall within rounding of a multiple of
+    ``unit`` are summed again with ``np.sum`` so that the floor is the same.
+    """
+    n = len(values)
+    cumulative = np.concatenate([[0.0], np.cumsum(values)])
+    start, stop = np.minimum(lo, n), np.minimum(hi, n)
+    total = np.where(stop > start, cumulative[stop] - cumulative[start], 0.0)
+    whole = np.rint(total / unit)
+    slack = 4.0 * (n + 1) * _EPS * (cumulative[-1] + abs(unit))
+    again = (whole >= 1) & (np.abs(total - whole * unit) <= slack) | (lo < 0) | (hi < 0)
+    for i in np.flatnonzero(again).tolist():
+        total[i] = float(np.sum(values[lo[i] : hi[i]]))
+    return np.floor_divide(total, unit).astype(np.intp)
 
 
 def inflection(xy: Array, a: int, b: int, support: int, min_turn: float) -> int | None:
@@ -202,24 +309,57 @@ def inflection(xy: Array, a: int, b: int, support: int, min_turn: float) -> int 
     turns at least ``min_turn`` (rad) on each side, in opposite directions; among several, the
     one that splits the turning most evenly.
     """
-    if b - a < 4:
-        return None
-    theta = turning(xy, max(1, min(support, (b - a) // 4)))[a + 1 : b]
-    left = np.cumsum(theta)  # turning from a to each candidate
-    right = left[-1] - left
+    cut = int(inflections(xy, np.array([a, b], dtype=np.intp), support, min_turn)[0])
+    return None if cut < 0 else cut
+
+
+def inflections(xy: Array, dominant: Indices, support: int, min_turn: float) -> Indices:
+    """:func:`inflection` of every section ``dominant[i]..dominant[i + 1]``, -1 where none.
+
+    The turning is measured within the section: its chords stop at the section's ends, so the
+    corner at a dominant point (rounded by the smoothing) does not count as the section turning
+    one way before it turns the other. Sections shorter than 4 supports measure their turning
+    with a quarter of their length.
+    """
+    dominant = np.asarray(dominant, dtype=np.intp)
+    a, b = dominant[:-1], dominant[1:]
+    cuts = np.full(len(a), -1, dtype=np.intp)
+    sections = np.flatnonzero(b - a >= 4)
+    if not sections.size:
+        return cuts
+    a, b = a[sections], b[sections]
+    count = b - a - 1  # turnings strictly inside
+    scale = np.maximum(1, np.minimum(support, (b - a) // 4))
+    # One row per section, zeros past its end: each row's cumulative sum is the section's own.
+    width = int(count.max())
+    inside = np.arange(width) < count[:, None]
+    where = ((a + 1)[:, None] + np.arange(width))[inside]
+    values = _turning_at(
+        xy, where, np.repeat(scale, count), np.repeat(a, count), np.repeat(b, count)
+    )
+    theta = np.zeros((len(a), width))
+    theta[inside] = values
+    left = np.cumsum(theta, axis=1)  # turning from a to each candidate
+    total = left[np.arange(len(a)), count - 1]
     # Sign changes between consecutive non-zero turnings (a zero can sit exactly on one).
-    nonzero = np.flatnonzero(theta != 0)
-    flips = np.flatnonzero(np.sign(theta[nonzero[:-1]]) != np.sign(theta[nonzero[1:]]))
-    change = (nonzero[flips] + nonzero[flips + 1]) // 2
-    if not change.size:
-        return None
-    score = np.minimum(np.abs(left[change]), np.abs(right[change]))
-    opposite = np.sign(left[change]) * np.sign(right[change]) < 0
-    score = np.where(opposite, score, 0.0)
-    best = int(np.argmax(score))
-    if score[best] < min_turn:
-        return None
-    return a + 1 + int(change[best]) + 1
+    nonzero = np.flatnonzero(theta)
+    rows, cols = np.divmod(nonzero, width)
+    sign = np.sign(theta.ravel()[nonzero])
+    flips = np.flatnonzero((rows[:-1] == rows[1:]) & (sign[:-1] != sign[1:]))
+    if not flips.size:
+        return cuts
+    rows = rows[flips]
+    change = (cols[flips] + cols[flips + 1]) // 2
+    before = left.ravel()[rows * width + change]
+    after = total[rows] - before
+    score = np.minimum(np.abs(before), np.abs(after))
+    score = np.where(np.sign(before) * np.sign(after) < 0, score, 0.0)
+    # Per section the best score, the first of equals (lexsort is stable).
+    order = np.lexsort((-score, rows))
+    best = order[np.concatenate([[True], rows[order][1:] != rows[order][:-1]])]
+    best = best[score[best] >= min_turn]
+    cuts[sections[rows[best]]] = a[rows[best]] + 2 + change[best]
+    return cuts
 
 
 def signed_area(xy: Array) -> float:
@@ -228,24 +368,103 @@ def signed_area(xy: Array) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
+def _signed_areas(xy: Array, start: Indices, end: Indices) -> Array:
+    """:func:`signed_area` of each ``xy[start[i] : end[i] + 1]``, summed relative to its start."""
+    length = np.maximum(end - start, 0)
+    offset = np.cumsum(length) - length
+    area = np.zeros(len(length))
+    count = int(offset[-1] + length[-1]) if len(length) else 0
+    if count:
+        edge = np.arange(count) - np.repeat(offset - start, length)
+        x, y = xy[:, 0], xy[:, 1]
+        origin_x, origin_y = np.repeat(x[start], length), np.repeat(y[start], length)
+        ux, uy = x[edge] - origin_x, y[edge] - origin_y
+        vx, vy = x[edge + 1] - origin_x, y[edge + 1] - origin_y
+        filled = length > 0
+        area[filled] = 0.5 * np.add.reduceat(ux * vy - uy * vx, offset[filled])
+    return area
+
+
+_FULL_TURN = 2.0 * np.pi - 1e-9
+"""The largest central angle of a circular segment (the whole circle but a sliver)."""
+
+
 def segment_angle(chord: float, area: float) -> float:
     """The central angle θ of the circular segment with this chord and (absolute) area (eq. 19).
 
-    Solves ``½ (c / (2 sin(θ/2)))² (θ − sin θ) = A`` for θ in [0, 2π) by bisection on the
-    monotone ratio ``A / c² = (θ − sin θ) / (8 sin²(θ/2))``.
+    See :func:`segment_angles`.
     """
-    if chord <= 0 or area <= 0:
-        return 0.0
-    ratio = area / (chord * chord)
-    lo, hi = 0.0, 2.0 * np.pi - 1e-9
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        value = (mid - np.sin(mid)) / (8.0 * np.sin(0.5 * mid) ** 2)
-        if value < ratio:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
+    return float(segment_angles(np.array([chord], dtype=float), np.array([area], dtype=float))[0])
+
+
+def segment_angles(chord: Array, area: Array) -> Array:
+    """Eq. 19 for arrays: central angles θ in [0, 2π) of the circular segments with these chords
+    and (absolute) areas; 0 where either is not positive.
+
+    Solves ``½ (c / (2 sin(θ/2)))² (θ − sin θ) = A``, i.e. the monotone ratio
+    ``A / c² = (θ − sin θ) / (8 sin²(θ/2))``, with a table of cubics in ``log(A / c²)`` (good to
+    about 1e-14); below it (θ < 1e-4) from the ratio's series, above it the whole circle (less
+    the sliver of 1e-9).
+    """
+    chord, area = np.asarray(chord, dtype=float), np.asarray(area, dtype=float)
+    start, cubics = _segment_table()
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        ratio = np.where((chord > 0) & (area > 0), area / (chord * chord), 0.0)
+        at = np.minimum(np.maximum((np.log(ratio) - start) / _TABLE_STEP, 0.0), len(cubics))
+        k = np.minimum(at.astype(np.intp), len(cubics) - 1)
+        t = at - k
+        c = cubics[k]
+        theta = c[..., 0] + t * (c[..., 1] + t * (c[..., 2] + t * c[..., 3]))
+        # Below the table, ratio = θ/12 (1 + θ²/30 + O(θ⁴)).
+        small = 12.0 * ratio * (1.0 - 4.8 * ratio * ratio)
+        return np.where(at > 0.0, np.minimum(theta, _FULL_TURN), small)
+
+
+def _segment_ratio(theta: Array) -> tuple[Array, Array]:
+    """``(θ − sin θ) / (8 sin²(θ/2))`` and its derivative in θ (below θ = ¼, ``θ − sin θ`` from
+    its series, free of cancellation)."""
+    sin, cos = np.sin(0.5 * theta), np.cos(0.5 * theta)
+    t2 = theta * theta
+    # θ − sin θ = θ³/6 (1 − θ²/20 (1 − θ²/42 (1 − θ²/72 (1 − θ²/110 (1 − θ²/156)))))
+    series = 1.0 - t2 / 156.0
+    for k in (110.0, 72.0, 42.0, 20.0):
+        series = 1.0 - t2 / k * series
+    excess = np.where(theta < 0.25, theta * t2 / 6.0 * series, theta - 2.0 * sin * cos)
+    square = 8.0 * sin * sin
+    return excess / square, 0.25 - excess * cos / (square * sin)
+
+
+_TABLE_STEP = 2e-3
+"""Spacing of :func:`_segment_table` in ``log(A / c²)``."""
+
+
+@functools.cache
+def _segment_table() -> tuple[float, Array]:
+    """For :func:`segment_angles`: the first ``log(A / c²)`` (θ = 1e-4) and, per step of
+    :data:`_TABLE_STEP` from there to past θ = 2π − 1e-9, the cubic in the fraction of the step
+    through θ there (Hermite, from θ and dθ/d log(A / c²) at both ends)."""
+    # θ on an even grid of log(A / c²): a first guess from a dense grid of θ, then Newton.
+    w = np.arange(np.log(1e-4 / (2.0 * np.pi)), np.log(2.0 * np.pi / 1e-10), 1e-3)
+    guess = 2.0 * np.pi / (1.0 + np.exp(-w))
+    guess_x = np.log(_segment_ratio(guess)[0])
+    top = np.log(_segment_ratio(np.array(_FULL_TURN))[0])
+    x = guess_x[0] + _TABLE_STEP * np.arange(int((top - guess_x[0]) / _TABLE_STEP) + 3)
+    theta = np.interp(x, guess_x, guess)
+    for _ in range(3):
+        value, slope = _segment_ratio(theta)
+        theta = theta - (value - np.exp(x)) / slope
+    value, slope = _segment_ratio(theta)
+    step = _TABLE_STEP * value / slope  # dθ per table step
+    rise = np.diff(theta)
+    cubics = np.column_stack(
+        [
+            theta[:-1],
+            step[:-1],
+            3.0 * rise - 2.0 * step[:-1] - step[1:],
+            step[:-1] + step[1:] - 2.0 * rise,
+        ]
+    )
+    return float(x[0]), cubics
 
 
 def arc_deviation(xy: Array) -> float:
@@ -259,29 +478,77 @@ def arc_deviation(xy: Array) -> float:
     return float(np.sign(area)) * 0.5 * segment_angle(chord, abs(area))
 
 
+def section_deviations(
+    curve: Array, dominant: Indices, cuts: Sequence[int | None] | Indices | None = None
+) -> tuple[Array, Array]:
+    """``(phi1, phi2)`` of every section ``dominant[i]..dominant[i + 1]`` (eq. 19).
+
+    One circular arc by the section's area: ``(-phi, phi)``, as :func:`arc_deviation`. With an
+    inflection at ``curve[cuts[i]]`` strictly inside (None or -1: none), one arc on each side; the
+    first's start tangent and the second's end tangent, measured from the section's chord.
+    """
+    dominant = np.asarray(dominant, dtype=np.intp)
+    a, b = dominant[:-1], dominant[1:]
+    m = len(a)
+    if cuts is None:
+        q = np.full(m, -1, dtype=np.intp)
+    elif isinstance(cuts, np.ndarray):
+        q = cuts.astype(np.intp)
+    else:
+        q = np.array([-1 if c is None else c for c in cuts], dtype=np.intp)
+    split = np.flatnonzero((q > a) & (q < b))
+    # The arcs: each section, or its part up to the inflection; then the parts after it.
+    start, end = a, b
+    if split.size:
+        start = np.concatenate([a, q[split]])
+        end = np.concatenate([b, b[split]])
+        end[split] = q[split]
+    area = _signed_areas(curve, start, end)
+    chord = curve[end] - curve[start]
+    phi = np.sign(area) * 0.5 * segment_angles(np.hypot(chord[:, 0], chord[:, 1]), np.abs(area))
+    if not split.size:
+        return -phi, phi
+    # Two arcs: their chords' directions, and the section's chord's (alpha).
+    vectors = np.concatenate([chord[split], chord[m:], curve[b[split]] - curve[a[split]]])
+    direction = np.arctan2(vectors[:, 1], vectors[:, 0])
+    n = len(split)
+    alpha = direction[2 * n :]
+    first, second = direction[:n] - phi[split] - alpha, direction[n : 2 * n] + phi[m:] - alpha
+    tangents = wrap_angle(np.concatenate([first, second]))
+    phi1, phi2 = -phi[:m], phi[:m]
+    phi1[split], phi2[split] = tangents[:n], tangents[n:]
+    return phi1, phi2
+
+
 def sharpness(xy: Array, a: int, z: int, b: int) -> float:
     """Eq. 20: how close the contour ``a..b`` around ``z`` is to a corner (1) or an arc (0).
 
     Compares its area ``A_Z`` (closed by the chord ``ab``) with the triangle ``(a, z, b)``
     (``A_t``, sharpest) and the circular segment through ``a, z, b`` (``A_s``, roundest).
     """
+    return float(sharpnesses(xy, np.array([a]), np.array([z]), np.array([b]))[0])
+
+
+def sharpnesses(xy: Array, a: Indices, z: Indices, b: Indices) -> Array:
+    """:func:`sharpness` of the contours ``xy[a[i]..b[i]]`` around ``xy[z[i]]``."""
+    a, z, b = (np.asarray(k, dtype=np.intp) for k in (a, z, b))
+    if not z.size:
+        return np.zeros(z.shape)
     pa, pz, pb = xy[a], xy[z], xy[b]
     u, w = pa - pz, pb - pz
-    lengths = float(np.hypot(*u) * np.hypot(*w))
-    if lengths <= 0:
-        return 0.0
-    # The inscribed angle at z; the arc through z subtends 2π − 2γ at the centre.
-    gamma = float(np.arccos(np.clip(np.dot(u, w) / lengths, -1.0, 1.0)))
-    if gamma < 1e-6:  # a cusp (a and b on one ray from z): as sharp as it gets
-        return 1.0
-    chord = float(np.hypot(*(pb - pa)))
-    triangle = 0.5 * abs(float(u[0] * w[1] - u[1] * w[0]))
-    if chord <= 0 or triangle <= 0 or np.pi - gamma < 1e-9:  # straight through
-        return 0.0
-    radius = chord / (2.0 * np.sin(gamma))
-    theta = 2.0 * np.pi - 2.0 * gamma
-    circle = 0.5 * radius * radius * (theta - np.sin(theta))
-    contour = abs(signed_area(xy[a : b + 1]))
-    if not circle > max(contour, triangle):
-        return 0.0
-    return (circle - contour) / (circle - triangle)
+    lengths = np.hypot(u[:, 0], u[:, 1]) * np.hypot(w[:, 0], w[:, 1])
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        # The inscribed angle at z; the arc through z subtends 2π − 2γ at the centre.
+        cosine = (u[:, 0] * w[:, 0] + u[:, 1] * w[:, 1]) / lengths
+        gamma = np.arccos(np.minimum(np.maximum(cosine, -1.0), 1.0))
+        chord = np.hypot(*(pb - pa).T)
+        triangle = 0.5 * np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0])
+        radius = chord / (2.0 * np.sin(gamma))
+        theta = 2.0 * np.pi - 2.0 * gamma
+        circle = 0.5 * radius * radius * (theta - np.sin(theta))
+        contour = np.abs(_signed_areas(xy, a, b))
+        sharp = (circle - contour) / (circle - triangle)
+    rounded = ~(np.pi - gamma < 1e-9) & (circle > np.maximum(contour, triangle))
+    sharp = np.where((chord > 0) & (triangle > 0) & rounded, sharp, 0.0)
+    sharp = np.where(gamma < 1e-6, 1.0, sharp)  # a cusp (a and b on one ray from z)
+    return np.where(lengths > 0, sharp, 0.0)
