@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import multiprocessing
 import os
 import platform
 import re
@@ -235,7 +236,12 @@ def main() -> None:
         f" {args.jobs} processes"
     )
     started = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs) as pool:
+    # One fit per core, each single-threaded: fresh worker processes started with OpenBLAS's
+    # threads off, which would otherwise spin against each other (a 90 ms fit measured 1.4 s).
+    for variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(variable, "1")
+    spawn = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(args.jobs, mp_context=spawn) as pool:
         rows = list(
             pool.map(run_case, cases, [args.model] * len(cases), [args.refine] * len(cases))
         )

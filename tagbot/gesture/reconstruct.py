@@ -23,7 +23,6 @@ bounding box), so a fit does not depend on units; angles are degrees; times seco
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
 from typing import Any
@@ -35,7 +34,6 @@ from tagbot.errors import PlanError
 from tagbot.gesture import contour
 from tagbot.gesture.refine import RefineOptions, refine
 from tagbot.gesture.strokes import Strokes
-from tagbot.model.euler import wrap_angle
 from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, MODELS, Model, Plan, Tag, sequence
 
 Array = NDArray[np.float64]
@@ -78,7 +76,7 @@ class FitOptions:
     """Pen-up time between consecutive plans, seconds."""
     dot: float = 0.003
     """A trace with no length (a dot) becomes a straight stroke this long, fraction of size."""
-    split_error: float = 0.01
+    split_error: float = 0.015
     """With refinement, a section still farther than this (fraction of the tag's size) from the
     trajectory gets one more dominant point where it is farthest, and its trace is refitted."""
     splits: int = 2
@@ -267,17 +265,21 @@ def _estimate(
 ) -> _Sections:
     """§6.2–6.3: tangents and delays of the strokes between ``dominant`` points (for the ΣΛ*
     model, inflections become dominant points first: arcs cannot inflect)."""
-    min_turn = np.radians(opts.inflection_angle)
-    cuts = [
-        contour.inflection(curve, int(a), int(b), support, min_turn)
-        for a, b in itertools.pairwise(dominant)
-    ]
-    if model == "sigma":
-        dominant = np.unique(np.concatenate([dominant, [c for c in cuts if c is not None]]))
-        dominant = dominant.astype(np.intp)
-        cuts = [None] * (len(dominant) - 1)
-    phi1, phi2 = _deviations(curve, dominant, cuts)
-    dt = _onset_delays(curve, dominant, support, opts)
+    cuts = contour.inflections(curve, dominant, support, np.radians(opts.inflection_angle))
+    if model == "sigma":  # inflections become targets; sections are then single arcs
+        dominant = np.union1d(dominant, cuts[cuts >= 0]).astype(np.intp)
+        cuts = None
+    phi1, phi2 = contour.section_deviations(curve, dominant, cuts)
+    # Eq. 21: the first stroke starts at once; each next one after a delay that grows with the
+    # sharpness of the contour (eq. 20) around the target it leaves from.
+    z = dominant[1:-1]
+    sharp = contour.sharpnesses(
+        curve, np.maximum(dominant[:-2], z - support), z, np.minimum(dominant[2:], z + support)
+    )
+    dt = np.zeros(len(dominant) - 1)
+    dt[1:] = opts.dt_min + (opts.dt_max - opts.dt_min) * np.minimum(
+        sharp**opts.sharpness_exponent, 1.0
+    )
     return _Sections(curve, dominant, phi1, phi2, dt, ds, support)
 
 
@@ -285,48 +287,6 @@ def _dot(point: Array, size: float, opts: FitOptions) -> Plan:
     """A dot: a short straight stroke, so that the pen touches down."""
     end = point + np.array([opts.dot * size, 0.0])
     return Plan([point, end], [0.0], [opts.mu], [opts.sigma], [0.0], [0.0])
-
-
-def _deviations(
-    curve: Array, dominant: NDArray[np.intp], cuts: list[int | None]
-) -> tuple[Array, Array]:
-    """``phi1, phi2`` per section of ``curve`` (one arc, or two across the inflection ``cuts``)."""
-    pairs = [
-        section_tangents(curve[a : b + 1], None if q is None else q - a)
-        for a, b, q in zip(dominant[:-1], dominant[1:], cuts, strict=True)
-    ]
-    return np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
-
-
-def section_tangents(section: Array, cut: int | None) -> tuple[float, float]:
-    """Eq. 19: a section's start and end tangents from the chord, from circular segments.
-
-    With no inflection, one arc: ``(-phi, phi)``. With an inflection at ``section[cut]``, two arcs,
-    one on each side; their start and end tangents measured from the whole section's chord.
-    """
-    if cut is None or not 0 < cut < len(section) - 1:
-        phi = contour.arc_deviation(section)
-        return -phi, phi
-    alpha = _direction(section[-1] - section[0])
-    first = contour.arc_deviation(section[: cut + 1])
-    second = contour.arc_deviation(section[cut:])
-    start = _direction(section[cut] - section[0]) - first
-    end = _direction(section[-1] - section[cut]) + second
-    return float(wrap_angle(start - alpha)), float(wrap_angle(end - alpha))
-
-
-def _onset_delays(
-    curve: Array, dominant: NDArray[np.intp], support: int, opts: FitOptions
-) -> Array:
-    """``dt`` per stroke (eq. 21): the first 0, then from the sharpness at the preceding target."""
-    dt = np.zeros(len(dominant) - 1)
-    for j in range(1, len(dominant) - 1):
-        z = int(dominant[j])
-        a = max(int(dominant[j - 1]), z - support)
-        b = min(int(dominant[j + 1]), z + support)
-        sharp = contour.sharpness(curve, a, z, b)
-        dt[j] = opts.dt_min + (opts.dt_max - opts.dt_min) * min(sharp**opts.sharpness_exponent, 1.0)
-    return dt
 
 
 def correct_targets(strokes: Strokes, size: float, tolerance: Array, iterations: int) -> Strokes:
@@ -461,7 +421,3 @@ def _crossings(strokes: Strokes, a: NDArray[np.intp], b: NDArray[np.intp]) -> Ar
 
 _CROSSING_STEPS = 8
 """Safeguarded Newton steps for the speed-profile crossings (quadratic once close)."""
-
-
-def _direction(vector: Array) -> float:
-    return float(np.arctan2(vector[1], vector[0]))

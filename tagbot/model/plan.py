@@ -213,8 +213,8 @@ def unit_strokes(phi1: ArrayLike, phi2: ArrayLike) -> Clothoids:
     """
     phi1, phi2 = np.asarray(phi1, dtype=float), np.asarray(phi2, dtype=float)
     arc = (phi1 == -phi2) & (np.abs(phi2) < np.pi)
-    zeros = np.zeros(phi1.shape + (2,))
-    spiral = fit_euler(zeros, phi1, zeros + [1.0, 0.0], phi2)
+    start = np.zeros((*phi1.shape, 2))
+    spiral = fit_euler(start, phi1, start + np.array([1.0, 0.0]), phi2)
     phi = np.where(arc, phi2, 0.0)
     arc_length = 1.0 / np.sinc(phi / np.pi)
     return Clothoids(
