@@ -46,7 +46,7 @@ _ANGLE_STEP = 1e-6
 class RefineOptions:
     """How hard the refinement works."""
 
-    iterations: int = 8
+    iterations: int = 4
     """Levenberg-Marquardt iterations at most."""
     contour_samples: int = 16
     """Contour samples per stroke that the trajectory must pass near."""

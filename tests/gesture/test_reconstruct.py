@@ -35,8 +35,10 @@ def test_synthetic_round_trip(model):
         ratios.append(fitted.n_strokes / tag.n_strokes)
         assert error.mean < 0.02
     assert np.median(errors) <= 0.005
-    assert 0.5 <= np.median(ratios) <= 1.6
-    assert min(ratios) >= 0.25 and max(ratios) <= 2.5
+    # More strokes than the truth where the fit splits a section it still missed by > 1.5 %,
+    # and (ΣΛ*) where arcs meet at an inflection, which becomes a target.
+    assert 0.5 <= np.median(ratios) <= 1.7
+    assert min(ratios) >= 0.25 and max(ratios) <= 3.0
 
 
 def test_paper_method_alone_is_close_and_refining_improves_it():
@@ -180,3 +182,27 @@ def test_cusps_are_sharpest():
 
     spike = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [1.0, 0.0], [0.0, 0.0]])
     assert contour.sharpness(spike, 0, 2, 4) == 1.0
+
+
+def test_sections_missed_by_the_refined_fit_are_split():
+    """A tall narrow loop then a wave: where the refined trajectory still misses the contour,
+    an extra dominant point (and stroke) brings it closer; splits=0 turns that off."""
+    t = np.linspace(0, 1, 400)
+    loop = np.column_stack([8 * np.sin(2 * np.pi * t) + 30 * t, 60 * np.sin(np.pi * t) ** 2])
+    wave = np.column_stack([np.linspace(30, 90, 300), 10 * np.sin(np.linspace(0, 6 * np.pi, 300))])
+    contour = np.vstack([loop, wave[1:]])
+    errors = {}
+    for splits in (0, 2):
+        fitted = fit([contour], splits=splits)
+        errors[splits] = shape_error([contour], pen_down_paths(fitted.sample(0.005))), fitted
+    (plain, plain_tag), (split, split_tag) = errors[0], errors[2]
+    assert split_tag.n_strokes > plain_tag.n_strokes
+    assert split.max < 0.5 * plain.max
+    assert split.max < 0.005
+
+
+def test_split_options_are_checked():
+    with pytest.raises(PlanError, match="splits"):
+        fit([np.array([[0.0, 0.0], [1.0, 1.0]])], splits=-1)
+    with pytest.raises(PlanError, match="split_error"):
+        fit([np.array([[0.0, 0.0], [1.0, 1.0]])], split_error=-0.1)
