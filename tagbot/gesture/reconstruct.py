@@ -15,7 +15,13 @@ Per trace:
    trajectory's position where the speed profiles of the strokes meeting at target ``j`` cross,
    until the largest move is below one resampling step or after 10 iterations (§6.4);
 6. beyond the paper, unless ``refine=False``: a least-squares polish of targets, tangents and
-   onsets so the trajectory follows the whole contour (:mod:`tagbot.gesture.refine`).
+   onsets so the trajectory follows the whole contour (:mod:`tagbot.gesture.refine`);
+7. beyond the paper too: a section the polished trajectory still misses by more than
+   ``split_error`` gets one more dominant point where it misses most, and its trace is fitted
+   again (at most ``splits`` times, kept only if it got closer).
+
+All traces go through steps 5–7 together (:mod:`tagbot.gesture.strokes`): one numpy pass per
+step for the whole tag rather than one per trace.
 
 Lengths in :class:`FitOptions` are fractions of the tag's size (the diagonal of all traces'
 bounding box), so a fit does not depend on units; angles are degrees; times seconds.
