@@ -89,7 +89,7 @@ def refine(
         if gain > 0:  # Nielsen's damping update, from the gain ratio
             improvement = 1.0 - trial_cost / cost
             x, strokes, tau, current, cost = trial_x, trial_strokes, trial_tau, trial, trial_cost
-            damping *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
+            damping *= max(1.0 / 3.0, 1.0 - (2.0 * min(gain, 1.0) - 1.0) ** 3)
             grow = 2.0
             system = None
             if improvement < 1e-3:
