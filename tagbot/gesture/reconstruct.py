@@ -308,11 +308,11 @@ def correct_targets(strokes: Strokes, size: float, tolerance: Array, iterations:
     if not inner.size:
         return strokes
     wanted = strokes.targets[inner]
-    owner = strokes.trace[np.searchsorted(strokes.start_target, inner)]
+    owner = strokes.trace[strokes.later]
     traces = len(strokes.counts)
 
     def errors(candidate: Strokes) -> tuple[Array, Array]:
-        error = wanted - _critical_points(candidate, inner, size)
+        error = wanted - _critical_points(candidate, size)
         worst = np.zeros(traces)
         np.maximum.at(worst, owner, np.hypot(error[:, 0], error[:, 1]))
         return error, worst
@@ -347,9 +347,9 @@ def correct_targets(strokes: Strokes, size: float, tolerance: Array, iterations:
     return strokes
 
 
-def _critical_points(strokes: Strokes, inner: NDArray[np.intp], size: float) -> Array:
-    """The trajectory's position at the critical instant of each target in ``inner``."""
-    b = np.searchsorted(strokes.start_target, inner)
+def _critical_points(strokes: Strokes, size: float) -> Array:
+    """The trajectory's position at the critical instant of each interior target."""
+    b = strokes.later  # the stroke leaving each interior target
     times = _crossings(strokes, b - 1, b)
     trace = strokes.trace[b]
     order = np.lexsort((times, trace))
@@ -369,7 +369,7 @@ def critical_points(plan: Plan) -> Array:
     strokes = Strokes.of([plan.at(0.0)])
     points = plan.targets.copy()
     size = float(np.hypot(*np.ptp(plan.targets, axis=0)))
-    points[1:-1] = _critical_points(strokes, strokes.interior, size)
+    points[1:-1] = _critical_points(strokes, size)
     return points
 
 

@@ -16,7 +16,7 @@ The Jacobian is exact for the targets (the trajectory is linear in them) and the
 instants (minus or plus a velocity), and a forward difference of the unit-chord shapes for the
 tangents. Each residual depends only on the strokes active at its instant, so the normal
 equations are sparse; an iteration costs one evaluation of the active (instant, stroke) pairs and
-two evaluations of shapes, whatever the number of strokes.
+one of the stepped shapes at them, whatever the number of strokes.
 """
 
 from __future__ import annotations
@@ -227,7 +227,7 @@ class _Problem:
 
         # Targets: x = Σ_i p_i (G_{i-1} − G_i), complex-linear in each interior target p_i.
         inner = layout.inner
-        b = np.searchsorted(strokes.start_target, inner)  # the stroke leaving each target
+        b = strokes.later  # the stroke leaving each interior target
         a = b - 1
         lo = np.minimum(ev.begin[a], ev.begin[b])
         span = np.maximum(ev.stop[a], ev.stop[b]) - lo
@@ -345,9 +345,7 @@ class _Layout:
         self.inner = strokes.interior
         self.targets = 2 * len(self.inner)
         self.angles = n if arcs_only else 2 * n
-        first = np.zeros(n, dtype=bool)
-        first[strokes.first_stroke[:-1]] = True
-        self.free_onsets = np.flatnonzero(~first)
+        self.free_onsets = strokes.later
         self.onset_column = np.full(n, -1)
         self.onset_column[self.free_onsets] = (
             self.targets + self.angles + np.arange(len(self.free_onsets))

@@ -107,12 +107,17 @@ class Strokes:
         return slice(int(self.first_stroke[k]), int(self.first_stroke[k + 1]))
 
     @cached_property
+    def later(self) -> Index:
+        """Strokes other than the first of their trace: in order, the stroke leaving each
+        :attr:`interior` target."""
+        first = np.zeros(len(self.onsets), dtype=bool)
+        first[self.first_stroke[:-1]] = True
+        return np.flatnonzero(~first)
+
+    @cached_property
     def interior(self) -> Index:
         """Targets that are neither the first nor the last of their trace."""
-        inner = np.ones(len(self.targets), dtype=bool)
-        inner[self.first_target[:-1]] = False
-        inner[self.first_target[1:] - 1] = False
-        return np.flatnonzero(inner)
+        return self.start_target[self.later]
 
     # --- geometry ------------------------------------------------------------------------------
 

@@ -165,7 +165,7 @@ class Plan:
     @cached_property
     def arcs(self) -> NDArray[np.bool_]:
         """Which strokes are circular arcs (ΣΛ* strokes): ``phi1 == -phi2`` with ``|phi2| < π``."""
-        return (self.phi1 == -self.phi2) & (np.abs(self.phi2) < np.pi)
+        return _arcs(self.phi1, self.phi2)
 
     @property
     def n_strokes(self) -> int:
@@ -212,7 +212,7 @@ def unit_strokes(phi1: ArrayLike, phi2: ArrayLike) -> Clothoids:
     closed form, exact where the spiral fit's root would be ~1e-17 rather than 0.
     """
     phi1, phi2 = np.asarray(phi1, dtype=float), np.asarray(phi2, dtype=float)
-    arc = (phi1 == -phi2) & (np.abs(phi2) < np.pi)
+    arc = _arcs(phi1, phi2)
     start = np.zeros((*phi1.shape, 2))
     spiral = fit_euler(start, phi1, start + np.array([1.0, 0.0]), phi2)
     phi = np.where(arc, phi2, 0.0)
@@ -225,6 +225,11 @@ def unit_strokes(phi1: ArrayLike, phi2: ArrayLike) -> Clothoids:
         dkappa=np.where(arc, 0.0, spiral.dkappa),
         length=np.where(arc, arc_length, spiral.length),
     )
+
+
+def _arcs(phi1: Array, phi2: Array) -> NDArray[np.bool_]:
+    """Which strokes are ΣΛ* arcs: ``phi1 == -phi2`` with ``|phi2| < π``."""
+    return (phi1 == -phi2) & (np.abs(phi2) < np.pi)
 
 
 def place_strokes(shapes: Clothoids, targets: Array) -> Clothoids:
