@@ -19,8 +19,8 @@ from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import ndtr
 
+from tagbot.gesture import kernels
 from tagbot.model.euler import Clothoids
 from tagbot.model.plan import END_TOLERANCE, Plan, stroke_windows, unit_strokes
 
@@ -152,53 +152,31 @@ class Strokes:
     def evaluate(self, trace: Index, t: Array, size: float) -> Evaluation:
         """Positions and velocities at times ``t`` of traces ``trace`` (sorted by trace, then
         time), with the (sample, active stroke) pairs kept for Jacobians."""
-        count = len(t)
+        t = np.ascontiguousarray(t, dtype=float)
+        sample_first = np.searchsorted(trace, np.arange(len(self.counts) + 1))
         t_on, t_off = self.windows(size)
-        span = 2.0 * (float(np.max(np.abs(t), initial=0.0)) + float(np.max(t_off)) + 1.0)
-        key = trace * span + t
-        base = self.trace * span
-        begin = np.searchsorted(key, base + t_on, side="left")
-        stop = np.searchsorted(key, base + t_off, side="right")
-
-        # Completed strokes contribute their whole chord; each trace starts on its first target.
-        chords = np.column_stack([self.chords.real, self.chords.imag])
-        done = np.zeros((count + 1, 2))
-        np.add.at(done, stop, chords)
-        starts = self.targets[self.first_target[:-1]]
-        ends = self.targets[self.first_target[1:] - 1]
-        first_sample = np.searchsorted(trace, np.arange(len(self.counts)))
-        np.add.at(done, first_sample, starts - np.vstack([[0.0, 0.0], ends[:-1]]))
-        xy = np.cumsum(done[:count], axis=0)
-
-        pairs = self.pairs(begin, stop, t)
-        w = pairs.chord * (pairs.gx + 1j * pairs.gy)
-        v = pairs.chord * pairs.velocity
-        xy[:, 0] += np.bincount(pairs.sample, weights=w.real, minlength=count)
-        xy[:, 1] += np.bincount(pairs.sample, weights=w.imag, minlength=count)
-        vel = np.column_stack(
-            [
-                np.bincount(pairs.sample, weights=v.real, minlength=count),
-                np.bincount(pairs.sample, weights=v.imag, minlength=count),
-            ]
+        begin, stop = kernels.active_ranges(t, sample_first, self.trace, t_on, t_off)
+        shapes = self.shapes
+        xy, v, values = kernels.evaluate(
+            t,
+            sample_first,
+            self.first_stroke,
+            self.targets,
+            self.onsets,
+            self.mu,
+            self.sigma,
+            shapes.constants,
+            shapes.length,
+            begin,
+            stop,
         )
-        return Evaluation(xy, vel, pairs, begin, stop)
-
-    def pairs(self, begin: Index, stop: Index, t: Array) -> Pairs:
-        """The (sample, stroke) pairs of each stroke's active samples ``begin..stop``, grouped by
-        stroke, with the shape's point ``g``, the lognormal CDF ``w`` and the unit velocity."""
         counts = stop - begin
         offsets = np.concatenate([[0], np.cumsum(counts)])
         stroke = np.repeat(np.arange(len(counts)), counts)
         sample = np.arange(offsets[-1]) - np.repeat(offsets[:-1] - begin, counts)
-        elapsed = np.maximum(t[sample] - self.onsets[stroke], np.finfo(float).tiny)
-        sigma = self.sigma[stroke]
-        z = (np.log(elapsed) - self.mu[stroke]) / sigma
-        w = ndtr(z)
-        pdf = np.exp(-0.5 * z * z) * _INV_SQRT_2PI / (sigma * elapsed)
-        gx, gy, tx, ty = evaluate_shapes(self.shapes, stroke, counts, w)
-        unit_length = self.shapes.length[stroke]
-        velocity = (tx + 1j * ty) * (unit_length * pdf)
-        return Pairs(sample, stroke, offsets, w, gx, gy, velocity, self.chords[stroke])
+        w, gx, gy, ux, uy = values.T
+        pairs = Pairs(sample, stroke, offsets, w, gx, gy, ux + 1j * uy, self.chords[stroke])
+        return Evaluation(xy, v, pairs, begin, stop)
 
 
 def evaluate_shapes(
@@ -207,22 +185,7 @@ def evaluate_shapes(
     """Points and unit tangents of ``shapes`` at the fractions ``w`` of their lengths, for pairs
     grouped by stroke (``counts`` per stroke, in stroke order)."""
     s = shapes.length[stroke] * w
-    order = np.argsort(shapes.kind, kind="stable")
-    if np.all(order == np.arange(len(order))):
-        return shapes.evaluate_runs(np.arange(len(counts)), counts, s)
-    # Regroup the runs so the segments come ordered by kind, evaluate, and put them back.
-    offsets = np.concatenate([[0], np.cumsum(counts)])
-    ordered_counts = counts[order]
-    perm = np.arange(int(offsets[-1])) - np.repeat(
-        np.cumsum(ordered_counts) - ordered_counts - offsets[order], ordered_counts
-    )
-    out = shapes.evaluate_runs(order, ordered_counts, s[perm])
-    results = []
-    for values in out:
-        back = np.empty_like(values)
-        back[perm] = values
-        results.append(back)
-    return results[0], results[1], results[2], results[3]
+    return shapes.evaluate_runs(np.arange(len(counts)), counts, s)
 
 
 @dataclass(frozen=True, eq=False)

@@ -31,25 +31,9 @@ from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import fresnel
 
-SMALL_A = 1e-2
-"""Below this ``|dkappa|·length²`` a segment is evaluated with the near-arc series."""
-_SMALL_A_MOMENTS = 4.0
-"""Series threshold when I_1, I_2… are wanted: B&F's recurrence in k divides by ``a`` and
-amplifies errors by ``|b|/|a|`` per step, harmless only once ``|a|`` is a few units."""
-
-_NEWTON_TOL = 1e-14
-_NEWTON_MAX_ITER = 20
-# Initial-guess polynomial of Bertolazzi & Frego (2015), eq. for A(phi0, phi1).
-_GUESS = (
-    2.989696028701907,
-    0.716228953608281,
-    -0.458969738821509,
-    -0.502821153340377,
-    0.261062141752652,
-    -0.045854475238709,
-)
+from tagbot.model import euler_kernels as kernels
+from tagbot.model.euler_kernels import SMALL_A as SMALL_A
 
 Array = NDArray[np.float64]
 
@@ -63,11 +47,6 @@ def wrap_angle(angle: ArrayLike) -> Array:
 # --- moments and generalised Fresnel integrals ----------------------------------------------
 
 
-def _sinc_half(b: Array) -> NDArray[np.complex128]:
-    """M_0(b) = (e^{ib} − 1)/(ib), written so that it is exact at and near b = 0."""
-    return np.exp(0.5j * b) * np.sinc(b / (2.0 * np.pi))
-
-
 def moments(n_max: int, b: ArrayLike) -> NDArray[np.complex128]:
     """``M_n(b) = ∫₀¹ τ^n e^{ibτ} dτ`` for ``n = 0..n_max``; shape ``(n_max + 1, *b.shape)``.
 
@@ -76,31 +55,8 @@ def moments(n_max: int, b: ArrayLike) -> NDArray[np.complex128]:
     ``M_N`` about τ = 1. Each moment is taken from its stable direction.
     """
     b = np.asarray(b, dtype=float)
-    e = np.exp(1j * b)
-    ib = 1j * b
-    up = np.empty((n_max + 1, *b.shape), dtype=complex)
-    up[0] = _sinc_half(b)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # unused where |b| small
-        for n in range(1, n_max + 1):
-            up[n] = (e - n * up[n - 1]) / ib
-    b_max = float(np.max(np.abs(b), initial=0.0))
-    top = n_max + 24 + int(np.ceil(b_max))
-    # M_top = e^{ib} Σ_j (−ib)^j top! / (top + j + 1)!  (terms shrink like |b|/top).
-    term = e / (top + 1)
-    series = term.copy()
-    for j in range(1, 40):
-        term = term * (-ib) / (top + j + 1)
-        series += term
-    down = np.empty_like(up)
-    m = series
-    for n in range(top, 0, -1):
-        m = (e - ib * m) / n
-        if n - 1 <= n_max:
-            down[n - 1] = m
-    order = np.arange(n_max + 1).reshape((-1,) + (1,) * b.ndim)
-    result = np.where(order < np.abs(b), up, down)
-    result[0] = up[0]
-    return result
+    out = kernels.moments_array(int(n_max), np.ascontiguousarray(b.ravel()))
+    return out.T.reshape((n_max + 1, *b.shape))
 
 
 def generalized_fresnel(
@@ -113,58 +69,9 @@ def generalized_fresnel(
     ``|b|``: good enough for a derivative in Newton's method, and much cheaper.
     """
     a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
-    out = np.empty((k_max + 1, *a.shape), dtype=complex)
-    small = np.abs(a) < (SMALL_A if k_max == 0 or not accurate else _SMALL_A_MOMENTS)
-    if np.any(small):
-        out[:, small] = _generalized_fresnel_series(k_max, a[small], b[small])
-    large = ~small
-    if np.any(large):
-        out[:, large] = _generalized_fresnel_large(k_max, a[large], b[large])
-    return out
-
-
-def _generalized_fresnel_large(k_max: int, a: Array, b: Array) -> NDArray[np.complex128]:
-    """I_k for |a| >= SMALL_A: I_0 from standard Fresnel integrals, then B&F's recurrence."""
-    sign = np.sign(a)
-    a_abs, b_s = np.abs(a), b * sign  # I(a, b) = conj(I(−a, −b)): solve with a > 0
-    scale = np.sqrt(np.pi / a_abs)
-    u0 = b_s / (scale * a_abs)
-    u1 = (a_abs + b_s) / (scale * a_abs)
-    s0, c0 = fresnel(u0)
-    s1, c1 = fresnel(u1)
-    i0 = scale * np.exp(-0.5j * b_s * b_s / a_abs) * ((c1 - c0) + 1j * (s1 - s0))
-    i0 = np.where(sign < 0, np.conj(i0), i0)
-    out = np.empty((k_max + 1, *a.shape), dtype=complex)
-    out[0] = i0
-    e1 = np.exp(1j * (0.5 * a + b))
-    for k in range(k_max):
-        # a I_{k+1} + b I_k = −i (e^{iψ(1)} − [k = 0]) + i k I_{k−1}
-        rhs = -1j * (e1 - (1.0 if k == 0 else 0.0)) - b * out[k]
-        if k > 0:
-            rhs = rhs + 1j * k * out[k - 1]
-        out[k + 1] = rhs / a
-    return out
-
-
-def _generalized_fresnel_series(k_max: int, a: Array, b: Array) -> NDArray[np.complex128]:
-    """I_k for small |a|: Σ_n (ia/2)^n / n! · M_{k+2n}(b), truncated below double precision."""
-    half = 0.5 * np.abs(a)
-    h = float(np.max(half, initial=0.0))
-    n_terms = 0
-    bound = 1.0
-    while h > 0.0 and bound > 1e-18:  # next term ≤ h^{n+1}/(n+1)! (|M| ≤ 1)
-        n_terms += 1
-        bound *= h / n_terms
-    m = moments(k_max + 2 * n_terms, b)
-    out = np.empty((k_max + 1, *a.shape), dtype=complex)
-    for k in range(k_max + 1):
-        total = m[k].copy()
-        coeff = np.ones_like(a, dtype=complex)
-        for n in range(1, n_terms + 1):
-            coeff = coeff * (0.5j * a) / n
-            total += coeff * m[k + 2 * n]
-        out[k] = total
-    return out
+    flat_a, flat_b = np.ascontiguousarray(a.ravel()), np.ascontiguousarray(b.ravel())
+    out = kernels.generalized_fresnel_array(int(k_max), flat_a, flat_b, bool(accurate))
+    return out.T.reshape((k_max + 1, *a.shape))
 
 
 # --- clothoid segments -----------------------------------------------------------------------
@@ -200,10 +107,7 @@ class Clothoids:
         shape = np.broadcast_shapes(s.shape, np.shape(self.length))
         index = np.broadcast_to(np.arange(len(self)).reshape(np.shape(self.length)), shape).ravel()
         flat_s = np.broadcast_to(s, shape).ravel()
-        order = np.argsort(self._flat.kind[index], kind="stable")
-        dx, dy = np.empty(flat_s.shape), np.empty(flat_s.shape)
-        ones = np.ones(len(order), np.intp)
-        dx[order], dy[order], _, _ = self.evaluate_runs(index[order], ones, flat_s[order])
+        dx, dy, _, _ = self.evaluate_runs(index, np.ones(len(index), np.intp), flat_s)
         x0 = np.broadcast_to(self.x0, shape)
         y0 = np.broadcast_to(self.y0, shape)
         return np.stack([x0 + dx.reshape(shape), y0 + dy.reshape(shape)], axis=-1)
@@ -216,110 +120,32 @@ class Clothoids:
     @property
     def kind(self) -> NDArray[np.int8]:
         """Per segment (flattened): 0 arc or line, 1 near-arc (series), 2 spiral (Fresnel)."""
-        return self._flat.kind
+        return self.constants[:, kernels.KIND].astype(np.int8)
 
     def evaluate_runs(
         self, segments: NDArray[np.intp], counts: NDArray[np.intp], s: Array
     ) -> tuple[Array, Array, Array, Array]:
         """Displacement ``(dx, dy)`` from the start and unit tangent ``(tx, ty)`` at lengths ``s``.
 
-        ``s`` holds ``counts[i]`` consecutive values for segment ``segments[i]``, and the segments
-        are ordered by :attr:`kind`, so that each branch works on one contiguous slice with
-        per-segment constants expanded by ``np.repeat``. This is the hot path of sampling: real
-        arithmetic, one sine/cosine pair per point, plus one standard Fresnel evaluation on spirals.
+        ``s`` holds ``counts[i]`` consecutive values for segment ``segments[i]`` (flattened
+        index). This is the hot path of sampling: a compiled loop with one sine/cosine pair per
+        point, plus one standard Fresnel evaluation on spirals.
         """
-        flat = self._flat
-        kinds = flat.kind[segments]
-        if np.any(np.diff(kinds) < 0):
-            raise ValueError("segments: must be ordered by kind")
-        dx, dy, tx, ty = (np.empty(s.shape) for _ in range(4))
-        bounds = np.concatenate([[0], np.cumsum(counts)])
-        for branch in (0, 1, 2):
-            group = np.flatnonzero(kinds == branch)
-            if not group.size:
-                continue
-            rows = slice(int(bounds[group[0]]), int(bounds[group[-1] + 1]))
-            seg, cnt, sj = segments[group], counts[group], s[rows]
-
-            def per_point(values: np.ndarray, seg=seg, cnt=cnt) -> np.ndarray:
-                return np.repeat(values[seg], cnt)
-
-            cos0, sin0 = per_point(flat.cos0), per_point(flat.sin0)
-            if branch == 0:
-                # Arc or line: the chord to s turns by half the tangent's turn κ0·s, and has
-                # length s·sin(x)/x with x = κ0·s/2 (exact at x = 0 and for tiny x).
-                x = 0.5 * per_point(flat.kappa0) * sj
-                cx, sx = np.cos(x), np.sin(x)
-                chord = sj * np.divide(sx, x, out=np.ones_like(x), where=x != 0.0)
-                hx, hy = cos0 * cx - sin0 * sx, sin0 * cx + cos0 * sx  # direction θ0 + x
-                dx[rows], dy[rows] = chord * hx, chord * hy
-                tx[rows], ty[rows] = hx * cx - hy * sx, hy * cx + hx * sx  # direction θ0 + 2x
-                continue
-            k0, dk = per_point(flat.kappa0), per_point(flat.dkappa)
-            turn = sj * (k0 + 0.5 * dk * sj)
-            ct, st = np.cos(turn), np.sin(turn)
-            tx[rows], ty[rows] = cos0 * ct - sin0 * st, sin0 * ct + cos0 * st
-            if branch == 1:  # near-arc: series in dkappa·s²
-                off = sj * (cos0 + 1j * sin0) * generalized_fresnel(0, dk * sj * sj, k0 * sj)[0]
-                dx[rows], dy[rows] = off.real, off.imag
-            else:  # spiral: ρ e^{iθc} [F(u) − F(u0)], u = (s − s_c)/ρ, F = C + iγS
-                fs, fc = fresnel((sj - per_point(flat.s_centre)) * per_point(flat.inv_scale))
-                fc -= per_point(flat.c0)
-                fs -= per_point(flat.s0)
-                fs *= per_point(flat.gamma)
-                rc, rs = per_point(flat.rotation_cos), per_point(flat.rotation_sin)
-                dx[rows], dy[rows] = rc * fc - rs * fs, rs * fc + rc * fs
-        return dx, dy, tx, ty
+        return kernels.evaluate_runs(
+            self.constants,
+            np.ascontiguousarray(segments, dtype=np.intp),
+            np.ascontiguousarray(counts, dtype=np.intp),
+            np.ascontiguousarray(s, dtype=float),
+        )
 
     @cached_property
-    def _flat(self) -> _FlatClothoids:
-        return _FlatClothoids.of(self)
-
-
-@dataclass(frozen=True, eq=False)
-class _FlatClothoids:
-    """Per-segment constants for :meth:`Clothoids.evaluate_runs` (flattened batch)."""
-
-    kind: NDArray[np.int8]  # 0 arc/line, 1 near-arc (series), 2 spiral (Fresnel)
-    cos0: Array  # cos θ0
-    sin0: Array  # sin θ0
-    kappa0: Array
-    dkappa: Array
-    s_centre: Array  # arc length of the zero-curvature point
-    inv_scale: Array  # 1/ρ, ρ = sqrt(π/|dkappa|)
-    gamma: Array  # sign of dkappa
-    rotation_cos: Array  # ρ·cos θc, θc the tangent angle at zero curvature
-    rotation_sin: Array  # ρ·sin θc
-    c0: Array  # C(u0)
-    s0: Array  # S(u0)
-
-    @classmethod
-    def of(cls, c: Clothoids) -> _FlatClothoids:
+    def constants(self) -> Array:
+        """Per segment (flattened), its evaluation constants (:mod:`.euler_kernels`)."""
         theta0, kappa0, dkappa, length = (
-            np.asarray(v, dtype=float).ravel() for v in (c.theta0, c.kappa0, c.dkappa, c.length)
+            np.ascontiguousarray(np.broadcast_to(v, np.shape(self.length)), dtype=float).ravel()
+            for v in (self.theta0, self.kappa0, self.dkappa, self.length)
         )
-        a = np.abs(dkappa) * length * length
-        kind = np.where(dkappa == 0.0, 0, np.where(a < SMALL_A, 1, 2)).astype(np.int8)
-        spiral = kind == 2
-        dk = np.where(spiral, dkappa, 1.0)
-        scale = np.sqrt(np.pi / np.abs(dk))
-        s_centre = -kappa0 / dk
-        theta_c = theta0 - 0.5 * kappa0 * kappa0 / dk
-        fs0, fc0 = fresnel(-s_centre / scale)
-        return cls(
-            kind=kind,
-            cos0=np.cos(theta0),
-            sin0=np.sin(theta0),
-            kappa0=kappa0,
-            dkappa=dkappa,
-            s_centre=s_centre,
-            inv_scale=1.0 / scale,
-            gamma=np.sign(dk),
-            rotation_cos=scale * np.cos(theta_c),
-            rotation_sin=scale * np.sin(theta_c),
-            c0=fc0,
-            s0=fs0,
-        )
+        return kernels.constants_array(theta0, kappa0, dkappa, length)
 
 
 def fit_euler(p0: ArrayLike, theta0: ArrayLike, p1: ArrayLike, theta1: ArrayLike) -> Clothoids:
@@ -357,28 +183,8 @@ def fit_euler(p0: ArrayLike, theta0: ArrayLike, p1: ArrayLike, theta1: ArrayLike
 
 
 def solve_g1(phi0: ArrayLike, phi1: ArrayLike) -> Array:
-    """Solve B&F's ``Y_0(2A, φ1 − φ0 − A, φ0) = 0`` for ``A`` (chord-relative angles in (−π, π])."""
+    """Solve B&F's ``Y_0(2A, φ1 − φ0 − A, φ0) = 0`` for ``A`` (chord-relative angles in (−π, π]):
+    Newton's method from the published polynomial guess."""
     phi0, phi1 = np.broadcast_arrays(np.asarray(phi0, dtype=float), np.asarray(phi1, dtype=float))
-    shape = phi0.shape
-    phi0, phi1 = phi0.ravel(), phi1.ravel()
-    x, y = phi0 / np.pi, phi1 / np.pi
-    xy, x2, y2 = x * y, x * x, y * y
-    c = _GUESS
-    a = (phi0 + phi1) * (
-        c[0] + xy * (c[1] + xy * c[2]) + (c[3] + xy * c[4]) * (x2 + y2) + c[5] * (x2 * x2 + y2 * y2)
-    )
-    delta = phi1 - phi0
-    rot = np.exp(1j * phi0)
-    active = np.arange(a.size)
-    for _ in range(_NEWTON_MAX_ITER):
-        if not active.size:
-            break
-        ai = a[active]
-        moments_ = rot[active] * generalized_fresnel(
-            2, 2.0 * ai, delta[active] - ai, accurate=False
-        )
-        g = moments_[0].imag
-        dg = moments_[2].real - moments_[1].real
-        a[active] = ai - g / dg
-        active = active[np.abs(g) > _NEWTON_TOL]
-    return a.reshape(shape)
+    flat0, flat1 = np.ascontiguousarray(phi0.ravel()), np.ascontiguousarray(phi1.ravel())
+    return kernels.solve_g1_array(flat0, flat1).reshape(phi0.shape)

@@ -31,7 +31,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtri
 
 from tagbot.errors import PlanError
-from tagbot.model.euler import Clothoids, fit_euler
+from tagbot.model import euler_kernels as kernels
+from tagbot.model.euler import Clothoids
 
 if TYPE_CHECKING:
     from tagbot.model.motion import Motion
@@ -209,27 +210,23 @@ def unit_strokes(phi1: ArrayLike, phi2: ArrayLike) -> Clothoids:
 
     A stroke's curve is its shape scaled by the chord's length and turned to its direction
     (:func:`place_strokes`). ΣΛ* strokes (``phi1 == -phi2``, ``|phi2| < π``) are circular arcs in
-    closed form, exact where the spiral fit's root would be ~1e-17 rather than 0.
+    closed form, exact where the spiral fit's root would be ~1e-17 rather than 0; the others are
+    :func:`~tagbot.model.euler.fit_euler`'s G1 spirals.
     """
-    phi1, phi2 = np.asarray(phi1, dtype=float), np.asarray(phi2, dtype=float)
-    arc = _arcs(phi1, phi2)
-    start = np.zeros((*phi1.shape, 2))
-    spiral = fit_euler(start, phi1, start + np.array([1.0, 0.0]), phi2)
-    phi = np.where(arc, phi2, 0.0)
-    arc_length = 1.0 / np.sinc(phi / np.pi)
-    return Clothoids(
-        x0=np.zeros(phi1.shape),
-        y0=np.zeros(phi1.shape),
-        theta0=np.where(arc, -phi, spiral.theta0),
-        kappa0=np.where(arc, 2.0 * phi / arc_length, spiral.kappa0),
-        dkappa=np.where(arc, 0.0, spiral.dkappa),
-        length=np.where(arc, arc_length, spiral.length),
+    phi1, phi2 = np.broadcast_arrays(np.asarray(phi1, dtype=float), np.asarray(phi2, dtype=float))
+    flat1, flat2 = np.ascontiguousarray(phi1.ravel()), np.ascontiguousarray(phi2.ravel())
+    theta0, kappa0, dkappa, length = kernels.unit_strokes_array(flat1, flat2).T.reshape(
+        (4, *phi1.shape)
     )
+    zeros = np.zeros(phi1.shape)
+    return Clothoids(zeros, zeros.copy(), theta0, kappa0, dkappa, length)
 
 
 def _arcs(phi1: Array, phi2: Array) -> NDArray[np.bool_]:
-    """Which strokes are ΣΛ* arcs: ``phi1 == -phi2`` with ``|phi2| < π``."""
-    return (phi1 == -phi2) & (np.abs(phi2) < np.pi)
+    """Which strokes are ΣΛ* arcs (:func:`~tagbot.model.euler_kernels.is_arc`)."""
+    phi1, phi2 = np.broadcast_arrays(np.asarray(phi1, dtype=float), np.asarray(phi2, dtype=float))
+    flat1, flat2 = np.ascontiguousarray(phi1.ravel()), np.ascontiguousarray(phi2.ravel())
+    return kernels.arcs_array(flat1, flat2).reshape(phi1.shape)
 
 
 def place_strokes(shapes: Clothoids, targets: Array) -> Clothoids:
