@@ -37,10 +37,19 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tagbot.errors import PlanError
-from tagbot.gesture import contour
+from tagbot.gesture import contour, kernels
 from tagbot.gesture.refine import RefineOptions, refine
 from tagbot.gesture.strokes import Strokes
-from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, MODELS, Model, Plan, Tag, sequence
+from tagbot.model.plan import (
+    DEFAULT_MU,
+    DEFAULT_SIGMA,
+    END_TOLERANCE,
+    MODELS,
+    Model,
+    Plan,
+    Tag,
+    sequence,
+)
 
 Array = NDArray[np.float64]
 
@@ -296,67 +305,24 @@ def _dot(point: Array, size: float, opts: FitOptions) -> Plan:
 
 
 def correct_targets(strokes: Strokes, size: float, tolerance: Array, iterations: int) -> Strokes:
-    """Eq. 22 for every trace at once: move each interior target by ``p(z_j) − c_j`` until the
-    largest move of its trace is below ``tolerance[trace]``, at most ``iterations`` times.
+    """Eq. 22 for every trace: move each interior target by ``p(z_j) − c_j`` until the largest
+    move of its trace is below ``tolerance[trace]``, at most ``iterations`` times.
 
     The wanted points ``p(z_j)`` are where the targets start. All targets of a trace move at
     once; with strongly overlapping strokes a full move can overshoot, so each iteration takes,
     per trace, the largest step of 1, ½, ¼ or ⅛ of it that lowers the trace's largest error (and
-    the trace stops when none does).
+    the trace stops when none does). Compiled: :func:`tagbot.gesture.kernels.correct_targets`.
     """
-    inner = strokes.interior
-    if not inner.size:
-        return strokes
-    wanted = strokes.targets[inner]
-    owner = strokes.trace[strokes.later]
-    traces = len(strokes.counts)
-
-    def errors(candidate: Strokes) -> tuple[Array, Array]:
-        error = wanted - _critical_points(candidate, size)
-        worst = np.zeros(traces)
-        np.maximum.at(worst, owner, np.hypot(error[:, 0], error[:, 1]))
-        return error, worst
-
-    error, worst = errors(strokes)
-    moving = worst >= tolerance
-    for _ in range(iterations):
-        if not moving.any():
-            break
-        pending = moving.copy()
-        for step in (1.0, 0.5, 0.25, 0.125):
-            targets = strokes.targets.copy()
-            shift = np.where(pending[owner], step, 0.0)[:, None] * error
-            targets[inner] += shift
-            trial = strokes.replace(targets=targets)
-            chord = np.abs(trial.chords)
-            collapsed = np.zeros(traces, dtype=bool)
-            np.logical_or.at(collapsed, trial.trace, chord <= 1e-9 * size)
-            trial_error, trial_worst = errors(trial) if not collapsed.all() else (error, worst)
-            better = pending & ~collapsed & (trial_worst < worst)
-            if better.any():
-                keep = better[owner]
-                kept = strokes.targets.copy()
-                kept[inner[keep]] = targets[inner[keep]]
-                strokes = strokes.replace(targets=kept)
-                error[keep] = trial_error[keep]
-                worst[better] = trial_worst[better]
-                pending &= ~better
-            if not pending.any():
-                break
-        moving &= ~pending & (worst >= tolerance)
-    return strokes
-
-
-def _critical_points(strokes: Strokes, size: float) -> Array:
-    """The trajectory's position at the critical instant of each interior target."""
-    b = strokes.later  # the stroke leaving each interior target
-    times = _crossings(strokes, b - 1, b)
-    trace = strokes.trace[b]
-    order = np.lexsort((times, trace))
-    xy = strokes.evaluate(trace[order], times[order], size).xy
-    points = np.empty_like(xy)
-    points[order] = xy
-    return points
+    targets = kernels.correct_targets(
+        *strokes.kernel_arrays,
+        strokes.first_stroke,
+        float(size),
+        END_TOLERANCE,
+        np.ascontiguousarray(tolerance, dtype=float),
+        int(iterations),
+        _CROSSING_STEPS,
+    )
+    return strokes.replace(targets=targets)
 
 
 def critical_points(plan: Plan) -> Array:
@@ -369,7 +335,12 @@ def critical_points(plan: Plan) -> Array:
     strokes = Strokes.of([plan.at(0.0)])
     points = plan.targets.copy()
     size = float(np.hypot(*np.ptp(plan.targets, axis=0)))
-    points[1:-1] = _critical_points(strokes, size)
+    if plan.n_strokes > 1:
+        interior = np.empty((plan.n_strokes - 1, 2))
+        kernels.critical_points(
+            *strokes.kernel_arrays, size, END_TOLERANCE, _CROSSING_STEPS, interior
+        )
+        points[1:-1] = interior
     return points
 
 
@@ -383,46 +354,11 @@ def crossing_times(plan: Plan) -> Array:
     if m > 2:
         strokes = Strokes.of([plan])
         b = np.arange(1, m - 1)
-        times[1:-1] = plan.start + _crossings(strokes, b - 1, b)
+        _, onsets, mu, sigma, _, _ = strokes.kernel_arrays
+        times[1:-1] = plan.start + kernels.crossings(
+            onsets, mu, sigma, strokes.lengths, b - 1, b, _CROSSING_STEPS
+        )
     return times
-
-
-def _crossings(strokes: Strokes, a: NDArray[np.intp], b: NDArray[np.intp]) -> Array:
-    """Where the speed profiles of strokes ``a`` and ``b`` cross, between their peaks (the later
-    peak if they do not), on their traces' clocks."""
-    onsets, mu, sigma = strokes.onsets, strokes.mu, strokes.sigma
-    peaks = onsets + np.exp(mu - sigma**2)
-    lo, hi = np.minimum(peaks[a], peaks[b]), np.maximum(peaks[a], peaks[b])
-    # Compare log-speeds: log(D Λ(t)) = log D − log σ − ℓ − (ℓ − μ)²/2σ², ℓ = log(t − t0).
-    log_length = np.log(strokes.lengths)
-    offset_a = log_length[a] - np.log(sigma[a])
-    offset_b = log_length[b] - np.log(sigma[b])
-    tiny = np.finfo(float).tiny
-
-    def excess(t: Array) -> tuple[Array, Array]:
-        """The log-speed difference and its derivative in t."""
-        ea = np.maximum(t - onsets[a], tiny)
-        eb = np.maximum(t - onsets[b], tiny)
-        la, lb = np.log(ea), np.log(eb)
-        za = (la - mu[a]) / sigma[a]
-        zb = (lb - mu[b]) / sigma[b]
-        value = (offset_a - la - 0.5 * za * za) - (offset_b - lb - 0.5 * zb * zb)
-        slope = (1.0 + zb / sigma[b]) / eb - (1.0 + za / sigma[a]) / ea
-        return value, slope
-
-    # Near an onset the slope overflows: the Newton step is then refused and we bisect.
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        bracket = (excess(lo)[0] > 0) & (excess(hi)[0] < 0)
-        t = 0.5 * (lo + hi)
-        for _ in range(_CROSSING_STEPS):  # Newton's method, kept inside the bracket
-            value, slope = excess(t)
-            positive = value > 0
-            lo = np.where(bracket & positive, t, lo)
-            hi = np.where(bracket & ~positive, t, hi)
-            step = t - value / slope
-            inside = (step > lo) & (step < hi)
-            t = np.where(inside, step, 0.5 * (lo + hi))
-    return np.where(bracket, t, hi)
 
 
 _CROSSING_STEPS = 8

@@ -154,21 +154,8 @@ class Strokes:
         time), with the (sample, active stroke) pairs kept for Jacobians."""
         t = np.ascontiguousarray(t, dtype=float)
         sample_first = np.searchsorted(trace, np.arange(len(self.counts) + 1))
-        t_on, t_off = self.windows(size)
-        begin, stop = kernels.active_ranges(t, sample_first, self.trace, t_on, t_off)
-        shapes = self.shapes
-        xy, v, values = kernels.evaluate(
-            t,
-            sample_first,
-            self.first_stroke,
-            self.targets,
-            self.onsets,
-            self.mu,
-            self.sigma,
-            shapes.constants,
-            shapes.length,
-            begin,
-            stop,
+        xy, v, begin, stop, values = kernels.evaluate(
+            t, sample_first, self.first_stroke, *self.kernel_arrays, *self.windows(size)
         )
         counts = stop - begin
         offsets = np.concatenate([[0], np.cumsum(counts)])
@@ -177,6 +164,18 @@ class Strokes:
         w, gx, gy, ux, uy = values.T
         pairs = Pairs(sample, stroke, offsets, w, gx, gy, ux + 1j * uy, self.chords[stroke])
         return Evaluation(xy, v, pairs, begin, stop)
+
+    @property
+    def kernel_arrays(self) -> tuple[Array, ...]:
+        """``targets, onsets, mu, sigma``, the shapes' constants and unit lengths, as the
+        compiled loops (:mod:`tagbot.gesture.kernels`) take them."""
+        shapes = self.shapes
+        return (
+            *(np.ascontiguousarray(a, dtype=float) for a in (self.targets, self.onsets, self.mu)),
+            np.ascontiguousarray(self.sigma, dtype=float),
+            shapes.constants,
+            np.ascontiguousarray(shapes.length, dtype=float),
+        )
 
 
 def evaluate_shapes(

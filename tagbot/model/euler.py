@@ -32,8 +32,8 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tagbot.model import euler_kernels as kernels
-from tagbot.model.euler_kernels import SMALL_A as SMALL_A
+from tagbot.model import kernels
+from tagbot.model.kernels import SMALL_A as SMALL_A
 
 Array = NDArray[np.float64]
 
@@ -140,7 +140,7 @@ class Clothoids:
 
     @cached_property
     def constants(self) -> Array:
-        """Per segment (flattened), its evaluation constants (:mod:`.euler_kernels`)."""
+        """Per segment (flattened), its evaluation constants (:mod:`.kernels`)."""
         theta0, kappa0, dkappa, length = (
             np.ascontiguousarray(np.broadcast_to(v, np.shape(self.length)), dtype=float).ravel()
             for v in (self.theta0, self.kappa0, self.dkappa, self.length)

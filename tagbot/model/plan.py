@@ -28,10 +28,9 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import ndtri
 
 from tagbot.errors import PlanError
-from tagbot.model import euler_kernels as kernels
+from tagbot.model import kernels
 from tagbot.model.euler import Clothoids
 
 if TYPE_CHECKING:
@@ -223,7 +222,7 @@ def unit_strokes(phi1: ArrayLike, phi2: ArrayLike) -> Clothoids:
 
 
 def _arcs(phi1: Array, phi2: Array) -> NDArray[np.bool_]:
-    """Which strokes are ΣΛ* arcs (:func:`~tagbot.model.euler_kernels.is_arc`)."""
+    """Which strokes are ΣΛ* arcs (:func:`~tagbot.model.kernels.is_arc`)."""
     phi1, phi2 = np.broadcast_arrays(np.asarray(phi1, dtype=float), np.asarray(phi2, dtype=float))
     flat1, flat2 = np.ascontiguousarray(phi1.ravel()), np.ascontiguousarray(phi2.ravel())
     return kernels.arcs_array(flat1, flat2).reshape(phi1.shape)
@@ -248,8 +247,10 @@ def stroke_windows(
 ) -> tuple[Array, Array]:
     """Active windows ``(t_on, t_off)`` of lognormal strokes outside which each is within
     ``budget`` (a fraction of its length, capped at 1 %) of not started or of complete."""
-    z = -ndtri(np.minimum(budget, 1e-2))
-    return onsets + np.exp(mu - sigma * z), onsets + np.exp(mu + sigma * z)
+    arrays = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (onsets, mu, sigma, budget)))
+    flat = [np.ascontiguousarray(a.ravel()) for a in arrays]
+    t_on, t_off = kernels.windows_array(*flat)
+    return t_on.reshape(arrays[0].shape), t_off.reshape(arrays[0].shape)
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,5 +1,6 @@
-"""Compiled scalar kernels of the Euler-spiral maths (numba): the one implementation behind
-:mod:`tagbot.model.euler`'s array API, the sampler and the fitter's loops.
+"""Compiled scalar kernels of the model's maths (numba): Euler spirals and lognormal profiles, the
+one implementation behind :mod:`tagbot.model.euler`'s array API, the sampler and the fitter's
+loops.
 
 Each function works on one segment or one argument, so the fitter can call it from compiled
 loops of its own without numpy's per-call cost, and :mod:`~tagbot.model.euler` wraps it in a
@@ -14,6 +15,8 @@ from __future__ import annotations
 
 import ctypes
 import math
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 import numpy as np
 import scipy.special.cython_special as _cython_special
@@ -22,6 +25,8 @@ from llvmlite import ir
 from numba import njit, types
 from numba.core import cgutils
 from numba.extending import get_cython_function_address, intrinsic
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 SMALL_A = 1e-2
 """Below this ``|dkappa|·length²`` a segment is evaluated with the near-arc series."""
@@ -39,6 +44,12 @@ _G0, _G1, _G2, _G3, _G4, _G5 = (
     0.261062141752652,
     -0.045854475238709,
 )
+
+
+def compiled(function: F) -> F:
+    """Compile ``function`` with numba, cached on disk; float errors give inf/nan as in numpy."""
+    return njit(cache=True, error_model="numpy")(function)  # type: ignore[no-any-return]
+
 
 # Segment constants, one row per segment.
 KIND, COS0, SIN0, KAPPA0, DKAPPA, S_CENTRE, INV_SCALE, GAMMA, ROT_COS, ROT_SIN, C0, S0 = range(12)
@@ -58,10 +69,14 @@ def _scipy_function(name: str, signature: bytes) -> int:
     raise ImportError(f"scipy.special.cython_special has no {name}{signature.decode()}")
 
 
-# Registered by name, so that cached machine code links to it again in a new process.
+# Registered by name, so that cached machine code links to them again in a new process.
 _FRESNEL_SYMBOL = "tagbot_scipy_fresnel"
+_NDTRI_SYMBOL = "tagbot_scipy_ndtri"
 llvm_binding.add_symbol(
     _FRESNEL_SYMBOL, _scipy_function("fresnel", b"void (double, double *, double *)")
+)
+llvm_binding.add_symbol(
+    _NDTRI_SYMBOL, _scipy_function("ndtri", b"double (double, int __pyx_skip_dispatch)")
 )
 
 
@@ -83,13 +98,50 @@ def fresnel(typingctx, x):  # type: ignore[no-untyped-def]
     return signature, codegen
 
 
-@njit(cache=True)
+@intrinsic
+def ndtri(typingctx, p):  # type: ignore[no-untyped-def]
+    """The standard normal quantile (as ``scipy.special.ndtri``)."""
+    signature = types.float64(types.float64)
+
+    def codegen(context, builder, sig, args):  # type: ignore[no-untyped-def]
+        double = ir.DoubleType()
+        function_type = ir.FunctionType(double, [double, ir.IntType(32)])
+        function = cgutils.get_or_insert_function(builder.module, function_type, _NDTRI_SYMBOL)
+        return builder.call(function, [args[0], ir.Constant(ir.IntType(32), 0)])
+
+    return signature, codegen
+
+
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+_INV_SQRT_2 = 1.0 / math.sqrt(2.0)
+TINY = float(np.finfo(np.float64).tiny)
+"""Elapsed times are clamped to at least this, so that logarithms stay finite."""
+
+
+@compiled
+def lognormal_at(t: float, onset: float, mu: float, sigma: float) -> tuple[float, float]:
+    """A lognormal stroke's CDF ``W`` and density ``Λ`` at ``t``."""
+    elapsed = max(t - onset, TINY)
+    z = (math.log(elapsed) - mu) / sigma
+    cdf = 0.5 * math.erfc(-z * _INV_SQRT_2)
+    return cdf, math.exp(-0.5 * z * z) * _INV_SQRT_2PI / (sigma * elapsed)
+
+
+@compiled
+def stroke_window(onset: float, mu: float, sigma: float, budget: float) -> tuple[float, float]:
+    """When a lognormal stroke is within ``budget`` (a fraction of it, capped at 1 %) of not
+    started and of complete: its active window ``(t_on, t_off)``."""
+    z = -ndtri(min(budget, 1e-2))
+    return onset + math.exp(mu - sigma * z), onset + math.exp(mu + sigma * z)
+
+
+@compiled
 def wrap_angle(angle: float) -> float:
     """``angle`` wrapped into (−π, π]."""
     return math.pi - np.mod(math.pi - angle, 2.0 * math.pi)
 
 
-@njit(cache=True)
+@compiled
 def sinc_half(b: float) -> complex:
     """M_0(b) = (e^{ib} − 1)/(ib), exact at and near b = 0."""
     h = 0.5 * b
@@ -97,7 +149,7 @@ def sinc_half(b: float) -> complex:
     return complex(math.cos(h), math.sin(h)) * s
 
 
-@njit(cache=True)
+@compiled
 def moments_into(b: float, out: np.ndarray) -> None:
     """``out[n] = M_n(b) = ∫₀¹ τ^n e^{ibτ} dτ`` for ``n < len(out)``.
 
@@ -131,7 +183,7 @@ def moments_into(b: float, out: np.ndarray) -> None:
             out[n - 1] = m
 
 
-@njit(cache=True)
+@compiled
 def generalized_fresnel_into(a: float, b: float, accurate: bool, out: np.ndarray) -> None:
     """``out[k] = I_k(a, b) = ∫₀¹ τ^k exp(i(aτ²/2 + bτ)) dτ`` for ``k < len(out)``.
 
@@ -146,7 +198,7 @@ def generalized_fresnel_into(a: float, b: float, accurate: bool, out: np.ndarray
         _large_into(a, b, out)
 
 
-@njit(cache=True)
+@compiled
 def _large_into(a: float, b: float, out: np.ndarray) -> None:
     """I_k for |a| >= SMALL_A: I_0 from standard Fresnel integrals, then B&F's recurrence."""
     negative = a < 0.0
@@ -168,7 +220,7 @@ def _large_into(a: float, b: float, out: np.ndarray) -> None:
         out[k + 1] = rhs / a
 
 
-@njit(cache=True)
+@compiled
 def _series_into(a: float, b: float, out: np.ndarray) -> None:
     """I_k for small |a|: Σ_n (ia/2)^n / n! · M_{k+2n}(b), truncated below double precision."""
     h = 0.5 * abs(a)
@@ -189,7 +241,7 @@ def _series_into(a: float, b: float, out: np.ndarray) -> None:
         out[k] = total
 
 
-@njit(cache=True)
+@compiled
 def solve_g1(phi0: float, phi1: float) -> float:
     """Root ``A`` of B&F's ``Y_0(2A, φ1 − φ0 − A, φ0) = 0`` (chord-relative angles in (−π, π])."""
     x, y = phi0 / math.pi, phi1 / math.pi
@@ -210,7 +262,7 @@ def solve_g1(phi0: float, phi1: float) -> float:
     return a
 
 
-@njit(cache=True)
+@compiled
 def fit_unit_chord(phi0: float, phi1: float) -> tuple[float, float, float, float]:
     """The G1 clothoid from (0, 0) to (1, 0) with chord-relative tangents ``phi0``, ``phi1``
     (wrapped into (−π, π]): ``(theta0, kappa0, dkappa, length)``."""
@@ -223,13 +275,13 @@ def fit_unit_chord(phi0: float, phi1: float) -> tuple[float, float, float, float
     return phi0, (delta - a) / length, 2.0 * a / (length * length), length
 
 
-@njit(cache=True)
+@compiled
 def is_arc(phi1: float, phi2: float) -> bool:
     """A ΣΛ* stroke: ``phi1 == -phi2`` with ``|phi2| < π`` (a circular arc)."""
     return phi1 == -phi2 and abs(phi2) < math.pi
 
 
-@njit(cache=True)
+@compiled
 def unit_stroke(phi1: float, phi2: float) -> tuple[float, float, float, float]:
     """A stroke's shape on the unit chord: ``(theta0, kappa0, dkappa, length)``; arcs in
     closed form (exact where the spiral fit's root would be ~1e-17 rather than 0)."""
@@ -239,7 +291,7 @@ def unit_stroke(phi1: float, phi2: float) -> tuple[float, float, float, float]:
     return fit_unit_chord(phi1, phi2)
 
 
-@njit(cache=True)
+@compiled
 def segment_constants(
     theta0: float, kappa0: float, dkappa: float, length: float, out: np.ndarray
 ) -> None:
@@ -260,7 +312,7 @@ def segment_constants(
     out[C0], out[S0] = fc0, fs0
 
 
-@njit(cache=True)
+@compiled
 def segment_point(c: np.ndarray, s: float) -> tuple[float, float, float, float]:
     """Displacement ``(dx, dy)`` from the start and unit tangent ``(tx, ty)`` at arc length
     ``s`` of the segment with constants ``c``."""
@@ -293,7 +345,7 @@ def segment_point(c: np.ndarray, s: float) -> tuple[float, float, float, float]:
 # --- loops over arrays, for the numpy API -----------------------------------------------------
 
 
-@njit(cache=True)
+@compiled
 def moments_array(n_max: int, b: np.ndarray) -> np.ndarray:
     out = np.empty((b.size, n_max + 1), dtype=np.complex128)
     for i in range(b.size):
@@ -301,7 +353,7 @@ def moments_array(n_max: int, b: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@compiled
 def generalized_fresnel_array(
     k_max: int, a: np.ndarray, b: np.ndarray, accurate: bool
 ) -> np.ndarray:
@@ -311,7 +363,7 @@ def generalized_fresnel_array(
     return out
 
 
-@njit(cache=True)
+@compiled
 def solve_g1_array(phi0: np.ndarray, phi1: np.ndarray) -> np.ndarray:
     out = np.empty(phi0.size)
     for i in range(phi0.size):
@@ -319,7 +371,7 @@ def solve_g1_array(phi0: np.ndarray, phi1: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@compiled
 def unit_strokes_array(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
     """Per stroke ``(theta0, kappa0, dkappa, length)`` of :func:`unit_stroke`, shape (n, 4)."""
     out = np.empty((phi1.size, 4))
@@ -328,7 +380,17 @@ def unit_strokes_array(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@compiled
+def windows_array(
+    onsets: np.ndarray, mu: np.ndarray, sigma: np.ndarray, budget: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    t_on, t_off = np.empty(onsets.size), np.empty(onsets.size)
+    for i in range(onsets.size):
+        t_on[i], t_off[i] = stroke_window(onsets[i], mu[i], sigma[i], budget[i])
+    return t_on, t_off
+
+
+@compiled
 def arcs_array(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
     out = np.empty(phi1.size, dtype=np.bool_)
     for i in range(phi1.size):
@@ -336,7 +398,7 @@ def arcs_array(phi1: np.ndarray, phi2: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@compiled
 def constants_array(
     theta0: np.ndarray, kappa0: np.ndarray, dkappa: np.ndarray, length: np.ndarray
 ) -> np.ndarray:
@@ -346,7 +408,7 @@ def constants_array(
     return out
 
 
-@njit(cache=True)
+@compiled
 def evaluate_runs(
     constants: np.ndarray, segments: np.ndarray, counts: np.ndarray, s: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
