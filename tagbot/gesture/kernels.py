@@ -14,7 +14,16 @@ import math
 
 import numpy as np
 
-from tagbot.model.kernels import TINY, compiled, lognormal_at, segment_point, stroke_window
+from tagbot.model.kernels import (
+    N_CONSTANTS,
+    TINY,
+    compiled,
+    lognormal_at,
+    segment_constants,
+    segment_point,
+    stroke_window,
+    unit_stroke,
+)
 
 
 @compiled
@@ -308,3 +317,239 @@ def _collapsed(targets: np.ndarray, limit: float) -> bool:
         ):
             return True
     return False
+
+
+# --- the refinement's normal equations ----------------------------------------------------------
+
+
+@compiled
+def jacobian(
+    begin: np.ndarray,
+    stop: np.ndarray,
+    pairs: np.ndarray,
+    chords: np.ndarray,
+    first_stroke: np.ndarray,
+    phi1: np.ndarray,
+    phi2: np.ndarray,
+    arcs_only: bool,
+    h: float,
+    angle_col: np.ndarray,
+    onset_col: np.ndarray,
+    target_col: np.ndarray,
+    rows: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The trajectory's complex Jacobian in the plan's parameters, as rows (``indptr``, ``col``,
+    ``value``) per evaluation row.
+
+    Targets: ``x = Σ_i p_i (G_{i−1} − G_i)`` is complex-linear in each interior target. Onsets:
+    moving one later moves its stroke's contribution back by its velocity. Tangents: forward
+    differences (step ``h``) of the unit shapes at the same CDF values. Stroke ``j``'s columns
+    are ``angle_col[j]`` (and the next), ``onset_col[j]`` and ``target_col[j]`` (x, then y) of
+    the target it leaves, −1 where fixed.
+    """
+    n = begin.size
+    offsets = np.zeros(n + 1, np.intp)
+    for j in range(n):
+        offsets[j + 1] = offsets[j] + stop[j] - begin[j]
+    angles = 1 if arcs_only else 2
+    # Stepped unit shapes: one block of strokes per angle parameter.
+    stepped = np.empty((angles, n, N_CONSTANTS))
+    stepped_length = np.empty((angles, n))
+    for j in range(n):
+        for m in range(angles):
+            if arcs_only:
+                a1, a2 = phi1[j] - h, phi2[j] + h
+            elif m == 0:
+                a1, a2 = phi1[j] + h, phi2[j]
+            else:
+                a1, a2 = phi1[j], phi2[j] + h
+            theta0, kappa0, dkappa, length = unit_stroke(a1, a2)
+            segment_constants(theta0, kappa0, dkappa, length, stepped[m, j])
+            stepped_length[m, j] = length
+    # Count the entries per row, then fill them in row order.
+    count = np.zeros(rows + 1, np.intp)
+    for j in range(n):
+        per_pair = angles + (1 if onset_col[j] >= 0 else 0)
+        for i in range(begin[j], stop[j]):
+            count[i + 1] += per_pair
+        if target_col[j] >= 0:
+            lo, hi = min(begin[j - 1], begin[j]), max(stop[j - 1], stop[j])
+            for i in range(lo, hi):
+                count[i + 1] += 2
+    indptr = np.cumsum(count)
+    fill = indptr[:-1].copy()
+    col = np.empty(indptr[-1], np.intp)
+    value = np.empty(indptr[-1], np.complex128)
+    for j in range(n):
+        chord = complex(chords[j, 0], chords[j, 1])
+        for i in range(begin[j], stop[j]):
+            q = offsets[j] + i - begin[j]
+            w, g = pairs[q, 0], complex(pairs[q, 1], pairs[q, 2])
+            for m in range(angles):
+                gx, gy, _, _ = segment_point(stepped[m, j], stepped_length[m, j] * w)
+                col[fill[i]] = angle_col[j] + m
+                value[fill[i]] = chord * (complex(gx, gy) - g) / h
+                fill[i] += 1
+            if onset_col[j] >= 0:
+                col[fill[i]] = onset_col[j]
+                value[fill[i]] = -chord * complex(pairs[q, 3], pairs[q, 4])
+                fill[i] += 1
+        if target_col[j] >= 0:
+            a, b = j - 1, j
+            lo, hi = min(begin[a], begin[b]), max(stop[a], stop[b])
+            for i in range(lo, hi):
+                c = _shape_at(a, i, begin, stop, offsets, pairs) - _shape_at(
+                    b, i, begin, stop, offsets, pairs
+                )
+                col[fill[i]], value[fill[i]] = target_col[j], c
+                col[fill[i] + 1], value[fill[i] + 1] = target_col[j] + 1, 1j * c
+                fill[i] += 2
+    return indptr, col, value
+
+
+@compiled
+def _shape_at(j, i, begin, stop, offsets, pairs) -> complex:  # type: ignore[no-untyped-def]
+    """Stroke ``j``'s unit shape at evaluation row ``i``: 0 before its window, 1 after."""
+    if i < begin[j]:
+        return 0j
+    if i >= stop[j]:
+        return 1.0 + 0j
+    q = offsets[j] + i - begin[j]
+    return complex(pairs[q, 1], pairs[q, 2])
+
+
+@compiled
+def normal_equations(
+    indptr: np.ndarray,
+    col: np.ndarray,
+    value: np.ndarray,
+    residual: np.ndarray,
+    velocity: np.ndarray,
+    speed2: np.ndarray,
+    forward: np.ndarray,
+    params: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The real normal equations of the complex Jacobian rows, in band storage.
+
+    Returns ``A = Re(CᴴC)`` and ``B = Σ u uᵀ / |v|²`` over the forward rows (lower bands:
+    ``[d, c] = M[c + d, c]``), ``g = Re(Cᴴ r)``, and per row ``u = Re(conj(v)·C_row)`` (aligned
+    with ``value``) — the coupling of a forward row's own instant, whose column is its velocity
+    ``v``, to the parameters.
+    """
+    rows = indptr.size - 1
+    band = 0
+    for i in range(rows):
+        lo, hi = params, -1
+        for e in range(indptr[i], indptr[i + 1]):
+            lo, hi = min(lo, col[e]), max(hi, col[e])
+        band = max(band, hi - lo)
+    a = np.zeros((band + 1, params))
+    b = np.zeros((band + 1, params))
+    g = np.zeros(params)
+    u = np.zeros(value.size)
+    for i in range(rows):
+        r = residual[i]
+        for e in range(indptr[i], indptr[i + 1]):
+            ze = value[e]
+            g[col[e]] += (ze.conjugate() * r).real
+            for f in range(indptr[i], indptr[i + 1]):
+                if col[f] <= col[e]:
+                    a[col[e] - col[f], col[f]] += (value[f].conjugate() * ze).real
+        if forward[i]:
+            vc = velocity[i].conjugate()
+            for e in range(indptr[i], indptr[i + 1]):
+                u[e] = (vc * value[e]).real
+            for e in range(indptr[i], indptr[i + 1]):
+                for f in range(indptr[i], indptr[i + 1]):
+                    if col[f] <= col[e]:
+                        b[col[e] - col[f], col[f]] += u[e] * u[f] / speed2[i]
+    return a, b, g, u
+
+
+@compiled
+def damped_step(
+    a: np.ndarray,
+    b: np.ndarray,
+    scale: np.ndarray,
+    g: np.ndarray,
+    indptr: np.ndarray,
+    col: np.ndarray,
+    u: np.ndarray,
+    g_t: np.ndarray,
+    speed2: np.ndarray,
+    forward: np.ndarray,
+    damping: float,
+) -> tuple[np.ndarray, np.ndarray, float, bool]:
+    """The Levenberg-Marquardt step at ``damping`` with the forward instants eliminated (a Schur
+    complement, still banded): ``(step for the parameters, step per row's instant, the cost
+    decrease the linear model predicts, whether the system was positive definite)``.
+
+    With ``d = |v|²(1 + λ)`` per forward row: ``(A − B/(1 + λ) + λ·diag(scale)) δp =
+    −g + Σ u g_t / d`` and ``δt = (−g_t − u·δp) / d``.
+    """
+    params = g.size
+    band = a.shape[0] - 1
+    factor = a - b / (1.0 + damping)
+    for c in range(params):
+        factor[0, c] += damping * scale[c]
+    rhs = -g.copy()
+    rows = indptr.size - 1
+    for i in range(rows):
+        if forward[i]:
+            weight = g_t[i] / (speed2[i] * (1.0 + damping))
+            for e in range(indptr[i], indptr[i + 1]):
+                rhs[col[e]] += u[e] * weight
+    if not _band_cholesky(factor, band):
+        return np.zeros(params), np.zeros(rows), 0.0, False
+    step = _band_solve(factor, band, rhs)
+    step_t = np.zeros(rows)
+    predicted = 0.0
+    for c in range(params):
+        predicted += damping * scale[c] * step[c] * step[c] - step[c] * g[c]
+    for i in range(rows):
+        if forward[i]:
+            coupled = 0.0
+            for e in range(indptr[i], indptr[i + 1]):
+                coupled += u[e] * step[col[e]]
+            step_t[i] = (-g_t[i] - coupled) / (speed2[i] * (1.0 + damping))
+            predicted += damping * speed2[i] * step_t[i] ** 2 - step_t[i] * g_t[i]
+    return step, step_t, predicted, True
+
+
+@compiled
+def _band_cholesky(m: np.ndarray, band: int) -> bool:
+    """In place: the lower band ``m`` (``m[d, c] = M[c + d, c]``) becomes its Cholesky factor
+    ``L`` in the same storage. False if ``M`` is not positive definite."""
+    n = m.shape[1]
+    for j in range(n):
+        s = m[0, j]
+        for k in range(max(0, j - band), j):
+            s -= m[j - k, k] ** 2
+        if not s > 0.0:
+            return False
+        d = math.sqrt(s)
+        m[0, j] = d
+        for i in range(j + 1, min(n, j + band + 1)):
+            s = m[i - j, j]
+            for k in range(max(0, i - band), j):
+                s -= m[i - k, k] * m[j - k, k]
+            m[i - j, j] = s / d
+    return True
+
+
+@compiled
+def _band_solve(factor: np.ndarray, band: int, rhs: np.ndarray) -> np.ndarray:
+    """Solve ``L Lᵀ x = rhs`` with the banded Cholesky factor of :func:`_band_cholesky`."""
+    n = rhs.size
+    y = rhs.copy()
+    for i in range(n):
+        s = y[i]
+        for k in range(max(0, i - band), i):
+            s -= factor[i - k, k] * y[k]
+        y[i] = s / factor[0, i]
+    for i in range(n - 1, -1, -1):
+        s = y[i]
+        for k in range(i + 1, min(n, i + band + 1)):
+            s -= factor[k - i, i] * y[k]
+        y[i] = s / factor[0, i]
+    return y

@@ -14,24 +14,24 @@ residuals are
 
 The Jacobian is exact for the targets (the trajectory is linear in them) and the onsets and
 instants (minus or plus a velocity), and a forward difference of the unit-chord shapes for the
-tangents. Each residual depends only on the strokes active at its instant, so the normal
-equations are sparse; an iteration costs one evaluation of the active (instant, stroke) pairs and
-one of the stepped shapes at them, whatever the number of strokes.
+tangents. Each residual depends only on the strokes active at its instant and the parameters
+are ordered stroke by stroke, so the normal equations are banded; the instants are eliminated
+(a Schur complement, still banded) and the band is factored in compiled code
+(:mod:`tagbot.gesture.kernels`). An iteration costs one evaluation of the active (instant,
+stroke) pairs and one of the stepped shapes at them: linear in the number of strokes.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import cho_factor, cho_solve
-from scipy.sparse import csr_matrix, diags
-from scipy.sparse.linalg import spsolve
 from scipy.spatial import cKDTree
 
-from tagbot.gesture.strokes import Evaluation, Strokes, evaluate_shapes
-from tagbot.model.plan import unit_strokes
+from tagbot.gesture import kernels
+from tagbot.gesture.strokes import Evaluation, Strokes
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]
@@ -68,22 +68,26 @@ def refine(
     The first and last target of each trace stay on its contour's ends and its first onset at 0.
     """
     problem = _Problem.build(strokes, curves, size, options)
-    layout = _Layout(strokes, options.arcs_only, len(problem.goal))
+    layout = _Layout(strokes, options.arcs_only)
     tau = problem.initial_instants(strokes)
-    x = layout.pack(strokes, tau)
+    x = layout.pack(strokes)
+    lower, upper = layout.bounds(strokes, options.onset_slack)
     end = problem.trace_end[problem.goal_trace]
-    lower, upper = layout.bounds(strokes, options.onset_slack, end)
     current = problem.evaluate(strokes, tau)
     cost = current.cost
     damping, grow = 1e-3, 2.0
     system = None
     for _ in range(options.iterations):
         if system is None:
-            system = _NormalEquations(problem.jacobian(layout, strokes, current), current)
-        step, predicted = system.solve(damping)
-        trial_x = np.clip(x + step, lower, upper)
-        trial_strokes, trial_tau = layout.unpack(strokes, trial_x)
-        trial = problem.evaluate(trial_strokes, trial_tau) if problem.valid(trial_strokes) else None
+            system = _NormalEquations(layout, strokes, current)
+        step, step_tau, predicted = system.solve(damping)
+        trial = None
+        if predicted > 0.0:
+            trial_x = np.clip(x + step, lower, upper)
+            trial_tau = np.clip(tau + step_tau, 0.0, end)
+            trial_strokes = layout.unpack(strokes, trial_x)
+            if problem.valid(trial_strokes):
+                trial = problem.evaluate(trial_strokes, trial_tau)
         trial_cost = np.inf if trial is None else trial.cost
         gain = (cost - trial_cost) / max(predicted, 1e-300)
         if gain > 0:  # Nielsen's damping update, from the gain ratio
@@ -217,63 +221,26 @@ class _Problem:
         np.maximum.at(out, current.nearest, distance[forward:])
         return out
 
-    def jacobian(self, layout: _Layout, strokes: Strokes, current: _Residuals) -> csr_matrix:
-        """The residuals' Jacobian in the plan's parameters, complex (row per instant, columns as
-        in :class:`_Layout` up to the instants)."""
-        ev, order = current.evaluation, current.order
-        pairs = ev.pairs
-        g = pairs.gx + 1j * pairs.gy
-        rows, cols, values = [], [], []
 
-        # Targets: x = Σ_i p_i (G_{i-1} − G_i), complex-linear in each interior target p_i.
-        inner = layout.inner
-        b = strokes.later  # the stroke leaving each interior target
-        a = b - 1
-        lo = np.minimum(ev.begin[a], ev.begin[b])
-        span = np.maximum(ev.stop[a], ev.stop[b]) - lo
-        which = np.repeat(np.arange(len(inner)), span)
-        row = np.arange(int(span.sum())) - np.repeat(np.cumsum(span) - span - lo, span)
-        coefficient = self._shape_at(ev, g, a[which], row) - self._shape_at(ev, g, b[which], row)
-        rows += [row, row]
-        cols += [2 * which, 2 * which + 1]
-        values += [coefficient, 1j * coefficient]
-
-        # Onsets: moving stroke j's onset later moves its contribution back by its velocity.
-        free = layout.onset_column[pairs.stroke]
-        has = free >= 0
-        rows.append(pairs.sample[has])
-        cols.append(free[has])
-        values.append(-(pairs.chord * pairs.velocity)[has])
-
-        # Tangents: forward differences of the unit shapes at the same CDF values.
-        columns, phi1, phi2 = layout.angle_steps(strokes, _ANGLE_STEP)
-        copies = len(columns)
-        shapes = unit_strokes(phi1, phi2)  # the stepped shapes, ``copies`` blocks of strokes
-        n = len(strokes.onsets)
-        counts = np.tile(np.diff(pairs.offsets), copies)
-        stroke = np.concatenate([pairs.stroke + c * n for c in range(copies)])
-        gx, gy, _, _ = evaluate_shapes(shapes, stroke, counts, np.tile(pairs.w, copies))
-        change = np.tile(pairs.chord, copies) * ((gx + 1j * gy) - np.tile(g, copies))
-        rows.append(np.tile(pairs.sample, copies))
-        cols.append(np.concatenate([column[pairs.stroke] for column in columns]))
-        values.append(change / _ANGLE_STEP)
-
-        # Rows by instant rather than by evaluation order.
-        return csr_matrix(
-            (np.concatenate(values), (order[np.concatenate(rows)], np.concatenate(cols))),
-            shape=(len(order), layout.instant_column),
-        )
-
-    @staticmethod
-    def _shape_at(
-        ev: Evaluation, g: NDArray[np.complex128], stroke: Index, row: Index
-    ) -> NDArray[np.complex128]:
-        """Stroke shapes at evaluation rows: 0 before their windows, 1 after, ``g`` inside."""
-        begin, stop = ev.begin[stroke], ev.stop[stroke]
-        inside = (row >= begin) & (row < stop)
-        out = np.where(row >= stop, 1.0 + 0j, 0j)
-        out[inside] = g[ev.pairs.offsets[stroke[inside]] + row[inside] - begin[inside]]
-        return out
+def _jacobian(layout: _Layout, strokes: Strokes, current: _Residuals) -> tuple[Index, Index, Any]:
+    """The residuals' complex Jacobian in the plan's parameters, as rows ``(indptr, col,
+    value)`` in evaluation order (:attr:`_Residuals.order` maps them to instants)."""
+    ev = current.evaluation
+    return kernels.jacobian(
+        ev.begin,
+        ev.stop,
+        ev.values,
+        np.column_stack([strokes.chords.real, strokes.chords.imag]),
+        strokes.first_stroke,
+        strokes.phi1,
+        strokes.phi2,
+        layout.arcs_only,
+        _ANGLE_STEP,
+        layout.angle_col,
+        layout.onset_col,
+        layout.target_col,
+        len(current.order),
+    )
 
 
 class _NormalEquations:
@@ -282,121 +249,111 @@ class _NormalEquations:
     With the complex Jacobian ``C`` (a row per instant) the real normal matrix is
     ``Re(Cᴴ C)``. Each forward instant's own column is the trajectory's velocity ``v`` at it, in
     its row alone, so that block of the normal matrix is diagonal (``|v|²``) and the instants
-    drop out: the system left is the size of the plan's parameters, solved densely (or sparse
-    when large).
+    drop out: the system left is the size of the plan's parameters, and banded.
     """
 
-    def __init__(self, jacobian: csr_matrix, current: _Residuals) -> None:
+    def __init__(self, layout: _Layout, strokes: Strokes, current: _Residuals) -> None:
+        order = current.order
         forward = len(current.velocity)
-        r = current.residual
-        v = current.velocity
+        self.forward_row = np.argsort(order)[:forward]  # each forward instant's evaluation row
+        rows = len(order)
+        self.forward = order < forward
+        residual = current.residual[order]
+        velocity = np.zeros(rows, dtype=complex)
+        velocity[self.forward_row] = current.velocity
         # Where the pen rests (the ends, a stop) an instant is free to slide a long way at no
         # cost in the linear model, and far from true in the real one: a floor on its scale.
-        speed2 = v.real**2 + v.imag**2
-        self.speed2 = np.maximum(speed2, _REST * max(float(np.median(speed2)), 1e-300))
-        ch = jacobian.conj().T.tocsr()
-        # Per forward instant: Re(conj(v)·row), the coupling of its instant to the parameters.
-        self.u = (diags(np.conj(v)) @ jacobian[:forward]).real.tocsr()
-        self.a = (ch @ jacobian).real
-        self.b = self.u.T @ diags(1.0 / self.speed2) @ self.u
-        diagonal = self.a.diagonal()
+        speed2 = np.abs(current.velocity) ** 2
+        floor = _REST * max(float(np.median(speed2)), 1e-300)
+        self.speed2 = np.ones(rows)
+        self.speed2[self.forward_row] = np.maximum(speed2, floor)
+        self.indptr, self.col, value = _jacobian(layout, strokes, current)
+        self.a, self.b, self.g, self.u = kernels.normal_equations(
+            self.indptr, self.col, value, residual, velocity, self.speed2, self.forward, layout.size
+        )
+        self.g_t = (np.conj(velocity) * residual).real
+        diagonal = self.a[0]
         self.scale = np.maximum(diagonal, 1e-12 * max(float(diagonal.max(initial=0.0)), 1e-300))
-        self.g_p = (ch @ r).real
-        self.g_t = (np.conj(v) * r[:forward]).real
-        if self.a.shape[0] <= _DENSE_LIMIT:
-            self.a, self.b = self.a.toarray(), self.b.toarray()
 
-    def solve(self, damping: float) -> tuple[Array, float]:
-        """The step for the parameters and the instants at this damping, and the decrease of
-        the cost that the linear model predicts for it."""
-        d = self.speed2 * (1.0 + damping)
-        rhs = -self.g_p + self.u.T @ (self.g_t / d)
-        if isinstance(self.a, np.ndarray):
-            schur = self.a - self.b / (1.0 + damping)
-            schur[np.diag_indices_from(schur)] += damping * self.scale
-            step_p = cho_solve(cho_factor(schur, check_finite=False), rhs, check_finite=False)
-        else:
-            schur = self.a - self.b / (1.0 + damping) + diags(damping * self.scale)
-            step_p = spsolve(schur.tocsc(), rhs)
-        step_t = (-self.g_t - self.u @ step_p) / d
-        # Cost is Σ|r|², so the model's decrease is δᵀ(λDδ − g) (twice the textbook form).
-        damped = damping * (self.scale @ step_p**2 + (self.speed2 * step_t) @ step_t)
-        predicted = damped - step_p @ self.g_p - step_t @ self.g_t
-        return np.concatenate([step_p, step_t]), float(predicted)
+    def solve(self, damping: float) -> tuple[Array, Array, float]:
+        """The step for the parameters and the forward instants at this damping, and the
+        decrease of the cost that the linear model predicts for it (0 if none)."""
+        step, step_t, predicted, ok = kernels.damped_step(
+            self.a,
+            self.b,
+            self.scale,
+            self.g,
+            self.indptr,
+            self.col,
+            self.u,
+            self.g_t,
+            self.speed2,
+            self.forward,
+            damping,
+        )
+        return step, step_t[self.forward_row], predicted if ok else 0.0
 
 
 _REST = 1e-2
 """Instants' scale floor, a fraction of the median squared speed (see _NormalEquations)."""
-_DENSE_LIMIT = 800
-"""Plan parameters up to which the reduced normal equations are solved densely."""
 
 
 class _Layout:
-    """How the free parameters sit in the solver's vector.
-
-    ``[interior targets (x, y)…, phi1/phi2 (or phi) per stroke…, onsets of all but each trace's
-    first stroke…, forward instants…]``. Onsets rather than delays: a delay moves every later
-    stroke, an onset only its own. Delays that would turn negative are clamped to 0.
+    """How the plan's free parameters sit in the solver's vector: stroke by stroke, each
+    stroke's ``phi1, phi2`` (or ``phi``), then, but for each trace's first stroke, its onset and
+    the target it leaves (x, y). Onsets rather than delays: a delay moves every later stroke, an
+    onset only its own. Delays that would turn negative are clamped to 0.
     """
 
-    def __init__(self, strokes: Strokes, arcs_only: bool, instants: int) -> None:
-        n = len(strokes.onsets)
+    def __init__(self, strokes: Strokes, arcs_only: bool) -> None:
         self.arcs_only = arcs_only
+        angles = 1 if arcs_only else 2
+        self.later = strokes.later
         self.inner = strokes.interior
-        self.targets = 2 * len(self.inner)
-        self.angles = n if arcs_only else 2 * n
-        self.free_onsets = strokes.later
-        self.onset_column = np.full(n, -1)
-        self.onset_column[self.free_onsets] = (
-            self.targets + self.angles + np.arange(len(self.free_onsets))
-        )
-        self.instant_column = self.targets + self.angles + len(self.free_onsets)
-        self.size = self.instant_column + instants
+        width = np.full(len(strokes.onsets), angles)
+        width[self.later] += 3
+        first = np.cumsum(width) - width
+        self.angle_col = first
+        self.onset_col = np.full(len(width), -1)
+        self.onset_col[self.later] = first[self.later] + angles
+        self.target_col = np.full(len(width), -1)
+        self.target_col[self.later] = first[self.later] + angles + 1
+        self.size = int(width.sum())
 
-    def pack(self, strokes: Strokes, tau: Array) -> Array:
+    def pack(self, strokes: Strokes) -> Array:
+        x = np.empty(self.size)
         if self.arcs_only:
-            angles = strokes.phi2
+            x[self.angle_col] = strokes.phi2
         else:
-            angles = np.column_stack([strokes.phi1, strokes.phi2]).ravel()
-        return np.concatenate(
-            [strokes.targets[self.inner].ravel(), angles, strokes.onsets[self.free_onsets], tau]
-        )
+            x[self.angle_col], x[self.angle_col + 1] = strokes.phi1, strokes.phi2
+        x[self.onset_col[self.later]] = strokes.onsets[self.later]
+        columns = self.target_col[self.later]
+        x[columns], x[columns + 1] = strokes.targets[self.inner].T
+        return x
 
-    def unpack(self, strokes: Strokes, x: Array) -> tuple[Strokes, Array]:
+    def unpack(self, strokes: Strokes, x: Array) -> Strokes:
         targets = strokes.targets.copy()
-        targets[self.inner] = x[: self.targets].reshape(-1, 2)
-        angles = x[self.targets : self.targets + self.angles]
+        columns = self.target_col[self.later]
+        targets[self.inner, 0], targets[self.inner, 1] = x[columns], x[columns + 1]
         if self.arcs_only:
-            phi1, phi2 = -angles, angles
+            phi2 = x[self.angle_col]
+            phi1 = -phi2
         else:
-            phi1, phi2 = angles[0::2], angles[1::2]
+            phi1, phi2 = x[self.angle_col], x[self.angle_col + 1]
         onsets = strokes.onsets.copy()
-        onsets[self.free_onsets] = x[self.targets + self.angles : self.instant_column]
+        onsets[self.later] = x[self.onset_col[self.later]]
         # Onsets keep their order within a trace (delays >= 0).
         offset = strokes.trace * (2.0 * float(np.max(np.abs(onsets))) + 1.0)
         onsets = np.maximum.accumulate(onsets + offset) - offset
-        changed = strokes.replace(targets=targets, phi1=phi1, phi2=phi2, onsets=onsets)
-        return changed, x[self.instant_column :]
+        return strokes.replace(targets=targets, phi1=phi1, phi2=phi2, onsets=onsets)
 
-    def bounds(self, strokes: Strokes, slack: float, end: Array) -> tuple[Array, Array]:
-        """Tangents within ±3 rad, onsets within ``slack`` of where they were, instants within
-        their trace's motion (``0..end`` each)."""
-        onsets = strokes.onsets[self.free_onsets]
-        instants = len(end)
-        inf = np.full(self.targets, np.inf)
-        lower = np.concatenate(
-            [-inf, np.full(self.angles, -PHI_LIMIT), onsets - slack, np.zeros(instants)]
-        )
-        upper = np.concatenate([inf, np.full(self.angles, PHI_LIMIT), onsets + slack, end])
+    def bounds(self, strokes: Strokes, slack: float) -> tuple[Array, Array]:
+        """Tangents within ±3 rad, onsets within ``slack`` of where they were."""
+        lower, upper = np.full(self.size, -np.inf), np.full(self.size, np.inf)
+        angles = np.concatenate([self.angle_col, self.angle_col + 1])
+        angles = self.angle_col if self.arcs_only else angles
+        lower[angles], upper[angles] = -PHI_LIMIT, PHI_LIMIT
+        onsets = strokes.onsets[self.later]
+        lower[self.onset_col[self.later]] = onsets - slack
+        upper[self.onset_col[self.later]] = onsets + slack
         return lower, upper
-
-    def angle_steps(self, strokes: Strokes, h: float) -> tuple[list[Index], Array, Array]:
-        """Each angle parameter's column per stroke, and ``(phi1, phi2)`` with one parameter
-        stepped by ``h`` per block of strokes (one block per column list)."""
-        n = len(strokes.onsets)
-        base = self.targets + np.arange(n) * (1 if self.arcs_only else 2)
-        if self.arcs_only:
-            return [base], strokes.phi1 - h, strokes.phi2 + h
-        phi1 = np.concatenate([strokes.phi1 + h, strokes.phi1])
-        phi2 = np.concatenate([strokes.phi2, strokes.phi2 + h])
-        return [base, base + 1], phi1, phi2

@@ -163,7 +163,7 @@ class Strokes:
         sample = np.arange(offsets[-1]) - np.repeat(offsets[:-1] - begin, counts)
         w, gx, gy, ux, uy = values.T
         pairs = Pairs(sample, stroke, offsets, w, gx, gy, ux + 1j * uy, self.chords[stroke])
-        return Evaluation(xy, v, pairs, begin, stop)
+        return Evaluation(xy, v, pairs, begin, stop, values)
 
     @property
     def kernel_arrays(self) -> tuple[Array, ...]:
@@ -209,3 +209,5 @@ class Evaluation:
     pairs: Pairs
     begin: Index
     stop: Index
+    values: Array
+    """The pairs as the compiled loops give them: rows ``(w, gx, gy, ux, uy)``."""

@@ -5,7 +5,14 @@ import numpy as np
 import pytest
 
 from tagbot.gesture.reconstruct import correct_targets
-from tagbot.gesture.refine import RefineOptions, _Layout, _Problem, refine
+from tagbot.gesture.refine import (
+    RefineOptions,
+    _jacobian,
+    _Layout,
+    _NormalEquations,
+    _Problem,
+    refine,
+)
 from tagbot.gesture.strokes import Strokes
 from tagbot.model.motion import evaluate_plan
 from tagbot.model.plan import random_plan
@@ -72,9 +79,19 @@ def jacobian_setup(sigma_model, seed=4):
     strokes = Strokes.of(plans)
     options = RefineOptions(arcs_only=sigma_model)
     problem = _Problem.build(strokes, curves, size, options)
-    layout = _Layout(strokes, sigma_model, len(problem.goal))
+    layout = _Layout(strokes, sigma_model)
     tau = problem.initial_instants(strokes)
     return strokes, problem, layout, tau
+
+
+def dense_jacobian(layout, strokes, current):
+    """The complex Jacobian in the plan's parameters, a row per instant."""
+    indptr, col, value = _jacobian(layout, strokes, current)
+    jac = np.zeros((len(current.order), layout.size), dtype=complex)
+    for row in range(len(indptr) - 1):
+        entries = slice(indptr[row], indptr[row + 1])
+        jac[current.order[row], col[entries]] = value[entries]
+    return jac
 
 
 @pytest.mark.parametrize("sigma_model", [False, True])
@@ -83,8 +100,8 @@ def test_jacobian_matches_central_differences(sigma_model):
     of the residuals whose goals are fixed (the contour samples); instants: the velocity."""
     strokes, problem, layout, tau = jacobian_setup(sigma_model)
     current = problem.evaluate(strokes, tau)
-    jac = problem.jacobian(layout, strokes, current).toarray()
-    x = layout.pack(strokes, tau)
+    jac = dense_jacobian(layout, strokes, current)
+    x = layout.pack(strokes)
     forward = len(tau)
     # Outside its window a stroke counts as not started or complete (within 1e-6 of the size):
     # instants at a window's edge see that step, not a derivative. Leave them out.
@@ -96,25 +113,52 @@ def test_jacobian_matches_central_differences(sigma_model):
     assert len(rows) > 0.7 * forward  # many goals near the end map to where the pen stops
     h = 1e-6
     worst = 0.0
-    for column in range(layout.instant_column):
+    for column in range(layout.size):
         plus, minus = x.copy(), x.copy()
         plus[column] += h
         minus[column] -= h
-        rp = problem.evaluate(*layout.unpack(strokes, plus)).residual[rows]
-        rm = problem.evaluate(*layout.unpack(strokes, minus)).residual[rows]
+        rp = problem.evaluate(layout.unpack(strokes, plus), tau).residual[rows]
+        rm = problem.evaluate(layout.unpack(strokes, minus), tau).residual[rows]
         numeric = (rp - rm) / (2 * h)
         scale = max(np.abs(numeric).max(), 1.0)
         worst = max(worst, np.abs(jac[rows, column] - numeric).max() / scale)
     assert worst < 1e-5
     # Instants: d(trajectory)/dτ is the velocity.
     k = rows[::5]
-    plus = x.copy()
-    plus[layout.instant_column + k] += h
-    minus = x.copy()
-    minus[layout.instant_column + k] -= h
-    rp = problem.evaluate(*layout.unpack(strokes, plus)).residual[k]
-    rm = problem.evaluate(*layout.unpack(strokes, minus)).residual[k]
+    plus, minus = tau.copy(), tau.copy()
+    plus[k] += h
+    minus[k] -= h
+    rp = problem.evaluate(strokes, plus).residual[k]
+    rm = problem.evaluate(strokes, minus).residual[k]
     np.testing.assert_allclose((rp - rm) / (2 * h), current.velocity[k], rtol=1e-4, atol=1e-3)
+
+
+@pytest.mark.parametrize("sigma_model", [False, True])
+@pytest.mark.parametrize("damping", [1e-3, 0.5, 40.0])
+def test_banded_schur_step_is_the_dense_damped_step(sigma_model, damping):
+    """The step with the instants eliminated and the band factored equals the damped
+    Gauss-Newton step of the whole system (parameters and instants) solved densely."""
+    strokes, problem, layout, tau = jacobian_setup(sigma_model)
+    current = problem.evaluate(strokes, tau)
+    system = _NormalEquations(layout, strokes, current)
+    step, step_tau, predicted = system.solve(damping)
+    # The whole real system: the parameters' columns, then one column per forward instant.
+    jac = dense_jacobian(layout, strokes, current)
+    forward = len(tau)
+    instants = np.zeros((len(jac), forward), dtype=complex)
+    instants[np.arange(forward), np.arange(forward)] = current.velocity
+    full = np.hstack([jac, instants])
+    r = current.residual
+    a = (full.conj().T @ full).real
+    g = (full.conj().T @ r).real
+    scale = np.concatenate([system.scale, system.speed2[system.forward_row]])
+    # The floored instants' scale stands in for |v|² in both the damping and the curvature.
+    a[layout.size :, layout.size :] = np.diag(scale[layout.size :])
+    dense = np.linalg.solve(a + damping * np.diag(scale), -g)
+    np.testing.assert_allclose(step, dense[: layout.size], rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(step_tau, dense[layout.size :], rtol=1e-7, atol=1e-9)
+    both = np.concatenate([step, step_tau])
+    assert predicted == pytest.approx(both @ (damping * scale * both - g), rel=1e-9)
 
 
 def test_refinement_lowers_the_cost_and_keeps_the_ends():
