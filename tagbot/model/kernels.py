@@ -169,16 +169,18 @@ def moments_into(b: float, out: np.ndarray) -> None:
         out[n] = m
     if n_max < abs(b):
         return
-    top = n_max + 24 + math.ceil(abs(b))
-    # M_top = e^{ib} Σ_j (−ib)^j top! / (top + j + 1)!  (terms shrink like |b|/top).
-    term = e / (top + 1)
+    top = n_max + 2 * math.ceil(abs(b)) + 2
+    # M_top = e^{ib} Σ_j (−ib)^j top! / (top + j + 1)!: terms shrink by |b|/(top + j + 1) < ½.
+    term = (1.0 / (top + 1)) + 0j
     series = term
-    for j in range(1, 40):
-        term = term * (-ib) / (top + j + 1)
+    for j in range(1, 80):
+        term = term * (-ib) * (1.0 / (top + j + 1))
         series += term
-    m = series
+        if abs(term.real) + abs(term.imag) < 1e-17 * (abs(series.real) + abs(series.imag)):
+            break
+    m = e * series
     for n in range(top, 1, -1):
-        m = (e - ib * m) / n
+        m = (e - ib * m) * (1.0 / n)
         if n - 1 <= n_max and n - 1 >= abs(b):
             out[n - 1] = m
 
