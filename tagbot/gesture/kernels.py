@@ -553,3 +553,439 @@ def _band_solve(factor: np.ndarray, band: int, rhs: np.ndarray) -> np.ndarray:
             s -= factor[k - i, i] * y[k]
         y[i] = s / factor[0, i]
     return y
+
+
+# --- nearest contour samples ------------------------------------------------------------------
+
+
+@compiled
+def buckets(
+    points: np.ndarray, first: np.ndarray, cell: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A uniform grid of cells ``cell`` wide over each group ``first[k]:first[k + 1]`` of
+    ``points``, for :func:`nearest`: per group ``(x0, y0, nx, ny, its first cell)``, and the
+    points of cell ``c``, ``order[start[c]:start[c + 1]]``."""
+    groups = first.size - 1
+    header = np.empty((groups, 5))
+    cells = 0
+    for k in range(groups):
+        lo, hi = first[k], first[k + 1]
+        x0, y0 = np.min(points[lo:hi, 0]), np.min(points[lo:hi, 1])
+        nx = int((np.max(points[lo:hi, 0]) - x0) / cell) + 1
+        ny = int((np.max(points[lo:hi, 1]) - y0) / cell) + 1
+        header[k, 0], header[k, 1], header[k, 2], header[k, 3] = x0, y0, nx, ny
+        header[k, 4] = cells
+        cells += nx * ny
+    which = np.empty(points.shape[0], np.intp)
+    start = np.zeros(cells + 1, np.intp)
+    for k in range(groups):
+        x0, y0 = header[k, 0], header[k, 1]
+        nx, ny, base = int(header[k, 2]), int(header[k, 3]), int(header[k, 4])
+        for i in range(first[k], first[k + 1]):
+            cx = min(int((points[i, 0] - x0) / cell), nx - 1)
+            cy = min(int((points[i, 1] - y0) / cell), ny - 1)
+            which[i] = base + cy * nx + cx
+            start[which[i] + 1] += 1
+    start = np.cumsum(start)
+    fill = start[:-1].copy()
+    order = np.empty(points.shape[0], np.intp)
+    for i in range(points.shape[0]):
+        order[fill[which[i]]] = i
+        fill[which[i]] += 1
+    return header, start, order
+
+
+@compiled
+def nearest(
+    points: np.ndarray, header: np.ndarray, start: np.ndarray, order: np.ndarray, cell: float,
+    k: int, x: float, y: float,
+) -> int:  # fmt: skip
+    """The point of group ``k`` nearest to ``(x, y)`` (:func:`buckets`): cells ring by ring
+    outwards, skipping those farther than the best so far, until no ring left can be nearer."""
+    x0, y0 = header[k, 0], header[k, 1]
+    nx, ny, base = int(header[k, 2]), int(header[k, 3]), int(header[k, 4])
+    cx = min(max(math.floor((x - x0) / cell), 0), nx - 1)
+    cy = min(max(math.floor((y - y0) / cell), 0), ny - 1)
+    best, best_d2 = -1, np.inf
+    for ring in range(max(nx, ny) + 1):
+        for iy in range(max(cy - ring, 0), min(cy + ring, ny - 1) + 1):
+            edge = iy == cy - ring or iy == cy + ring
+            step = 1 if edge else 2 * ring
+            ix = cx - ring
+            while ix <= cx + ring:
+                if 0 <= ix < nx:
+                    dx = max(x0 + ix * cell - x, 0.0, x - x0 - (ix + 1) * cell)
+                    dy = max(y0 + iy * cell - y, 0.0, y - y0 - (iy + 1) * cell)
+                    if dx * dx + dy * dy < best_d2:
+                        c = base + iy * nx + ix
+                        for e in range(start[c], start[c + 1]):
+                            i = order[e]
+                            px, py = points[i, 0] - x, points[i, 1] - y
+                            if px * px + py * py < best_d2:
+                                best, best_d2 = i, px * px + py * py
+                ix += max(step, 1)
+        # Cells beyond this ring are at least ``ring`` cells away.
+        if (ring * cell) ** 2 >= best_d2:
+            break
+    return best
+
+
+# --- the refinement ---------------------------------------------------------------------------
+
+
+@compiled
+def shapes_of(phi1: np.ndarray, phi2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each stroke's unit-chord shape: its evaluation constants and its length."""
+    constants = np.empty((phi1.size, N_CONSTANTS))
+    length = np.empty(phi1.size)
+    for j in range(phi1.size):
+        theta0, kappa0, dkappa, length[j] = unit_stroke(phi1[j], phi2[j])
+        segment_constants(theta0, kappa0, dkappa, length[j], constants[j])
+    return constants, length
+
+
+@compiled
+def windows_of(
+    targets, onsets, mu, sigma, unit_length, first_stroke, size, end_tolerance
+) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
+    """Each stroke's active window, as :meth:`tagbot.model.plan.Plan.windows` with ``size``."""
+    t_on, t_off = np.empty(onsets.size), np.empty(onsets.size)
+    for k in range(first_stroke.size - 1):
+        count = first_stroke[k + 1] - first_stroke[k]
+        for j in range(first_stroke[k], first_stroke[k + 1]):
+            a = j + k
+            chord = math.hypot(targets[a + 1, 0] - targets[a, 0], targets[a + 1, 1] - targets[a, 1])
+            budget = end_tolerance * size / (count * unit_length[j] * chord)
+            t_on[j], t_off[j] = stroke_window(onsets[j], mu[j], sigma[j], budget)
+    return t_on, t_off
+
+
+@compiled
+def residuals(
+    targets,
+    onsets,
+    mu,
+    sigma,
+    phi1,
+    phi2,
+    first_stroke,
+    tau,
+    goal,
+    goal_first,
+    grid,
+    grid_first,
+    contour,
+    header,
+    start,
+    order,
+    cell,
+    size,
+    end_tolerance,
+):  # type: ignore[no-untyped-def]
+    """The refinement's residuals for the plan and the forward instants ``tau``.
+
+    Rows are evaluation rows: per trace its forward instants and grid instants, sorted by time.
+    Returns ``(instant per row — forward index f, or F + grid index —, begin, stop, pairs,
+    residual per row (complex, trajectory minus goal), velocity per row (complex), nearest
+    contour sample per row (grid rows; −1 for forward rows))``; the goal of a forward row is
+    ``goal[f]``, of a grid row the contour sample nearest to the trajectory there.
+    """
+    forward = tau.size
+    traces = first_stroke.size - 1
+    rows = forward + grid.size
+    instant = np.empty(rows, np.intp)
+    t = np.empty(rows)
+    sample_first = np.empty(traces + 1, np.intp)
+    sample_first[0] = 0
+    for k in range(traces):
+        lo = sample_first[k]
+        f0, f1, g0, g1 = goal_first[k], goal_first[k + 1], grid_first[k], grid_first[k + 1]
+        count = (f1 - f0) + (g1 - g0)
+        times = np.empty(count)
+        ids = np.empty(count, np.intp)
+        times[: f1 - f0], ids[: f1 - f0] = tau[f0:f1], np.arange(f0, f1)
+        times[f1 - f0 :], ids[f1 - f0 :] = grid[g0:g1], forward + np.arange(g0, g1)
+        sort = np.argsort(times, kind="mergesort")
+        t[lo : lo + count], instant[lo : lo + count] = times[sort], ids[sort]
+        sample_first[k + 1] = lo + count
+    constants, unit_length = shapes_of(phi1, phi2)
+    t_on, t_off = windows_of(
+        targets, onsets, mu, sigma, unit_length, first_stroke, size, end_tolerance
+    )
+    xy, v, begin, stop, pairs = evaluate(
+        t, sample_first, first_stroke, targets, onsets, mu, sigma, constants, unit_length, t_on,
+        t_off,
+    )  # fmt: skip
+    residual = np.empty(rows, np.complex128)
+    velocity = np.empty(rows, np.complex128)
+    near = np.full(rows, -1, np.intp)
+    for k in range(traces):
+        for i in range(sample_first[k], sample_first[k + 1]):
+            velocity[i] = complex(v[i, 0], v[i, 1])
+            if instant[i] < forward:
+                gx, gy = goal[instant[i], 0], goal[instant[i], 1]
+            else:
+                near[i] = nearest(contour, header, start, order, cell, k, xy[i, 0], xy[i, 1])
+                gx, gy = contour[near[i], 0], contour[near[i], 1]
+            residual[i] = complex(xy[i, 0] - gx, xy[i, 1] - gy)
+    return instant, begin, stop, pairs, residual, velocity, near
+
+
+@compiled
+def cost_of(residual: np.ndarray) -> float:
+    total = 0.0
+    for r in residual:
+        total += r.real * r.real + r.imag * r.imag
+    return total
+
+
+@compiled
+def initial_instants(
+    targets,
+    onsets,
+    mu,
+    sigma,
+    phi1,
+    phi2,
+    first_stroke,
+    goal,
+    goal_first,
+    dense,
+    ends,
+    size,
+    end_tolerance,
+    cell,
+) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Each goal's instant: the nearest of ``dense[k]`` instants spread over its trace's
+    motion (``0..ends[k]``)."""
+    traces = first_stroke.size - 1
+    sample_first = np.zeros(traces + 1, np.intp)
+    for k in range(traces):
+        sample_first[k + 1] = sample_first[k] + dense[k]
+    t = np.empty(sample_first[-1])
+    for k in range(traces):
+        t[sample_first[k] : sample_first[k + 1]] = np.linspace(0.0, ends[k], dense[k])
+    constants, unit_length = shapes_of(phi1, phi2)
+    t_on, t_off = windows_of(
+        targets, onsets, mu, sigma, unit_length, first_stroke, size, end_tolerance
+    )
+    xy = evaluate(
+        t, sample_first, first_stroke, targets, onsets, mu, sigma, constants, unit_length, t_on,
+        t_off,
+    )[0]  # fmt: skip
+    header, start, order = buckets(xy, sample_first, cell)
+    tau = np.empty(goal.shape[0])
+    for k in range(traces):
+        for f in range(goal_first[k], goal_first[k + 1]):
+            tau[f] = t[nearest(xy, header, start, order, cell, k, goal[f, 0], goal[f, 1])]
+    return tau
+
+
+@compiled
+def pack(targets, onsets, phi1, phi2, first_stroke, angle_col, onset_col, target_col,
+         arcs_only, params):  # type: ignore[no-untyped-def]  # fmt: skip
+    """The refinement's parameter vector (see :class:`tagbot.gesture.refine._Layout`)."""
+    x = np.empty(params)
+    for k in range(first_stroke.size - 1):
+        for j in range(first_stroke[k], first_stroke[k + 1]):
+            if arcs_only:
+                x[angle_col[j]] = phi2[j]
+            else:
+                x[angle_col[j]], x[angle_col[j] + 1] = phi1[j], phi2[j]
+            if onset_col[j] >= 0:
+                x[onset_col[j]] = onsets[j]
+                x[target_col[j]], x[target_col[j] + 1] = targets[j + k, 0], targets[j + k, 1]
+    return x
+
+
+@compiled
+def unpack(x, targets, onsets, phi1, phi2, first_stroke, angle_col, onset_col, target_col,
+           arcs_only):  # type: ignore[no-untyped-def]  # fmt: skip
+    """The plan of parameter vector ``x``: ``(targets, onsets, phi1, phi2)``; onsets keep
+    their order within a trace (delays that would turn negative become 0)."""
+    targets, onsets, phi1, phi2 = targets.copy(), onsets.copy(), phi1.copy(), phi2.copy()
+    for k in range(first_stroke.size - 1):
+        for j in range(first_stroke[k], first_stroke[k + 1]):
+            if arcs_only:
+                phi2[j] = x[angle_col[j]]
+                phi1[j] = -phi2[j]
+            else:
+                phi1[j], phi2[j] = x[angle_col[j]], x[angle_col[j] + 1]
+            if onset_col[j] >= 0:
+                onsets[j] = max(x[onset_col[j]], onsets[j - 1])
+                targets[j + k, 0], targets[j + k, 1] = x[target_col[j]], x[target_col[j] + 1]
+    return targets, onsets, phi1, phi2
+
+
+@compiled
+def system(
+    instant,
+    begin,
+    stop,
+    pairs,
+    residual,
+    velocity,
+    targets,
+    phi1,
+    phi2,
+    first_stroke,
+    angle_col,
+    onset_col,
+    target_col,
+    arcs_only,
+    angle_step,
+    rest,
+    forward,
+    params,
+):  # type: ignore[no-untyped-def]
+    """The normal equations at the current residuals: ``(A, B, g, indptr, col, u, g_t,
+    speed2, forward rows, scale)`` for :func:`damped_step`.
+
+    Where the pen rests (the ends, a stop) an instant is free to slide a long way at no cost in
+    the linear model, and far from true in the real one: its scale ``|v|²`` has a floor of
+    ``rest`` times the median.
+    """
+    rows = instant.size
+    is_forward = instant < forward
+    speed2 = np.ones(rows)
+    v = np.zeros(rows, np.complex128)
+    moving = np.empty(forward)
+    for i in range(rows):
+        if is_forward[i]:
+            v[i] = velocity[i]
+            speed2[i] = velocity[i].real ** 2 + velocity[i].imag ** 2
+            moving[instant[i]] = speed2[i]
+    floor = rest * max(np.median(moving), 1e-300) if forward else 0.0
+    for i in range(rows):
+        if is_forward[i]:
+            speed2[i] = max(speed2[i], floor)
+    chords = np.empty((phi1.size, 2))
+    for k in range(first_stroke.size - 1):
+        for j in range(first_stroke[k], first_stroke[k + 1]):
+            chords[j, 0] = targets[j + k + 1, 0] - targets[j + k, 0]
+            chords[j, 1] = targets[j + k + 1, 1] - targets[j + k, 1]
+    indptr, col, value = jacobian(
+        begin, stop, pairs, chords, first_stroke, phi1, phi2, arcs_only, angle_step, angle_col,
+        onset_col, target_col, rows,
+    )  # fmt: skip
+    a, b, g, u = normal_equations(indptr, col, value, residual, v, speed2, is_forward, params)
+    g_t = np.empty(rows)
+    for i in range(rows):
+        g_t[i] = (v[i].conjugate() * residual[i]).real
+    top = max(np.max(a[0]), 1e-300) if params else 1.0
+    scale = np.maximum(a[0], 1e-12 * top)
+    return a, b, g, indptr, col, u, g_t, speed2, is_forward, scale
+
+
+@compiled
+def _valid(targets: np.ndarray, first_stroke: np.ndarray, limit: float) -> bool:
+    """No two consecutive targets of a trace within ``limit`` of each other."""
+    for k in range(first_stroke.size - 1):
+        if _collapsed(targets[first_stroke[k] + k : first_stroke[k + 1] + k + 1], limit):
+            return False
+    return True
+
+
+@compiled
+def refine_loop(
+    targets,
+    onsets,
+    mu,
+    sigma,
+    phi1,
+    phi2,
+    first_stroke,
+    angle_col,
+    onset_col,
+    target_col,
+    arcs_only,
+    lower,
+    upper,
+    tau,
+    tau_end,
+    goal,
+    goal_first,
+    goal_index,
+    grid,
+    grid_first,
+    contour,
+    header,
+    start,
+    order,
+    cell,
+    size,
+    end_tolerance,
+    angle_step,
+    rest,
+    iterations,
+):  # type: ignore[no-untyped-def]
+    """Levenberg-Marquardt with Nielsen's damping update over the plan and the forward
+    instants (see :mod:`tagbot.gesture.refine`). Returns the plan ``(targets, onsets, phi1,
+    phi2)``, the instants, and per contour sample the largest residual that looked at it."""
+    forward = tau.size
+    params = lower.size
+    x = pack(targets, onsets, phi1, phi2, first_stroke, angle_col, onset_col, target_col,
+             arcs_only, params)  # fmt: skip
+    current = residuals(
+        targets, onsets, mu, sigma, phi1, phi2, first_stroke, tau, goal, goal_first, grid,
+        grid_first, contour, header, start, order, cell, size, end_tolerance,
+    )  # fmt: skip
+    cost = cost_of(current[4])
+    damping, grow = 1e-3, 2.0
+    normal = system(
+        current[0], current[1], current[2], current[3], current[4], current[5], targets, phi1,
+        phi2, first_stroke, angle_col, onset_col, target_col, arcs_only, angle_step, rest,
+        forward, params,
+    )  # fmt: skip
+    stale = False
+    for _ in range(iterations):
+        if stale:
+            normal = system(
+                current[0], current[1], current[2], current[3], current[4], current[5], targets,
+                phi1, phi2, first_stroke, angle_col, onset_col, target_col, arcs_only,
+                angle_step, rest, forward, params,
+            )  # fmt: skip
+            stale = False
+        a, b, g, indptr, col, u, g_t, speed2, is_forward, scale = normal
+        step, step_t, predicted, ok = damped_step(
+            a, b, scale, g, indptr, col, u, g_t, speed2, is_forward, damping
+        )
+        trial_cost = np.inf
+        trial_x = np.minimum(np.maximum(x + step, lower), upper)
+        trial_tau = tau.copy()
+        instant = current[0]
+        for i in range(instant.size):
+            if is_forward[i]:
+                f = instant[i]
+                trial_tau[f] = min(max(tau[f] + step_t[i], 0.0), tau_end[f])
+        trial_plan = unpack(trial_x, targets, onsets, phi1, phi2, first_stroke, angle_col,
+                            onset_col, target_col, arcs_only)  # fmt: skip
+        trial = current
+        if ok and predicted > 0.0 and _valid(trial_plan[0], first_stroke, 1e-6 * size):
+            trial = residuals(
+                trial_plan[0], trial_plan[1], mu, sigma, trial_plan[2], trial_plan[3],
+                first_stroke, trial_tau, goal, goal_first, grid, grid_first, contour, header,
+                start, order, cell, size, end_tolerance,
+            )  # fmt: skip
+            trial_cost = cost_of(trial[4])
+        gain = (cost - trial_cost) / max(predicted, 1e-300)
+        if gain > 0.0:  # Nielsen's damping update, from the gain ratio
+            improvement = 1.0 - trial_cost / cost
+            x, tau, current, cost = trial_x, trial_tau, trial, trial_cost
+            targets, onsets, phi1, phi2 = trial_plan
+            damping *= max(1.0 / 3.0, 1.0 - (2.0 * min(gain, 1.0) - 1.0) ** 3)
+            grow = 2.0
+            stale = True
+            if improvement < 1e-3:
+                break
+        else:
+            damping *= grow
+            grow *= 2.0
+            if damping > 1e6:
+                break
+    misfit = np.zeros(contour.shape[0])
+    instant, near, residual = current[0], current[6], current[4]
+    for i in range(instant.size):
+        sample = goal_index[instant[i]] if instant[i] < forward else near[i]
+        misfit[sample] = max(misfit[sample], abs(residual[i]))
+    return targets, onsets, phi1, phi2, tau, misfit

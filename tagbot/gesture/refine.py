@@ -16,30 +16,34 @@ The Jacobian is exact for the targets (the trajectory is linear in them) and the
 instants (minus or plus a velocity), and a forward difference of the unit-chord shapes for the
 tangents. Each residual depends only on the strokes active at its instant and the parameters
 are ordered stroke by stroke, so the normal equations are banded; the instants are eliminated
-(a Schur complement, still banded) and the band is factored in compiled code
-(:mod:`tagbot.gesture.kernels`). An iteration costs one evaluation of the active (instant,
-stroke) pairs and one of the stepped shapes at them: linear in the number of strokes.
+(a Schur complement, still banded) and the band is factored. An iteration costs one
+evaluation of the active (instant, stroke) pairs and one of the stepped shapes at them: linear
+in the number of strokes. The loop runs in compiled code
+(:func:`tagbot.gesture.kernels.refine_loop`); this module sets the problem up.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from tagbot.gesture import kernels
-from tagbot.gesture.strokes import Evaluation, Strokes
+from tagbot.gesture.strokes import Strokes
+from tagbot.model.plan import END_TOLERANCE
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]
 
 PHI_LIMIT = 3.0
 """Tangent deviations stay within ±3 rad while refining (away from the ±π ambiguity)."""
-_ANGLE_STEP = 1e-6
+ANGLE_STEP = 1e-6
 """Forward-difference step for the tangents' Jacobian columns, radians."""
+REST = 1e-2
+"""Instants' scale floor, a fraction of the median squared speed (see kernels.system)."""
+_DENSE = 4
+"""Initial instants are picked among this many per grid instant."""
 
 
 @dataclass(frozen=True)
@@ -69,58 +73,31 @@ def refine(
     """
     problem = _Problem.build(strokes, curves, size, options)
     layout = _Layout(strokes, options.arcs_only)
-    tau = problem.initial_instants(strokes)
-    x = layout.pack(strokes)
     lower, upper = layout.bounds(strokes, options.onset_slack)
-    end = problem.trace_end[problem.goal_trace]
-    current = problem.evaluate(strokes, tau)
-    cost = current.cost
-    damping, grow = 1e-3, 2.0
-    system = None
-    for _ in range(options.iterations):
-        if system is None:
-            system = _NormalEquations(layout, strokes, current)
-        step, step_tau, predicted = system.solve(damping)
-        trial = None
-        if predicted > 0.0:
-            trial_x = np.clip(x + step, lower, upper)
-            trial_tau = np.clip(tau + step_tau, 0.0, end)
-            trial_strokes = layout.unpack(strokes, trial_x)
-            if problem.valid(trial_strokes):
-                trial = problem.evaluate(trial_strokes, trial_tau)
-        trial_cost = np.inf if trial is None else trial.cost
-        gain = (cost - trial_cost) / max(predicted, 1e-300)
-        if gain > 0:  # Nielsen's damping update, from the gain ratio
-            improvement = 1.0 - trial_cost / cost
-            x, strokes, tau, current, cost = trial_x, trial_strokes, trial_tau, trial, trial_cost
-            damping *= max(1.0 / 3.0, 1.0 - (2.0 * min(gain, 1.0) - 1.0) ** 3)
-            grow = 2.0
-            system = None
-            if improvement < 1e-3:
-                break
-        else:
-            damping *= grow
-            grow *= 2.0
-            if damping > 1e6:
-                break
-    return strokes, problem.misfit(current)
-
-
-@dataclass(frozen=True, eq=False)
-class _Residuals:
-    evaluation: Evaluation
-    order: Index
-    """Evaluation row → residual instant (forward instants first, then the grid)."""
-    residual: NDArray[np.complex128]
-    """Per instant (forward instants first), trajectory minus goal as a complex number."""
-    velocity: NDArray[np.complex128]
-    """The trajectory's velocity at each forward instant."""
-    nearest: Index
-    """The contour sample nearest to each grid instant's point."""
-
-    @property
-    def cost(self) -> float:
-        return float(np.sum(self.residual.real**2 + self.residual.imag**2))
+    goal = problem.contour[problem.goal_index]
+    targets, onsets, phi1, phi2, _, misfit = kernels.refine_loop(
+        *problem.plan_arrays(strokes),
+        layout.angle_col,
+        layout.onset_col,
+        layout.target_col,
+        layout.arcs_only,
+        lower,
+        upper,
+        problem.initial_instants(strokes),
+        problem.trace_end[problem.goal_trace],
+        goal,
+        problem.goal_first,
+        problem.goal_index,
+        problem.grid,
+        problem.grid_first,
+        *problem.contour_arrays,
+        float(size),
+        END_TOLERANCE,
+        ANGLE_STEP,
+        REST,
+        int(options.iterations),
+    )
+    return strokes.replace(targets=targets, onsets=onsets, phi1=phi1, phi2=phi2), misfit
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,187 +106,113 @@ class _Problem:
 
     size: float
     contour: Array
-    tree: cKDTree
-    """Nearest contour point per (x, y, trace·far)."""
-    far: float
-    goal: Array
-    """Contour samples the trajectory must pass near, per forward instant."""
-    goal_trace: Index
+    contour_first: Index
+    """Trace ``k``'s contour samples are ``contour_first[k]:contour_first[k + 1]``."""
     goal_index: Index
-    """Each goal's index among the contour samples."""
+    """The contour samples the trajectory must pass near (one forward instant each)."""
+    goal_first: Index
     grid: Array
     """Fixed trajectory instants that must lie near the contour."""
-    grid_trace: Index
+    grid_first: Index
     trace_end: Array
-    counts: Index
 
     @classmethod
     def build(
         cls, strokes: Strokes, curves: list[Array], size: float, options: RefineOptions
     ) -> _Problem:
         counts = strokes.counts
-        contour = np.concatenate(curves)
-        trace = np.repeat(np.arange(len(curves)), [len(c) for c in curves])
-        far = 4.0 * size
-        tree = cKDTree(np.column_stack([contour, trace * far]))
-        goal_index, goal_trace = [], []
-        first = np.concatenate([[0], np.cumsum([len(c) for c in curves])])
-        for k, curve in enumerate(curves):
-            count = min(len(curve), max(options.contour_samples * int(counts[k]), 32))
-            pick = np.linspace(0, len(curve) - 1, count).round().astype(np.intp)
-            goal_index.append(first[k] + pick)
-            goal_trace.append(np.full(count, k))
+        lengths = np.array([len(c) for c in curves])
+        contour_first = np.concatenate([[0], np.cumsum(lengths)])
+        goals = np.minimum(lengths, np.maximum(options.contour_samples * counts, 32))
+        goal_first = np.concatenate([[0], np.cumsum(goals)])
+        trace = np.repeat(np.arange(len(curves)), goals)
+        fraction = (np.arange(goal_first[-1]) - goal_first[trace]) / (goals[trace] - 1)
+        pick = np.round(fraction * (lengths[trace] - 1)).astype(np.intp)
         ends = strokes.ends(size)
-        grid, grid_trace = [], []
-        for k in range(len(curves)):
-            count = max(options.path_samples * int(counts[k]), 16)
-            grid.append(np.linspace(0.0, ends[k], count))
-            grid_trace.append(np.full(count, k))
+        grids = np.maximum(options.path_samples * counts, 16)
+        grid_first = np.concatenate([[0], np.cumsum(grids)])
+        trace = np.repeat(np.arange(len(curves)), grids)
+        fraction = (np.arange(grid_first[-1]) - grid_first[trace]) / (grids[trace] - 1)
         return cls(
             size=size,
-            contour=contour,
-            tree=tree,
-            far=far,
-            goal=contour[np.concatenate(goal_index)],
-            goal_trace=np.concatenate(goal_trace),
-            goal_index=np.concatenate(goal_index),
-            grid=np.concatenate(grid),
-            grid_trace=np.concatenate(grid_trace),
+            contour=np.ascontiguousarray(np.concatenate(curves), dtype=float),
+            contour_first=contour_first,
+            goal_index=contour_first[:-1][np.repeat(np.arange(len(curves)), goals)] + pick,
+            goal_first=goal_first,
+            grid=fraction * ends[trace],
+            grid_first=grid_first,
             trace_end=ends,
-            counts=counts,
+        )
+
+    @property
+    def goal_trace(self) -> Index:
+        return np.repeat(np.arange(len(self.trace_end)), np.diff(self.goal_first))
+
+    @property
+    def cell(self) -> float:
+        """Width of the cells that sort contour samples for nearest-point queries."""
+        return self.size / 100.0
+
+    @property
+    def goal_arrays(self) -> tuple[Array, Index, Array, Index]:
+        return self.contour[self.goal_index], self.goal_first, self.grid, self.grid_first
+
+    @property
+    def contour_arrays(self) -> tuple[Array, Array, Index, Index, float]:
+        header, start, order = kernels.buckets(self.contour, self.contour_first, self.cell)
+        return self.contour, header, start, order, self.cell
+
+    @staticmethod
+    def plan_arrays(strokes: Strokes) -> tuple[Array, ...]:
+        """``targets, onsets, mu, sigma, phi1, phi2, first_stroke`` for the compiled loops."""
+        return (
+            *(
+                np.ascontiguousarray(a, dtype=float)
+                for a in (strokes.targets, strokes.onsets, strokes.mu, strokes.sigma)
+            ),
+            np.ascontiguousarray(strokes.phi1, dtype=float),
+            np.ascontiguousarray(strokes.phi2, dtype=float),
+            strokes.first_stroke,
         )
 
     def initial_instants(self, strokes: Strokes) -> Array:
         """Each goal's instant: the closest of a dense grid along its trace's trajectory."""
-        fine = 4
-        per = np.bincount(self.grid_trace, minlength=len(self.counts)) * fine
-        trace = np.repeat(np.arange(len(per)), per)
-        first = np.concatenate([[0], np.cumsum(per)])
-        fraction = (np.arange(first[-1]) - np.repeat(first[:-1], per)) / np.repeat(per - 1, per)
-        t = fraction * self.trace_end[trace]
-        xy = strokes.evaluate(trace, t, self.size).xy
-        tree = cKDTree(np.column_stack([xy, trace * self.far]))
-        _, nearest = tree.query(np.column_stack([self.goal, self.goal_trace * self.far]))
-        return t[nearest]
-
-    def valid(self, strokes: Strokes) -> bool:
-        """No two consecutive targets of a trace (nearly) coincide."""
-        return bool(np.all(np.abs(strokes.chords) > 1e-6 * self.size))
-
-    def evaluate(self, strokes: Strokes, tau: Array) -> _Residuals:
-        trace = np.concatenate([self.goal_trace, self.grid_trace])
-        t = np.concatenate([tau, self.grid])
-        order = np.lexsort((t, trace))
-        evaluation = strokes.evaluate(trace[order], t[order], self.size)
-        xy = np.empty_like(evaluation.xy)
-        xy[order] = evaluation.xy
-        on_grid = xy[len(tau) :]
-        _, nearest = self.tree.query(np.column_stack([on_grid, self.grid_trace * self.far]))
-        goal = np.concatenate([self.goal, self.contour[nearest]])
-        residual = (xy[:, 0] - goal[:, 0]) + 1j * (xy[:, 1] - goal[:, 1])
-        v = np.empty_like(evaluation.v)
-        v[order] = evaluation.v
-        velocity = v[: len(tau), 0] + 1j * v[: len(tau), 1]
-        return _Residuals(evaluation, order, residual, velocity, nearest)
-
-    def misfit(self, current: _Residuals) -> Array:
-        """Per contour sample, the largest residual that looked at it."""
-        out = np.zeros(len(self.contour))
-        distance = np.abs(current.residual)
-        forward = len(self.goal)
-        np.maximum.at(out, self.goal_index, distance[:forward])
-        np.maximum.at(out, current.nearest, distance[forward:])
-        return out
-
-
-def _jacobian(layout: _Layout, strokes: Strokes, current: _Residuals) -> tuple[Index, Index, Any]:
-    """The residuals' complex Jacobian in the plan's parameters, as rows ``(indptr, col,
-    value)`` in evaluation order (:attr:`_Residuals.order` maps them to instants)."""
-    ev = current.evaluation
-    return kernels.jacobian(
-        ev.begin,
-        ev.stop,
-        ev.values,
-        np.column_stack([strokes.chords.real, strokes.chords.imag]),
-        strokes.first_stroke,
-        strokes.phi1,
-        strokes.phi2,
-        layout.arcs_only,
-        _ANGLE_STEP,
-        layout.angle_col,
-        layout.onset_col,
-        layout.target_col,
-        len(current.order),
-    )
-
-
-class _NormalEquations:
-    """Damped Gauss-Newton steps with the instants eliminated (a Schur complement).
-
-    With the complex Jacobian ``C`` (a row per instant) the real normal matrix is
-    ``Re(Cᴴ C)``. Each forward instant's own column is the trajectory's velocity ``v`` at it, in
-    its row alone, so that block of the normal matrix is diagonal (``|v|²``) and the instants
-    drop out: the system left is the size of the plan's parameters, and banded.
-    """
-
-    def __init__(self, layout: _Layout, strokes: Strokes, current: _Residuals) -> None:
-        order = current.order
-        forward = len(current.velocity)
-        self.forward_row = np.argsort(order)[:forward]  # each forward instant's evaluation row
-        rows = len(order)
-        self.forward = order < forward
-        residual = current.residual[order]
-        velocity = np.zeros(rows, dtype=complex)
-        velocity[self.forward_row] = current.velocity
-        # Where the pen rests (the ends, a stop) an instant is free to slide a long way at no
-        # cost in the linear model, and far from true in the real one: a floor on its scale.
-        speed2 = np.abs(current.velocity) ** 2
-        floor = _REST * max(float(np.median(speed2)), 1e-300)
-        self.speed2 = np.ones(rows)
-        self.speed2[self.forward_row] = np.maximum(speed2, floor)
-        self.indptr, self.col, value = _jacobian(layout, strokes, current)
-        self.a, self.b, self.g, self.u = kernels.normal_equations(
-            self.indptr, self.col, value, residual, velocity, self.speed2, self.forward, layout.size
+        dense = np.diff(self.grid_first) * _DENSE
+        goal, goal_first, _, _ = self.goal_arrays
+        return kernels.initial_instants(
+            *self.plan_arrays(strokes),
+            goal,
+            goal_first,
+            dense,
+            self.trace_end,
+            self.size,
+            END_TOLERANCE,
+            self.cell,
         )
-        self.g_t = (np.conj(velocity) * residual).real
-        diagonal = self.a[0]
-        self.scale = np.maximum(diagonal, 1e-12 * max(float(diagonal.max(initial=0.0)), 1e-300))
 
-    def solve(self, damping: float) -> tuple[Array, Array, float]:
-        """The step for the parameters and the forward instants at this damping, and the
-        decrease of the cost that the linear model predicts for it (0 if none)."""
-        step, step_t, predicted, ok = kernels.damped_step(
-            self.a,
-            self.b,
-            self.scale,
-            self.g,
-            self.indptr,
-            self.col,
-            self.u,
-            self.g_t,
-            self.speed2,
-            self.forward,
-            damping,
+    def residuals(self, strokes: Strokes, tau: Array) -> tuple[Array, ...]:
+        """:func:`tagbot.gesture.kernels.residuals` for ``strokes`` and the instants ``tau``."""
+        return kernels.residuals(
+            *self.plan_arrays(strokes),
+            tau,
+            *self.goal_arrays,
+            *self.contour_arrays,
+            self.size,
+            END_TOLERANCE,
         )
-        return step, step_t[self.forward_row], predicted if ok else 0.0
-
-
-_REST = 1e-2
-"""Instants' scale floor, a fraction of the median squared speed (see _NormalEquations)."""
 
 
 class _Layout:
     """How the plan's free parameters sit in the solver's vector: stroke by stroke, each
     stroke's ``phi1, phi2`` (or ``phi``), then, but for each trace's first stroke, its onset and
     the target it leaves (x, y). Onsets rather than delays: a delay moves every later stroke, an
-    onset only its own. Delays that would turn negative are clamped to 0.
+    onset only its own. Ordered so, the normal equations are banded.
     """
 
     def __init__(self, strokes: Strokes, arcs_only: bool) -> None:
         self.arcs_only = arcs_only
         angles = 1 if arcs_only else 2
         self.later = strokes.later
-        self.inner = strokes.interior
         width = np.full(len(strokes.onsets), angles)
         width[self.later] += 3
         first = np.cumsum(width) - width
@@ -320,40 +223,16 @@ class _Layout:
         self.target_col[self.later] = first[self.later] + angles + 1
         self.size = int(width.sum())
 
-    def pack(self, strokes: Strokes) -> Array:
-        x = np.empty(self.size)
-        if self.arcs_only:
-            x[self.angle_col] = strokes.phi2
-        else:
-            x[self.angle_col], x[self.angle_col + 1] = strokes.phi1, strokes.phi2
-        x[self.onset_col[self.later]] = strokes.onsets[self.later]
-        columns = self.target_col[self.later]
-        x[columns], x[columns + 1] = strokes.targets[self.inner].T
-        return x
-
-    def unpack(self, strokes: Strokes, x: Array) -> Strokes:
-        targets = strokes.targets.copy()
-        columns = self.target_col[self.later]
-        targets[self.inner, 0], targets[self.inner, 1] = x[columns], x[columns + 1]
-        if self.arcs_only:
-            phi2 = x[self.angle_col]
-            phi1 = -phi2
-        else:
-            phi1, phi2 = x[self.angle_col], x[self.angle_col + 1]
-        onsets = strokes.onsets.copy()
-        onsets[self.later] = x[self.onset_col[self.later]]
-        # Onsets keep their order within a trace (delays >= 0).
-        offset = strokes.trace * (2.0 * float(np.max(np.abs(onsets))) + 1.0)
-        onsets = np.maximum.accumulate(onsets + offset) - offset
-        return strokes.replace(targets=targets, phi1=phi1, phi2=phi2, onsets=onsets)
-
     def bounds(self, strokes: Strokes, slack: float) -> tuple[Array, Array]:
         """Tangents within ±3 rad, onsets within ``slack`` of where they were."""
         lower, upper = np.full(self.size, -np.inf), np.full(self.size, np.inf)
-        angles = np.concatenate([self.angle_col, self.angle_col + 1])
-        angles = self.angle_col if self.arcs_only else angles
+        angles = self.angle_col if self.arcs_only else np.r_[self.angle_col, self.angle_col + 1]
         lower[angles], upper[angles] = -PHI_LIMIT, PHI_LIMIT
         onsets = strokes.onsets[self.later]
         lower[self.onset_col[self.later]] = onsets - slack
         upper[self.onset_col[self.later]] = onsets + slack
         return lower, upper
+
+    @property
+    def columns(self) -> tuple[Index, Index, Index, bool]:
+        return self.angle_col, self.onset_col, self.target_col, self.arcs_only

@@ -4,15 +4,9 @@ Jacobian checked against finite differences."""
 import numpy as np
 import pytest
 
+from tagbot.gesture import kernels
 from tagbot.gesture.reconstruct import correct_targets
-from tagbot.gesture.refine import (
-    RefineOptions,
-    _jacobian,
-    _Layout,
-    _NormalEquations,
-    _Problem,
-    refine,
-)
+from tagbot.gesture.refine import ANGLE_STEP, REST, RefineOptions, _Layout, _Problem, refine
 from tagbot.gesture.strokes import Strokes
 from tagbot.model.motion import evaluate_plan
 from tagbot.model.plan import random_plan
@@ -84,14 +78,55 @@ def jacobian_setup(sigma_model, seed=4):
     return strokes, problem, layout, tau
 
 
-def dense_jacobian(layout, strokes, current):
+def pack(layout, strokes):
+    arrays = _Problem.plan_arrays(strokes)
+    targets, onsets, _, _, phi1, phi2, first_stroke = arrays
+    return kernels.pack(targets, onsets, phi1, phi2, first_stroke, *layout.columns, layout.size)
+
+
+def unpack(layout, strokes, x):
+    arrays = _Problem.plan_arrays(strokes)
+    targets, onsets, phi1, phi2 = kernels.unpack(
+        x, arrays[0], arrays[1], *arrays[4:7], *layout.columns
+    )
+    return strokes.replace(targets=targets, onsets=onsets, phi1=phi1, phi2=phi2)
+
+
+def by_instant(problem, strokes, tau):
+    """Residuals and velocities per instant (forward instants first, then the grid)."""
+    instant, _, _, _, residual, velocity, _ = problem.residuals(strokes, tau)
+    r, v = np.empty_like(residual), np.empty_like(velocity)
+    r[instant], v[instant] = residual, velocity
+    return r, v
+
+
+def normal_system(problem, layout, strokes, tau):
+    instant, begin, stop, pairs, residual, velocity, _ = problem.residuals(strokes, tau)
+    arrays = _Problem.plan_arrays(strokes)
+    return instant, kernels.system(
+        instant, begin, stop, pairs, residual, velocity, arrays[0], arrays[4], arrays[5],
+        arrays[6], *layout.columns, ANGLE_STEP, REST, len(tau), layout.size,
+    )  # fmt: skip
+
+
+def dense_jacobian(problem, layout, strokes, tau):
     """The complex Jacobian in the plan's parameters, a row per instant."""
-    indptr, col, value = _jacobian(layout, strokes, current)
-    jac = np.zeros((len(current.order), layout.size), dtype=complex)
+    instant, (_, _, _, indptr, col, _, _, _, _, _) = normal_system(problem, layout, strokes, tau)
+    values = kernels.jacobian(*_jacobian_arguments(problem, layout, strokes, tau))[2]
+    jac = np.zeros((len(instant), layout.size), dtype=complex)
     for row in range(len(indptr) - 1):
         entries = slice(indptr[row], indptr[row + 1])
-        jac[current.order[row], col[entries]] = value[entries]
+        jac[instant[row], col[entries]] = values[entries]
     return jac
+
+
+def _jacobian_arguments(problem, layout, strokes, tau):
+    instant, begin, stop, pairs, _, _, _ = problem.residuals(strokes, tau)
+    chords = np.column_stack([strokes.chords.real, strokes.chords.imag])
+    return (
+        begin, stop, pairs, chords, strokes.first_stroke, strokes.phi1, strokes.phi2,
+        layout.arcs_only, ANGLE_STEP, *layout.columns[:3], len(instant),
+    )  # fmt: skip
 
 
 @pytest.mark.parametrize("sigma_model", [False, True])
@@ -99,9 +134,9 @@ def test_jacobian_matches_central_differences(sigma_model):
     """Targets, tangents and onsets: the assembled complex Jacobian equals central differences
     of the residuals whose goals are fixed (the contour samples); instants: the velocity."""
     strokes, problem, layout, tau = jacobian_setup(sigma_model)
-    current = problem.evaluate(strokes, tau)
-    jac = dense_jacobian(layout, strokes, current)
-    x = layout.pack(strokes)
+    _, velocity = by_instant(problem, strokes, tau)
+    jac = dense_jacobian(problem, layout, strokes, tau)
+    x = pack(layout, strokes)
     forward = len(tau)
     # Outside its window a stroke counts as not started or complete (within 1e-6 of the size):
     # instants at a window's edge see that step, not a derivative. Leave them out.
@@ -117,8 +152,8 @@ def test_jacobian_matches_central_differences(sigma_model):
         plus, minus = x.copy(), x.copy()
         plus[column] += h
         minus[column] -= h
-        rp = problem.evaluate(layout.unpack(strokes, plus), tau).residual[rows]
-        rm = problem.evaluate(layout.unpack(strokes, minus), tau).residual[rows]
+        rp = by_instant(problem, unpack(layout, strokes, plus), tau)[0][rows]
+        rm = by_instant(problem, unpack(layout, strokes, minus), tau)[0][rows]
         numeric = (rp - rm) / (2 * h)
         scale = max(np.abs(numeric).max(), 1.0)
         worst = max(worst, np.abs(jac[rows, column] - numeric).max() / scale)
@@ -128,9 +163,9 @@ def test_jacobian_matches_central_differences(sigma_model):
     plus, minus = tau.copy(), tau.copy()
     plus[k] += h
     minus[k] -= h
-    rp = problem.evaluate(strokes, plus).residual[k]
-    rm = problem.evaluate(strokes, minus).residual[k]
-    np.testing.assert_allclose((rp - rm) / (2 * h), current.velocity[k], rtol=1e-4, atol=1e-3)
+    rp = by_instant(problem, strokes, plus)[0][k]
+    rm = by_instant(problem, strokes, minus)[0][k]
+    np.testing.assert_allclose((rp - rm) / (2 * h), velocity[k], rtol=1e-4, atol=1e-3)
 
 
 @pytest.mark.parametrize("sigma_model", [False, True])
@@ -139,26 +174,33 @@ def test_banded_schur_step_is_the_dense_damped_step(sigma_model, damping):
     """The step with the instants eliminated and the band factored equals the damped
     Gauss-Newton step of the whole system (parameters and instants) solved densely."""
     strokes, problem, layout, tau = jacobian_setup(sigma_model)
-    current = problem.evaluate(strokes, tau)
-    system = _NormalEquations(layout, strokes, current)
-    step, step_tau, predicted = system.solve(damping)
-    # The whole real system: the parameters' columns, then one column per forward instant.
-    jac = dense_jacobian(layout, strokes, current)
+    instant, normal = normal_system(problem, layout, strokes, tau)
+    a, b, g, indptr, col, u, g_t, speed2, forward_row, scale = normal
+    step, step_t, predicted, ok = kernels.damped_step(
+        a, b, scale, g, indptr, col, u, g_t, speed2, forward_row, damping
+    )
+    assert ok
     forward = len(tau)
+    step_tau = np.empty(forward)
+    step_tau[instant[forward_row]] = step_t[forward_row]
+    floored = np.empty(forward)
+    floored[instant[forward_row]] = speed2[forward_row]
+    # The whole real system: the parameters' columns, then one column per forward instant.
+    jac = dense_jacobian(problem, layout, strokes, tau)
+    r, velocity = by_instant(problem, strokes, tau)
     instants = np.zeros((len(jac), forward), dtype=complex)
-    instants[np.arange(forward), np.arange(forward)] = current.velocity
+    instants[np.arange(forward), np.arange(forward)] = velocity[:forward]
     full = np.hstack([jac, instants])
-    r = current.residual
-    a = (full.conj().T @ full).real
-    g = (full.conj().T @ r).real
-    scale = np.concatenate([system.scale, system.speed2[system.forward_row]])
+    normal_matrix = (full.conj().T @ full).real
+    gradient = (full.conj().T @ r).real
     # The floored instants' scale stands in for |v|² in both the damping and the curvature.
-    a[layout.size :, layout.size :] = np.diag(scale[layout.size :])
-    dense = np.linalg.solve(a + damping * np.diag(scale), -g)
+    normal_matrix[layout.size :, layout.size :] = np.diag(floored)
+    d = np.concatenate([scale, floored])
+    dense = np.linalg.solve(normal_matrix + damping * np.diag(d), -gradient)
     np.testing.assert_allclose(step, dense[: layout.size], rtol=1e-7, atol=1e-9)
     np.testing.assert_allclose(step_tau, dense[layout.size :], rtol=1e-7, atol=1e-9)
     both = np.concatenate([step, step_tau])
-    assert predicted == pytest.approx(both @ (damping * scale * both - g), rel=1e-9)
+    assert predicted == pytest.approx(both @ (damping * d * both - gradient), rel=1e-9)
 
 
 def test_refinement_lowers_the_cost_and_keeps_the_ends():
@@ -179,7 +221,8 @@ def test_refinement_lowers_the_cost_and_keeps_the_ends():
 
     def cost(strokes):
         problem = _Problem.build(strokes, contours, size, options)
-        return problem.evaluate(strokes, problem.initial_instants(strokes)).cost
+        residual = problem.residuals(strokes, problem.initial_instants(strokes))[4]
+        return float(np.sum(np.abs(residual) ** 2))
 
     done, misfit = refine(start, contours, size, options)
     assert misfit.shape == (sum(len(c) for c in contours),) and np.all(misfit >= 0)
