@@ -16,8 +16,10 @@ import numpy as np
 
 from tagbot.model.kernels import (
     N_CONSTANTS,
+    SMALL_A,
     TINY,
     compiled,
+    generalized_fresnel_into,
     lognormal_at,
     segment_constants,
     segment_point,
@@ -342,8 +344,10 @@ def jacobian(
     ``value``) per evaluation row.
 
     Targets: ``x = Σ_i p_i (G_{i−1} − G_i)`` is complex-linear in each interior target. Onsets:
-    moving one later moves its stroke's contribution back by its velocity. Tangents: forward
-    differences (step ``h``) of the unit shapes at the same CDF values. Stroke ``j``'s columns
+    moving one later moves its stroke's contribution back by its velocity. Tangents: the unit
+    shape's point at the same CDF value moves with the spiral's ``(θ0, κ0, κ', L)``, whose
+    partial derivatives are closed form (:func:`_shape_partials`) and whose derivatives in the
+    angles are central differences (step ``h``) of the G1 fit, per stroke. Stroke ``j``'s columns
     are ``angle_col[j]`` (and the next), ``onset_col[j]`` and ``target_col[j]`` (x, then y) of
     the target it leaves, −1 where fixed.
     """
@@ -352,20 +356,18 @@ def jacobian(
     for j in range(n):
         offsets[j + 1] = offsets[j] + stop[j] - begin[j]
     angles = 1 if arcs_only else 2
-    # Stepped unit shapes: one block of strokes per angle parameter.
-    stepped = np.empty((angles, n, N_CONSTANTS))
-    stepped_length = np.empty((angles, n))
+    # Per stroke its shape (θ0, κ0, κ', L) and, by central differences, their derivatives in
+    # each angle parameter.
+    shape = np.empty((n, 4))
+    slope = np.empty((angles, n, 4))
     for j in range(n):
+        shape[j, 0], shape[j, 1], shape[j, 2], shape[j, 3] = unit_stroke(phi1[j], phi2[j])
         for m in range(angles):
-            if arcs_only:
-                a1, a2 = phi1[j] - h, phi2[j] + h
-            elif m == 0:
-                a1, a2 = phi1[j] + h, phi2[j]
-            else:
-                a1, a2 = phi1[j], phi2[j] + h
-            theta0, kappa0, dkappa, length = unit_stroke(a1, a2)
-            segment_constants(theta0, kappa0, dkappa, length, stepped[m, j])
-            stepped_length[m, j] = length
+            d1, d2 = (-h, h) if arcs_only else ((h, 0.0) if m == 0 else (0.0, h))
+            plus = unit_stroke(phi1[j] + d1, phi2[j] + d2)
+            minus = unit_stroke(phi1[j] - d1, phi2[j] - d2)
+            for q in range(4):
+                slope[m, j, q] = (plus[q] - minus[q]) / (2.0 * h)
     # Count the entries per row, then fill them in row order.
     count = np.zeros(rows + 1, np.intp)
     for j in range(n):
@@ -385,10 +387,13 @@ def jacobian(
         for i in range(begin[j], stop[j]):
             q = offsets[j] + i - begin[j]
             w, g = pairs[q, 0], complex(pairs[q, 1], pairs[q, 2])
+            partial = _shape_partials(shape[j], w, g)
             for m in range(angles):
-                gx, gy, _, _ = segment_point(stepped[m, j], stepped_length[m, j] * w)
+                dg = 0j
+                for p in range(4):
+                    dg += partial[p] * slope[m, j, p]
                 col[fill[i]] = angle_col[j] + m
-                value[fill[i]] = chord * (complex(gx, gy) - g) / h
+                value[fill[i]] = chord * dg
                 fill[i] += 1
             if onset_col[j] >= 0:
                 col[fill[i]] = onset_col[j]
@@ -405,6 +410,46 @@ def jacobian(
                 col[fill[i] + 1], value[fill[i] + 1] = target_col[j] + 1, 1j * c
                 fill[i] += 2
     return indptr, col, value
+
+
+@compiled
+def _shape_partials(shape: np.ndarray, w: float, g: complex) -> tuple[complex, ...]:
+    """Derivatives of a unit shape's point ``g = P(L·w)`` in its ``(θ0, κ0, κ', L)``.
+
+    With ``P(s) = s·e^{iθ0}·I_0(κ's², κ0 s)``: ``∂P/∂θ0 = iP``, ``∂P/∂κ0 = i s² e^{iθ0} I_1``,
+    ``∂P/∂κ' = (i/2) s³ e^{iθ0} I_2`` and ``∂P/∂L = w·e^{iθ(s)}``.
+    """
+    theta0, kappa0, dkappa, length = shape[0], shape[1], shape[2], shape[3]
+    s = length * w
+    if s == 0.0:
+        return 0j, 0j, 0j, 0j
+    a, b = dkappa * s * s, kappa0 * s
+    e0 = complex(math.cos(theta0), math.sin(theta0))
+    i0 = g / (s * e0)
+    i1, i2 = _higher_moments(a, b, i0)
+    theta = theta0 + s * (kappa0 + 0.5 * dkappa * s)
+    return (
+        1j * g,
+        1j * s * s * e0 * i1,
+        0.5j * s * s * s * e0 * i2,
+        w * complex(math.cos(theta), math.sin(theta)),
+    )
+
+
+@compiled
+def _higher_moments(a: float, b: float, i0: complex) -> tuple[complex, complex]:
+    """``I_1(a, b)`` and ``I_2(a, b)`` from ``I_0``: B&F's recurrence in ``k`` down to
+    ``|a| = SMALL_A`` (enough for a derivative), the series below."""
+    if abs(a) < SMALL_A:
+        out = np.empty(3, np.complex128)
+        generalized_fresnel_into(a, b, False, out)
+        return out[1], out[2]
+    psi = 0.5 * a + b
+    e1 = complex(math.cos(psi), math.sin(psi))
+    # a I_{k+1} + b I_k = −i (e^{iψ(1)} − [k = 0]) + i k I_{k−1}
+    i1 = (-1j * (e1 - 1.0) - b * i0) / a
+    i2 = (-1j * e1 - b * i1 + 1j * i0) / a
+    return i1, i2
 
 
 @compiled
@@ -438,31 +483,31 @@ def normal_equations(
     """
     rows = indptr.size - 1
     band = 0
-    for i in range(rows):
-        lo, hi = params, -1
-        for e in range(indptr[i], indptr[i + 1]):
-            lo, hi = min(lo, col[e]), max(hi, col[e])
-        band = max(band, hi - lo)
+    for i in range(rows):  # a row's columns come in increasing order (see jacobian)
+        if indptr[i + 1] > indptr[i]:
+            band = max(band, col[indptr[i + 1] - 1] - col[indptr[i]])
     a = np.zeros((band + 1, params))
     b = np.zeros((band + 1, params))
     g = np.zeros(params)
     u = np.zeros(value.size)
+    re, im = value.real.copy(), value.imag.copy()
     for i in range(rows):
         r = residual[i]
-        for e in range(indptr[i], indptr[i + 1]):
-            ze = value[e]
-            g[col[e]] += (ze.conjugate() * r).real
-            for f in range(indptr[i], indptr[i + 1]):
-                if col[f] <= col[e]:
-                    a[col[e] - col[f], col[f]] += (value[f].conjugate() * ze).real
+        lo, hi = indptr[i], indptr[i + 1]
+        for e in range(lo, hi):
+            ce, xe, ye = col[e], re[e], im[e]
+            g[ce] += xe * r.real + ye * r.imag
+            for f in range(lo, e + 1):
+                a[ce - col[f], col[f]] += re[f] * xe + im[f] * ye
         if forward[i]:
-            vc = velocity[i].conjugate()
-            for e in range(indptr[i], indptr[i + 1]):
-                u[e] = (vc * value[e]).real
-            for e in range(indptr[i], indptr[i + 1]):
-                for f in range(indptr[i], indptr[i + 1]):
-                    if col[f] <= col[e]:
-                        b[col[e] - col[f], col[f]] += u[e] * u[f] / speed2[i]
+            vx, vy = velocity[i].real, velocity[i].imag
+            for e in range(lo, hi):
+                u[e] = vx * re[e] + vy * im[e]
+            inverse = 1.0 / speed2[i]
+            for e in range(lo, hi):
+                ue = u[e] * inverse
+                for f in range(lo, e + 1):
+                    b[col[e] - col[f], col[f]] += ue * u[f]
     return a, b, g, u
 
 

@@ -13,13 +13,14 @@ residuals are
   every evaluation (the trajectory may not wander off the contour between those instants).
 
 The Jacobian is exact for the targets (the trajectory is linear in them) and the onsets and
-instants (minus or plus a velocity), and a forward difference of the unit-chord shapes for the
-tangents. Each residual depends only on the strokes active at its instant and the parameters
-are ordered stroke by stroke, so the normal equations are banded; the instants are eliminated
-(a Schur complement, still banded) and the band is factored. An iteration costs one
-evaluation of the active (instant, stroke) pairs and one of the stepped shapes at them: linear
-in the number of strokes. The loop runs in compiled code
-(:func:`tagbot.gesture.kernels.refine_loop`); this module sets the problem up.
+instants (minus or plus a velocity); for the tangents it is closed form in the spirals'
+parameters, whose dependence on the tangents is a central difference of the G1 fit. Each
+residual depends only on the strokes active at its instant and the parameters are ordered
+stroke by stroke, so the normal equations are banded; the instants are eliminated (a Schur
+complement, still banded) and the band is factored. An iteration costs one evaluation of the
+active (instant, stroke) pairs and their derivatives: linear in the number of strokes. The loop
+runs in compiled code (:func:`tagbot.gesture.kernels.refine_loop`); this module sets the
+problem up.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ Index = NDArray[np.intp]
 PHI_LIMIT = 3.0
 """Tangent deviations stay within ±3 rad while refining (away from the ±π ambiguity)."""
 ANGLE_STEP = 1e-6
-"""Forward-difference step for the tangents' Jacobian columns, radians."""
+"""Central-difference step for the spirals' parameters in the tangents, radians."""
 REST = 1e-2
 """Instants' scale floor, a fraction of the median squared speed (see kernels.system)."""
 _DENSE = 4
