@@ -17,6 +17,7 @@ import numpy as np
 from tagbot.model.kernels import (
     N_CONSTANTS,
     SMALL_A,
+    TAYLOR_B,
     TINY,
     compiled,
     generalized_fresnel_into,
@@ -24,6 +25,7 @@ from tagbot.model.kernels import (
     segment_constants,
     segment_point,
     stroke_window,
+    taylor,
     unit_stroke,
 )
 
@@ -132,16 +134,20 @@ def evaluate_trace(
 def crossing(a: int, b: int, onsets, mu, sigma, lengths, steps: int) -> float:  # type: ignore[no-untyped-def]
     """When the speed profiles of strokes ``a`` and ``b`` cross between their peaks, or the
     later peak if they do not: safeguarded Newton's method on the log-speeds."""
-    peak_a = onsets[a] + math.exp(mu[a] - sigma[a] ** 2)
-    peak_b = onsets[b] + math.exp(mu[b] - sigma[b] ** 2)
+    onset_a, mu_a, sigma_a = onsets[a], mu[a], sigma[a]
+    onset_b, mu_b, sigma_b = onsets[b], mu[b], sigma[b]
+    # log(D Λ(t)) = log D − log σ − ℓ − (ℓ − μ)²/2σ², ℓ = log(t − t0).
+    offset = math.log(lengths[a] / sigma_a) - math.log(lengths[b] / sigma_b)
+    peak_a = onset_a + math.exp(mu_a - sigma_a * sigma_a)
+    peak_b = onset_b + math.exp(mu_b - sigma_b * sigma_b)
     lo, hi = min(peak_a, peak_b), max(peak_a, peak_b)
-    if not (_excess(lo, a, b, onsets, mu, sigma, lengths)[0] > 0.0):
+    if not (_excess(lo, onset_a, mu_a, sigma_a, onset_b, mu_b, sigma_b, offset)[0] > 0.0):
         return hi
-    if not (_excess(hi, a, b, onsets, mu, sigma, lengths)[0] < 0.0):
+    if not (_excess(hi, onset_a, mu_a, sigma_a, onset_b, mu_b, sigma_b, offset)[0] < 0.0):
         return hi
     t = 0.5 * (lo + hi)
     for _ in range(steps):
-        value, slope = _excess(t, a, b, onsets, mu, sigma, lengths)
+        value, slope = _excess(t, onset_a, mu_a, sigma_a, onset_b, mu_b, sigma_b, offset)
         if value > 0.0:
             lo = t
         else:
@@ -153,18 +159,19 @@ def crossing(a: int, b: int, onsets, mu, sigma, lengths, steps: int) -> float:  
 
 
 @compiled
-def _excess(t: float, a: int, b: int, onsets, mu, sigma, lengths) -> tuple[float, float]:  # type: ignore[no-untyped-def]
-    """The log-speed difference of strokes ``a`` and ``b`` at ``t``, and its derivative:
-    ``log(D Λ(t)) = log D − log σ − ℓ − (ℓ − μ)²/2σ²`` with ``ℓ = log(t − t0)``."""
-    ea = max(t - onsets[a], TINY)
-    eb = max(t - onsets[b], TINY)
+def _excess(
+    t: float, onset_a: float, mu_a: float, sigma_a: float, onset_b: float, mu_b: float,
+    sigma_b: float, offset: float,
+) -> tuple[float, float]:  # fmt: skip
+    """The log-speed difference of strokes ``a`` and ``b`` at ``t`` (``offset`` the difference
+    of their ``log(D/σ)``), and its derivative in ``t``."""
+    ea = max(t - onset_a, TINY)
+    eb = max(t - onset_b, TINY)
     la, lb = math.log(ea), math.log(eb)
-    za = (la - mu[a]) / sigma[a]
-    zb = (lb - mu[b]) / sigma[b]
-    value = (math.log(lengths[a] / sigma[a]) - la - 0.5 * za * za) - (
-        math.log(lengths[b] / sigma[b]) - lb - 0.5 * zb * zb
-    )
-    slope = (1.0 + zb / sigma[b]) / eb - (1.0 + za / sigma[a]) / ea
+    za = (la - mu_a) / sigma_a
+    zb = (lb - mu_b) / sigma_b
+    value = offset - la - 0.5 * za * za + lb + 0.5 * zb * zb
+    slope = (1.0 + zb / sigma_b) / eb - (1.0 + za / sigma_a) / ea
     return value, slope
 
 
@@ -280,8 +287,12 @@ def _correct_trace(
         if worst < tolerance:
             return
         moved = False
-        for step in (1.0, 0.5, 0.25, 0.125):
-            trial[1:-1] = targets[1:-1] + step * error
+        step = 1.0
+        while step > 0.1 and not moved:  # 1, ½, ¼, ⅛
+            for i in range(inner):
+                trial[i + 1, 0] = targets[i + 1, 0] + step * error[i, 0]
+                trial[i + 1, 1] = targets[i + 1, 1] + step * error[i, 1]
+            step *= 0.5
             if _collapsed(trial, 1e-9 * size):
                 continue
             critical_points(
@@ -293,7 +304,6 @@ def _correct_trace(
                 error[:] = trial_error
                 worst = trial_worst
                 moved = True
-                break
         if not moved:
             return
 
@@ -387,7 +397,7 @@ def jacobian(
         for i in range(begin[j], stop[j]):
             q = offsets[j] + i - begin[j]
             w, g = pairs[q, 0], complex(pairs[q, 1], pairs[q, 2])
-            partial = _shape_partials(shape[j], w, g)
+            partial = _shape_partials(shape[j, 0], shape[j, 1], shape[j, 2], shape[j, 3], w, g)
             for m in range(angles):
                 dg = 0j
                 for p in range(4):
@@ -403,23 +413,34 @@ def jacobian(
             a, b = j - 1, j
             lo, hi = min(begin[a], begin[b]), max(stop[a], stop[b])
             for i in range(lo, hi):
-                c = _shape_at(a, i, begin, stop, offsets, pairs) - _shape_at(
-                    b, i, begin, stop, offsets, pairs
-                )
-                col[fill[i]], value[fill[i]] = target_col[j], c
-                col[fill[i] + 1], value[fill[i] + 1] = target_col[j] + 1, 1j * c
-                fill[i] += 2
+                # Each stroke's unit shape at row i: 0 before its window, 1 after.
+                cx, cy = 0.0, 0.0
+                if i >= stop[a]:
+                    cx = 1.0
+                elif i >= begin[a]:
+                    q = offsets[a] + i - begin[a]
+                    cx, cy = pairs[q, 1], pairs[q, 2]
+                if i >= stop[b]:
+                    cx -= 1.0
+                elif i >= begin[b]:
+                    q = offsets[b] + i - begin[b]
+                    cx, cy = cx - pairs[q, 1], cy - pairs[q, 2]
+                e = fill[i]
+                col[e], value[e] = target_col[j], complex(cx, cy)
+                col[e + 1], value[e + 1] = target_col[j] + 1, complex(-cy, cx)
+                fill[i] = e + 2
     return indptr, col, value
 
 
 @compiled
-def _shape_partials(shape: np.ndarray, w: float, g: complex) -> tuple[complex, ...]:
+def _shape_partials(
+    theta0: float, kappa0: float, dkappa: float, length: float, w: float, g: complex
+) -> tuple[complex, complex, complex, complex]:
     """Derivatives of a unit shape's point ``g = P(L·w)`` in its ``(θ0, κ0, κ', L)``.
 
     With ``P(s) = s·e^{iθ0}·I_0(κ's², κ0 s)``: ``∂P/∂θ0 = iP``, ``∂P/∂κ0 = i s² e^{iθ0} I_1``,
     ``∂P/∂κ' = (i/2) s³ e^{iθ0} I_2`` and ``∂P/∂L = w·e^{iθ(s)}``.
     """
-    theta0, kappa0, dkappa, length = shape[0], shape[1], shape[2], shape[3]
     s = length * w
     if s == 0.0:
         return 0j, 0j, 0j, 0j
@@ -440,6 +461,8 @@ def _shape_partials(shape: np.ndarray, w: float, g: complex) -> tuple[complex, .
 def _higher_moments(a: float, b: float, i0: complex) -> tuple[complex, complex]:
     """``I_1(a, b)`` and ``I_2(a, b)`` from ``I_0``: B&F's recurrence in ``k`` down to
     ``|a| = SMALL_A`` (enough for a derivative), the series below."""
+    if abs(a) < SMALL_A and abs(b) <= TAYLOR_B:
+        return taylor(a, b, 1e-12)[1:]  # a derivative: 1e-12 of the unit chord is plenty
     if abs(a) < SMALL_A:
         out = np.empty(3, np.complex128)
         generalized_fresnel_into(a, b, False, out)
@@ -450,17 +473,6 @@ def _higher_moments(a: float, b: float, i0: complex) -> tuple[complex, complex]:
     i1 = (-1j * (e1 - 1.0) - b * i0) / a
     i2 = (-1j * e1 - b * i1 + 1j * i0) / a
     return i1, i2
-
-
-@compiled
-def _shape_at(j, i, begin, stop, offsets, pairs) -> complex:  # type: ignore[no-untyped-def]
-    """Stroke ``j``'s unit shape at evaluation row ``i``: 0 before its window, 1 after."""
-    if i < begin[j]:
-        return 0j
-    if i >= stop[j]:
-        return 1.0 + 0j
-    q = offsets[j] + i - begin[j]
-    return complex(pairs[q, 1], pairs[q, 2])
 
 
 @compiled
@@ -476,38 +488,38 @@ def normal_equations(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The real normal equations of the complex Jacobian rows, in band storage.
 
-    Returns ``A = Re(CᴴC)`` and ``B = Σ u uᵀ / |v|²`` over the forward rows (lower bands:
-    ``[d, c] = M[c + d, c]``), ``g = Re(Cᴴ r)``, and per row ``u = Re(conj(v)·C_row)`` (aligned
-    with ``value``) — the coupling of a forward row's own instant, whose column is its velocity
-    ``v``, to the parameters.
+    Returns ``A = Re(CᴴC)`` and ``B = Σ u uᵀ / |v|²`` over the forward rows (lower bands, row
+    by row: ``[c, d] = M[c, c − d]``), ``g = Re(Cᴴ r)``, and per row ``u = Re(conj(v)·C_row)``
+    (aligned with ``value``) — the coupling of a forward row's own instant, whose column is its
+    velocity ``v``, to the parameters.
     """
     rows = indptr.size - 1
     band = 0
     for i in range(rows):  # a row's columns come in increasing order (see jacobian)
         if indptr[i + 1] > indptr[i]:
             band = max(band, col[indptr[i + 1] - 1] - col[indptr[i]])
-    a = np.zeros((band + 1, params))
-    b = np.zeros((band + 1, params))
+    a = np.zeros((params, band + 1))
+    b = np.zeros((params, band + 1))
     g = np.zeros(params)
     u = np.zeros(value.size)
     re, im = value.real.copy(), value.imag.copy()
     for i in range(rows):
-        r = residual[i]
+        rr, ri = residual[i].real, residual[i].imag
         lo, hi = indptr[i], indptr[i + 1]
-        for e in range(lo, hi):
-            ce, xe, ye = col[e], re[e], im[e]
-            g[ce] += xe * r.real + ye * r.imag
-            for f in range(lo, e + 1):
-                a[ce - col[f], col[f]] += re[f] * xe + im[f] * ye
         if forward[i]:
             vx, vy = velocity[i].real, velocity[i].imag
             for e in range(lo, hi):
                 u[e] = vx * re[e] + vy * im[e]
-            inverse = 1.0 / speed2[i]
-            for e in range(lo, hi):
-                ue = u[e] * inverse
-                for f in range(lo, e + 1):
-                    b[col[e] - col[f], col[f]] += ue * u[f]
+        inverse = 1.0 / speed2[i] if forward[i] else 0.0
+        for e in range(lo, hi):
+            ce, xe, ye = col[e], re[e], im[e]
+            g[ce] += xe * rr + ye * ri
+            ue = u[e] * inverse
+            row_a, row_b = a[ce], b[ce]
+            for f in range(lo, e + 1):
+                d = ce - col[f]
+                row_a[d] += re[f] * xe + im[f] * ye
+                row_b[d] += ue * u[f]
     return a, b, g, u
 
 
@@ -533,10 +545,13 @@ def damped_step(
     −g + Σ u g_t / d`` and ``δt = (−g_t − u·δp) / d``.
     """
     params = g.size
-    band = a.shape[0] - 1
-    factor = a - b / (1.0 + damping)
+    band = a.shape[1] - 1
+    factor = np.empty_like(a)
+    shrink = 1.0 / (1.0 + damping)
     for c in range(params):
-        factor[0, c] += damping * scale[c]
+        for d in range(band + 1):
+            factor[c, d] = a[c, d] - b[c, d] * shrink
+        factor[c, 0] += damping * scale[c]
     rhs = -g.copy()
     rows = indptr.size - 1
     for i in range(rows):
@@ -563,22 +578,21 @@ def damped_step(
 
 @compiled
 def _band_cholesky(m: np.ndarray, band: int) -> bool:
-    """In place: the lower band ``m`` (``m[d, c] = M[c + d, c]``) becomes its Cholesky factor
-    ``L`` in the same storage. False if ``M`` is not positive definite."""
-    n = m.shape[1]
-    for j in range(n):
-        s = m[0, j]
-        for k in range(max(0, j - band), j):
-            s -= m[j - k, k] ** 2
-        if not s > 0.0:
-            return False
-        d = math.sqrt(s)
-        m[0, j] = d
-        for i in range(j + 1, min(n, j + band + 1)):
-            s = m[i - j, j]
-            for k in range(max(0, i - band), j):
-                s -= m[i - k, k] * m[j - k, k]
-            m[i - j, j] = s / d
+    """In place: the lower band ``m`` (``m[i, d] = M[i, i − d]``) becomes its Cholesky factor
+    ``L`` in the same storage, row by row. False if ``M`` is not positive definite."""
+    n = m.shape[0]
+    for i in range(n):
+        first = max(0, i - band)
+        for j in range(first, i + 1):
+            s = m[i, i - j]
+            for k in range(first, j):
+                s -= m[i, i - k] * m[j, j - k]
+            if j < i:
+                m[i, i - j] = s / m[j, 0]
+            elif s > 0.0:
+                m[i, 0] = math.sqrt(s)
+            else:
+                return False
     return True
 
 
@@ -590,13 +604,13 @@ def _band_solve(factor: np.ndarray, band: int, rhs: np.ndarray) -> np.ndarray:
     for i in range(n):
         s = y[i]
         for k in range(max(0, i - band), i):
-            s -= factor[i - k, k] * y[k]
-        y[i] = s / factor[0, i]
+            s -= factor[i, i - k] * y[k]
+        y[i] = s / factor[i, 0]
     for i in range(n - 1, -1, -1):
         s = y[i]
         for k in range(i + 1, min(n, i + band + 1)):
-            s -= factor[k - i, i] * y[k]
-        y[i] = s / factor[0, i]
+            s -= factor[k, k - i] * y[k]
+        y[i] = s / factor[i, 0]
     return y
 
 
@@ -900,7 +914,7 @@ def system(
             v[i] = velocity[i]
             speed2[i] = velocity[i].real ** 2 + velocity[i].imag ** 2
             moving[instant[i]] = speed2[i]
-    floor = rest * max(np.median(moving), 1e-300) if forward else 0.0
+    floor = rest * max(_median(moving), 1e-300) if forward else 0.0
     for i in range(rows):
         if is_forward[i]:
             speed2[i] = max(speed2[i], floor)
@@ -917,9 +931,20 @@ def system(
     g_t = np.empty(rows)
     for i in range(rows):
         g_t[i] = (v[i].conjugate() * residual[i]).real
-    top = max(np.max(a[0]), 1e-300) if params else 1.0
-    scale = np.maximum(a[0], 1e-12 * top)
+    top = 1e-300
+    for c in range(params):
+        top = max(top, a[c, 0])
+    scale = np.empty(params)
+    for c in range(params):
+        scale[c] = max(a[c, 0], 1e-12 * top)
     return a, b, g, indptr, col, u, g_t, speed2, is_forward, scale
+
+
+@compiled
+def _median(values: np.ndarray) -> float:
+    ordered = values[np.argsort(values, kind="mergesort")]
+    middle = ordered.size // 2
+    return ordered[middle] if ordered.size % 2 else 0.5 * (ordered[middle - 1] + ordered[middle])
 
 
 @compiled
@@ -996,7 +1021,9 @@ def refine_loop(
             a, b, scale, g, indptr, col, u, g_t, speed2, is_forward, damping
         )
         trial_cost = np.inf
-        trial_x = np.minimum(np.maximum(x + step, lower), upper)
+        trial_x = np.empty(params)
+        for c in range(params):
+            trial_x[c] = min(max(x[c] + step[c], lower[c]), upper[c])
         trial_tau = tau.copy()
         instant = current[0]
         for i in range(instant.size):
