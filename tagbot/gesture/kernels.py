@@ -349,9 +349,11 @@ def jacobian(
     onset_col: np.ndarray,
     target_col: np.ndarray,
     rows: int,
+    tail: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The trajectory's complex Jacobian in the plan's parameters, as rows (``indptr``, ``col``,
-    ``value``) per evaluation row.
+    ``value``) per evaluation row; where a stroke's CDF is within ``tail`` of 0 or 1 it counts
+    as not started or complete (``tail = 0``: exact).
 
     Targets: ``x = Σ_i p_i (G_{i−1} − G_i)`` is complex-linear in each interior target. Onsets:
     moving one later moves its stroke's contribution back by its velocity. Tangents: the unit
@@ -378,6 +380,17 @@ def jacobian(
             minus = unit_stroke(phi1[j] - d1, phi2[j] - d2)
             for q in range(4):
                 slope[m, j, q] = (plus[q] - minus[q]) / (2.0 * h)
+    # Each stroke's rows beyond its tails, ``first..last`` (within ``begin..stop``; w rises).
+    first, last = begin.copy(), stop.copy()
+    for j in range(n):
+        while first[j] < stop[j] and pairs[offsets[j] + first[j] - begin[j], 0] < tail:
+            first[j] += 1
+        last[j] = first[j]
+        while last[j] < stop[j] and pairs[offsets[j] + last[j] - begin[j], 0] <= 1.0 - tail:
+            last[j] += 1
+    for j in range(n):  # pair index of row i: offsets[j] + i − begin[j], with the new begin
+        offsets[j] += first[j] - begin[j]
+    begin, stop = first, last
     # Count the entries per row, then fill them in row order.
     count = np.zeros(rows + 1, np.intp)
     for j in range(n):
@@ -896,6 +909,7 @@ def system(
     rest,
     forward,
     params,
+    tail,
 ):  # type: ignore[no-untyped-def]
     """The normal equations at the current residuals: ``(A, B, g, indptr, col, u, g_t,
     speed2, forward rows, scale)`` for :func:`damped_step`.
@@ -925,7 +939,7 @@ def system(
             chords[j, 1] = targets[j + k + 1, 1] - targets[j + k, 1]
     indptr, col, value = jacobian(
         begin, stop, pairs, chords, first_stroke, phi1, phi2, arcs_only, angle_step, angle_col,
-        onset_col, target_col, rows,
+        onset_col, target_col, rows, tail,
     )  # fmt: skip
     a, b, g, u = normal_equations(indptr, col, value, residual, v, speed2, is_forward, params)
     g_t = np.empty(rows)
@@ -988,6 +1002,7 @@ def refine_loop(
     angle_step,
     rest,
     iterations,
+    tail,
 ):  # type: ignore[no-untyped-def]
     """Levenberg-Marquardt with Nielsen's damping update over the plan and the forward
     instants (see :mod:`tagbot.gesture.refine`). Returns the plan ``(targets, onsets, phi1,
@@ -1005,7 +1020,7 @@ def refine_loop(
     normal = system(
         current[0], current[1], current[2], current[3], current[4], current[5], targets, phi1,
         phi2, first_stroke, angle_col, onset_col, target_col, arcs_only, angle_step, rest,
-        forward, params,
+        forward, params, tail,
     )  # fmt: skip
     stale = False
     for _ in range(iterations):
@@ -1013,7 +1028,7 @@ def refine_loop(
             normal = system(
                 current[0], current[1], current[2], current[3], current[4], current[5], targets,
                 phi1, phi2, first_stroke, angle_col, onset_col, target_col, arcs_only,
-                angle_step, rest, forward, params,
+                angle_step, rest, forward, params, tail,
             )  # fmt: skip
             stale = False
         a, b, g, indptr, col, u, g_t, speed2, is_forward, scale = normal

@@ -43,6 +43,9 @@ ANGLE_STEP = 1e-6
 """Central-difference step for the spirals' parameters in the tangents, radians."""
 REST = 1e-2
 """Instants' scale floor, a fraction of the median squared speed (see kernels.system)."""
+JACOBIAN_TAIL = 1e-4
+"""In the Jacobian (not the residuals), a stroke whose CDF is within this of 0 or 1 counts as not
+started or complete: its tails' tiny derivatives would double the entries per row."""
 _DENSE = 4
 """Initial instants are picked among this many per grid instant."""
 
@@ -97,6 +100,7 @@ def refine(
         ANGLE_STEP,
         REST,
         int(options.iterations),
+        JACOBIAN_TAIL,
     )
     return strokes.replace(targets=targets, onsets=onsets, phi1=phi1, phi2=phi2), misfit
 
