@@ -30,7 +30,7 @@ bounding box), so a fit does not depend on units; angles are degrees; times seco
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -133,7 +133,7 @@ def fit(traces: Sequence[Any], model: Model = "gamma", **options: Any) -> Tag:
     unknown = sorted(set(options) - {f.name for f in fields(FitOptions)})
     if unknown:
         raise PlanError(f"{unknown[0]}: not a fit option (see tagbot.gesture.FitOptions)")
-    opts = replace(FitOptions(), **options)
+    opts = FitOptions(**options)
     polylines = [_polyline(trace, k) for k, trace in enumerate(traces)]
     if not polylines:
         raise PlanError("traces: empty (nothing to fit)")

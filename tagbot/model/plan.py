@@ -58,9 +58,9 @@ def _vector(name: str, values: ArrayLike, size: int) -> Array:
     if array is None or array.size != size:
         got = "a scalar" if array is None else f"{array.size} values"
         raise PlanError(f"strokes: expected {size} values of {name} (one per stroke), got {got}")
-    bad = np.flatnonzero(~np.isfinite(array))
-    if bad.size:
-        raise PlanError(f"strokes[{bad[0]}].{name}: must be finite, got {float(array[bad[0]])!r}")
+    if not np.isfinite(array).all():
+        bad = int(np.flatnonzero(~np.isfinite(array))[0])
+        raise PlanError(f"strokes[{bad}].{name}: must be finite, got {float(array[bad])!r}")
     return array
 
 
@@ -93,30 +93,28 @@ class Plan:
             raise PlanError(f"targets: expected a list of [x, y] pairs, got shape {targets.shape}")
         if len(targets) < 2:
             raise PlanError(f"targets: need at least 2, got {len(targets)}")
-        bad = np.flatnonzero(~np.all(np.isfinite(targets), axis=1))
-        if bad.size:
-            raise PlanError(f"targets[{bad[0]}]: must be finite, got {targets[bad[0]].tolist()}")
-        same = np.flatnonzero(np.all(targets[1:] == targets[:-1], axis=1))
-        if same.size:
-            raise PlanError(f"targets[{same[0] + 1}]: coincides with targets[{same[0]}]")
-        chord = np.hypot(*np.diff(targets, axis=0).T)
+        if not np.isfinite(targets).all():
+            bad = int(np.flatnonzero(~np.all(np.isfinite(targets), axis=1))[0])
+            raise PlanError(f"targets[{bad}]: must be finite, got {targets[bad].tolist()}")
+        step = np.diff(targets, axis=0)
+        chord = np.hypot(step[:, 0], step[:, 1])
         extent = float(np.hypot(*np.ptp(targets, axis=0)))
-        close = np.flatnonzero((chord < MIN_CHORD * extent) | (chord < 1e-100))
-        if close.size:
-            j = int(close[0])
+        if chord.min() < max(MIN_CHORD * extent, 1e-100):
+            same = np.flatnonzero(chord == 0.0)
+            if same.size:
+                raise PlanError(f"targets[{same[0] + 1}]: coincides with targets[{same[0]}]")
+            j = int(np.flatnonzero(chord < max(MIN_CHORD * extent, 1e-100))[0])
             raise PlanError(
                 f"targets[{j + 1}]: too close to targets[{j}] ({chord[j]:.3g} apart in a plan"
                 f" {extent:.3g} across; need more than {MIN_CHORD:g} of it)"
             )
         n = len(targets) - 1
         fields = {name: _vector(name, getattr(self, name), n) for name in _STROKE_FIELDS}
-        negative = np.flatnonzero(fields["dt"] < 0)
-        if negative.size:
-            j = negative[0]
+        if fields["dt"].min() < 0:
+            j = int(np.flatnonzero(fields["dt"] < 0)[0])
             raise PlanError(f"strokes[{j}].dt: must be >= 0, got {float(fields['dt'][j])!r}")
-        nonpositive = np.flatnonzero(fields["sigma"] <= 0)
-        if nonpositive.size:
-            j = nonpositive[0]
+        if fields["sigma"].min() <= 0:
+            j = int(np.flatnonzero(fields["sigma"] <= 0)[0])
             raise PlanError(f"strokes[{j}].sigma: must be > 0, got {float(fields['sigma'][j])!r}")
         start = float(self.start)
         if not np.isfinite(start):
