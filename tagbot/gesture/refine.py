@@ -19,7 +19,7 @@ residual depends only on the strokes active at its instant and the parameters ar
 stroke by stroke, so the normal equations are banded; the instants are eliminated (a Schur
 complement, still banded) and the band is factored. An iteration costs one evaluation of the
 active (instant, stroke) pairs and their derivatives: linear in the number of strokes. The loop
-runs in compiled code (:func:`tagbot.gesture.kernels.refine_loop`); this module sets the
+runs in compiled code (:func:`tagbot.gesture.refine_kernels.refine_loop`); this module sets the
 problem up.
 """
 
@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from tagbot.gesture import kernels
+from tagbot.gesture import refine_kernels
 from tagbot.gesture.strokes import Strokes
 from tagbot.model.plan import END_TOLERANCE
 
@@ -42,7 +42,7 @@ PHI_LIMIT = 3.0
 ANGLE_STEP = 1e-6
 """Central-difference step for the spirals' parameters in the tangents, radians."""
 REST = 1e-2
-"""Instants' scale floor, a fraction of the median squared speed (see kernels.system)."""
+"""Instants' scale floor, a fraction of the median squared speed (see refine_kernels.system)."""
 JACOBIAN_TAIL = 1e-4
 """In the Jacobian (not the residuals), a stroke whose CDF is within this of 0 or 1 counts as not
 started or complete: its tails' tiny derivatives would double the entries per row."""
@@ -79,7 +79,7 @@ def refine(
     layout = _Layout(strokes, options.arcs_only)
     lower, upper = layout.bounds(strokes, options.onset_slack)
     goal = problem.contour[problem.goal_index]
-    targets, onsets, phi1, phi2, _, misfit = kernels.refine_loop(
+    targets, onsets, phi1, phi2, _, misfit = refine_kernels.refine_loop(
         *problem.plan_arrays(strokes),
         layout.angle_col,
         layout.onset_col,
@@ -164,7 +164,7 @@ class _Problem:
 
     @property
     def contour_arrays(self) -> tuple[Array, Array, Index, Index, float]:
-        header, start, order = kernels.buckets(self.contour, self.contour_first, self.cell)
+        header, start, order = refine_kernels.buckets(self.contour, self.contour_first, self.cell)
         return self.contour, header, start, order, self.cell
 
     @staticmethod
@@ -184,7 +184,7 @@ class _Problem:
         """Each goal's instant: the closest of a dense grid along its trace's trajectory."""
         dense = np.diff(self.grid_first) * _DENSE
         goal, goal_first, _, _ = self.goal_arrays
-        return kernels.initial_instants(
+        return refine_kernels.initial_instants(
             *self.plan_arrays(strokes),
             goal,
             goal_first,
@@ -196,8 +196,8 @@ class _Problem:
         )
 
     def residuals(self, strokes: Strokes, tau: Array) -> tuple[Array, ...]:
-        """:func:`tagbot.gesture.kernels.residuals` for ``strokes`` and the instants ``tau``."""
-        return kernels.residuals(
+        """The residuals (:func:`~tagbot.gesture.refine_kernels.residuals`) at instants ``tau``."""
+        return refine_kernels.residuals(
             *self.plan_arrays(strokes),
             tau,
             *self.goal_arrays,

@@ -4,7 +4,7 @@ Jacobian checked against finite differences."""
 import numpy as np
 import pytest
 
-from tagbot.gesture import kernels
+from tagbot.gesture import refine_kernels as kernels
 from tagbot.gesture.reconstruct import correct_targets
 from tagbot.gesture.refine import (
     ANGLE_STEP,
