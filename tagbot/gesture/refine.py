@@ -56,9 +56,9 @@ class RefineOptions:
 
     iterations: int = 4
     """Levenberg-Marquardt iterations at most."""
-    contour_samples: int = 16
+    contour_samples: int = 14
     """Contour samples per stroke that the trajectory must pass near."""
-    path_samples: int = 8
+    path_samples: int = 7
     """Trajectory instants per stroke that must lie near the contour."""
     onset_slack: float = 0.125
     """How far each onset may move from where it started, seconds."""
