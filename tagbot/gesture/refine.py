@@ -54,8 +54,9 @@ _DENSE = 4
 class RefineOptions:
     """How hard the refinement works."""
 
-    iterations: int = 4
-    """Levenberg-Marquardt iterations at most."""
+    iterations: int = 3
+    """Levenberg-Marquardt steps taken at most (each with a new Jacobian; rejected trial steps,
+    three per step at most, are not counted)."""
     contour_samples: int = 14
     """Contour samples per stroke that the trajectory must pass near."""
     path_samples: int = 7

@@ -685,7 +685,12 @@ def refine_loop(
         forward, params, tail,
     )  # fmt: skip
     stale = False
-    for _ in range(iterations):
+    # ``iterations`` counts accepted steps (Jacobians); a rejected step only costs a residual
+    # evaluation, and up to three per accepted one are allowed.
+    accepted = 0
+    for _ in range(4 * iterations):
+        if accepted == iterations:
+            break
         if stale:
             normal = system(
                 current[0], current[1], current[2], current[3], current[4], current[5], targets,
@@ -722,6 +727,7 @@ def refine_loop(
             improvement = 1.0 - trial_cost / cost
             x, tau, current, cost = trial_x, trial_tau, trial, trial_cost
             targets, onsets, phi1, phi2 = trial_plan
+            accepted += 1
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * min(gain, 1.0) - 1.0) ** 3)
             grow = 2.0
             stale = True
