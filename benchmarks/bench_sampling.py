@@ -23,9 +23,10 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from scipy.special import fresnel
+from scipy.special import fresnel, ndtr
 
-from tagbot.model import euler
+from tagbot.model import kernels
+from tagbot.model.motion import sample_plan
 from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, Plan, Tag
 
 
@@ -64,19 +65,19 @@ def active_pairs(tag: Tag, dt: float) -> int:
 
 
 def fresnel_arguments(tag: Tag, dt: float) -> np.ndarray:
-    """The arguments the sampler passes to scipy's Fresnel integrals while sampling ``tag``."""
-    recorded: list[np.ndarray] = []
-
-    def recording(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        recorded.append(np.array(u, copy=True))
-        return fresnel(u)
-
-    euler.fresnel, original = recording, euler.fresnel
-    try:
-        tag.sample(dt)
-    finally:
-        euler.fresnel = original
-    return np.concatenate(recorded) if recorded else np.zeros(1)
+    """The arguments at which the sampler evaluates Fresnel integrals while sampling ``tag``:
+    one per (sample, active spiral stroke) pair, ``u = (s − s_c)/ρ`` (see tagbot.model.kernels)."""
+    recorded: list[np.ndarray] = [np.zeros(0)]
+    for k, plan in enumerate(tag.plans):
+        t, _, _ = sample_plan(tag, k, dt)
+        constants = plan.geometry.constants
+        t_on, t_off = plan.windows(tag.size)
+        for j in np.flatnonzero(constants[:, kernels.KIND] == kernels.SPIRAL):
+            active = t[(t >= t_on[j]) & (t <= t_off[j])]
+            w = ndtr((np.log(active - plan.onsets[j]) - plan.mu[j]) / plan.sigma[j])
+            s = plan.geometry.length[j] * w
+            recorded.append((s - constants[j, kernels.S_CENTRE]) * constants[j, kernels.INV_SCALE])
+    return np.concatenate(recorded) if len(recorded) > 1 else np.zeros(1)
 
 
 def best_times(fns: dict[str, Callable[[], object]], repeat: int) -> dict[str, float]:

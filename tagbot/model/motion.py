@@ -154,14 +154,13 @@ def evaluate_plan(plan: Plan, t: ArrayLike, size: float | None = None) -> tuple[
     xy = plan.targets[0] + np.cumsum(done[:count], axis=0)
     v = np.zeros((count, 2))
 
-    # Flatten the (sample, active stroke) pairs, strokes ordered by curve kind (see
-    # Clothoids.evaluate_runs) and processed in cache-sized chunks of consecutive strokes.
-    order = np.argsort(geometry.kind, kind="stable")
-    counts = (stop - begin)[order]
+    # Flatten the (sample, active stroke) pairs, processed in cache-sized chunks of consecutive
+    # strokes.
+    counts = stop - begin
     chunk_of = np.cumsum(counts) // _CHUNK
     for chunk in np.unique(chunk_of[counts > 0]):
-        pick = np.flatnonzero(chunk_of == chunk)
-        strokes, n = order[pick], counts[pick]
+        strokes = np.flatnonzero(chunk_of == chunk)
+        n = counts[strokes]
         lo = int(begin[strokes].min())
         row = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n - (begin[strokes] - lo), n)
         span = int(row.max()) + 1
