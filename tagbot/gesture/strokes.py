@@ -1,4 +1,5 @@
-"""Every trace's strokes side by side, evaluated in one numpy pass (the fitter's working form).
+"""Every trace's strokes side by side (the fitter's working form), as the compiled loops of
+:mod:`tagbot.gesture.kernels` take them.
 
 Reconstruction works on all the traces of a tag at once: each trace's plan keeps its own clock
 (starting at 0), and a sample belongs to one trace. Per stroke, the curve is its unit-chord shape
@@ -149,21 +150,15 @@ class Strokes:
 
     # --- evaluation ----------------------------------------------------------------------------
 
-    def evaluate(self, trace: Index, t: Array, size: float) -> Evaluation:
-        """Positions and velocities at times ``t`` of traces ``trace`` (sorted by trace, then
-        time), with the (sample, active stroke) pairs kept for Jacobians."""
+    def evaluate(self, trace: Index, t: Array, size: float) -> tuple[Array, Array]:
+        """Positions and velocities ``(N, 2)`` at times ``t`` of traces ``trace`` (sorted by
+        trace, then time)."""
         t = np.ascontiguousarray(t, dtype=float)
         sample_first = np.searchsorted(trace, np.arange(len(self.counts) + 1))
-        xy, v, begin, stop, values = kernels.evaluate(
+        xy, v, _, _, _ = kernels.evaluate(
             t, sample_first, self.first_stroke, *self.kernel_arrays, *self.windows(size)
         )
-        counts = stop - begin
-        offsets = np.concatenate([[0], np.cumsum(counts)])
-        stroke = np.repeat(np.arange(len(counts)), counts)
-        sample = np.arange(offsets[-1]) - np.repeat(offsets[:-1] - begin, counts)
-        w, gx, gy, ux, uy = values.T
-        pairs = Pairs(sample, stroke, offsets, w, gx, gy, ux + 1j * uy, self.chords[stroke])
-        return Evaluation(xy, v, pairs, begin, stop, values)
+        return xy, v
 
     @property
     def kernel_arrays(self) -> tuple[Array, ...]:
@@ -176,38 +171,3 @@ class Strokes:
             shapes.constants,
             np.ascontiguousarray(shapes.length, dtype=float),
         )
-
-
-def evaluate_shapes(
-    shapes: Clothoids, stroke: Index, counts: Index, w: Array
-) -> tuple[Array, Array, Array, Array]:
-    """Points and unit tangents of ``shapes`` at the fractions ``w`` of their lengths, for pairs
-    grouped by stroke (``counts`` per stroke, in stroke order)."""
-    s = shapes.length[stroke] * w
-    return shapes.evaluate_runs(np.arange(len(counts)), counts, s)
-
-
-@dataclass(frozen=True, eq=False)
-class Pairs:
-    """(sample, active stroke) pairs grouped by stroke; ``offsets[j]`` is stroke j's first."""
-
-    sample: Index
-    stroke: Index
-    offsets: Index
-    w: Array
-    gx: Array
-    gy: Array
-    velocity: NDArray[np.complex128]
-    """d(shape point)/dt on the unit chord."""
-    chord: NDArray[np.complex128]
-
-
-@dataclass(frozen=True, eq=False)
-class Evaluation:
-    xy: Array
-    v: Array
-    pairs: Pairs
-    begin: Index
-    stop: Index
-    values: Array
-    """The pairs as the compiled loops give them: rows ``(w, gx, gy, ux, uy)``."""

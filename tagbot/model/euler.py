@@ -11,9 +11,10 @@ Positions are closed form. With the generalised Fresnel integrals ::
 
 the point at arc length ``s`` is ``(x0, y0) + s·exp(i theta0)·I_0(dkappa s², kappa0 s)``. For
 ``|a|`` above :data:`SMALL_A`, ``I_0`` is a difference of two standard Fresnel integrals (scipy);
-below it (near-arcs, where that difference would cancel catastrophically) a power series in ``a``
-over the moments ``M_n(b) = ∫₀¹ τ^n e^{ibτ} dτ`` is used, each moment computed by whichever
-recurrence is stable for it.
+below it (near-arcs, where that difference would cancel catastrophically) the integrand's Taylor
+series in τ where ``|b| ≤ 6``, and beyond that a power series in ``a`` over the moments
+``M_n(b) = ∫₀¹ τ^n e^{ibτ} dτ``, each moment computed by whichever recurrence is stable for it.
+The scalar maths is compiled (:mod:`tagbot.model.kernels`); this module is its array API.
 
 **Fit method: Bertolazzi & Frego (2015), "G1 fitting with clothoids".** The problem reduces to one
 equation in one unknown ``A = dkappa·L²/2`` whose root is bracketed and unique in the range the

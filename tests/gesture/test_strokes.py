@@ -41,11 +41,11 @@ def test_all_traces_at_once_match_each_plan_alone(sigma_model):
     strokes = Strokes.of(plans)
     size = 150.0
     trace, times = samples(plans, size, 200, np.random.default_rng(0))
-    result = strokes.evaluate(trace, np.concatenate(times), size)
+    all_xy, all_v = strokes.evaluate(trace, np.concatenate(times), size)
     for k, plan in enumerate(plans):
         xy, v = evaluate_plan(plan, times[k], size)
-        np.testing.assert_allclose(result.xy[trace == k], xy, atol=1e-9)
-        np.testing.assert_allclose(result.v[trace == k], v, atol=1e-9)
+        np.testing.assert_allclose(all_xy[trace == k], xy, atol=1e-9)
+        np.testing.assert_allclose(all_v[trace == k], v, atol=1e-9)
 
 
 def test_plans_round_trip_through_strokes():
