@@ -20,8 +20,9 @@ Per trace:
    ``split_error`` gets one more dominant point where it misses most, and its trace is fitted
    again (at most ``splits`` times, kept only if it got closer).
 
-All traces go through steps 5–7 together (:mod:`tagbot.gesture.strokes`): one numpy pass per
-step for the whole tag rather than one per trace.
+All traces go through steps 5–7 together (:mod:`tagbot.gesture.strokes`): one call of compiled
+code per step for the whole tag (:mod:`tagbot.gesture.kernels`,
+:mod:`tagbot.gesture.refine_kernels`, and :mod:`tagbot.gesture.contour_kernels` for steps 1–4).
 
 Lengths in :class:`FitOptions` are fractions of the tag's size (the diagonal of all traces'
 bounding box), so a fit does not depend on units; angles are degrees; times seconds.
@@ -150,7 +151,7 @@ def fit_trace(xy: ArrayLike, size: float, model: Model, opts: FitOptions) -> Pla
 
 
 def fit_plans(polylines: list[Array], size: float, model: Model, opts: FitOptions) -> list[Plan]:
-    """Each polyline → one plan (start 0), all fitted together (one numpy pass per step).
+    """Each polyline → one plan (start 0), all fitted together (one compiled call per step).
 
     With refinement on, a section that the refined trajectory still misses by more than
     ``split_error`` of the size gets one more dominant point where it misses most, and its trace
