@@ -256,3 +256,25 @@ def test_refinement_lowers_the_cost_and_keeps_the_ends():
         np.testing.assert_array_equal(done.targets[s.start], contour[0])
         np.testing.assert_array_equal(done.targets[s.stop - 1], contour[-1])
     np.testing.assert_array_equal(done.onsets[done.first_stroke[:-1]], 0.0)
+
+
+@pytest.mark.parametrize("cell", [0.3, 2.0, 50.0])
+def test_nearest_contour_sample_is_the_nearest(cell):
+    """The bucket grid's nearest point of a group equals a KD-tree's, for queries inside and
+    far outside the points, with cells much smaller and larger than their spacing."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(1)
+    points = np.concatenate(
+        [np.cumsum(rng.normal(size=(500, 2)), 0), np.cumsum(rng.normal(size=(300, 2)), 0) + 5]
+    )
+    first = np.array([0, 500, 800])
+    header, start, order = kernels.buckets(points, first, cell)
+    queries = rng.uniform(-60, 60, size=(400, 2))
+    for k in range(2):
+        group = points[first[k] : first[k + 1]]
+        distance, _ = cKDTree(group).query(queries)
+        for q, d in zip(queries, distance, strict=True):
+            found = kernels.nearest(points, header, start, order, cell, k, q[0], q[1])
+            assert first[k] <= found < first[k + 1]
+            assert np.hypot(*(points[found] - q)) == pytest.approx(d, abs=1e-12)
