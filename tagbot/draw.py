@@ -1,21 +1,28 @@
 """``tagbot draw``: a tag on a machine, and a run folder saying what happened.
 
-:func:`draw` runs a back end chosen by name from :data:`DEVICES` (imported lazily: ``grbl``, the
-pen plotter; ``dynamixel``, the servo arm), each simulated unless a port is named, and writes
-the run folder:
+A back end is chosen by name from :data:`DEVICES` (imported lazily: ``grbl``, the pen plotter;
+``dynamixel``, the servo arm). Each provides ``prepare(tag, *, profile, overrides, port,
+**options)``, which loads the profile, places, retimes and checks the whole job and checks the
+port's name (:func:`tagbot.ports.check_port`) *without writing a file or sending a byte*, and
+returns a :class:`PreparedRun`; its ``run(out, progress=, control=)`` then drives the machine
+(simulated unless a port is named) and returns a :class:`MachineRun`, also after a fault or
+Ctrl-C (with :attr:`MachineRun.error` set: the machine was stopped safely first).
+
+:func:`draw` prepares first, so every refusal happens before the run folder exists, then writes
+the run folder, the same for both devices:
 
 - ``plan.json``: the tag drawn (tag units);
-- ``motion.csv``: planned setpoints in machine mm, ``t,x,y,vx,vy,speed,pen``;
-- ``program.gcode`` (plotter) or ``joints.csv`` (arm): what was sent;
-- ``executed.csv``: ``t,x,y,pen`` as the machine did it (the simulator's recorder at 1 ms, or
-  the positions the machine reported);
-- ``report.json``: the device's figures (lines or ticks sent and acknowledged, errors,
-  durations...) and the comparison of executed against planned: path deviation mean/max (mm),
-  speed SNR (dB), drawing durations and the time alignment of each pen-down run;
+- ``motion.csv``: the whole planned timeline in machine mm on the job's clock (0 = when the job
+  starts), pen-up travel and pen moves included, ``t,x,y,vx,vy,speed,pen`` (pen 0 up, 1 down);
+- ``program.gcode`` (plotter) or ``joints.csv`` (arm): what is sent;
+- ``executed.csv``: ``t,x,y,pen`` on the same clock, as the machine did it: the simulator's
+  1 ms recorder, or what the machine reported (Grbl status reports, servo read-backs);
+- ``report.json``: what happened (see :func:`run_report`: the same keys for both devices, with
+  the device's own figures under ``details``), and the comparison of executed against planned;
 - pictures (``tag.png``, ``speed.png``, ``plan.png``) when the rendering extras are installed.
 
-The folder is written even when the machine stops on a fault or Ctrl-C; the error is then in
-``report.json`` and raised again.
+``plan.json`` and ``motion.csv`` are written before the machine starts, ``report.json`` in every
+case: a run folder is complete, or its ``report.json`` says what happened.
 """
 
 from __future__ import annotations
@@ -26,24 +33,38 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
+from tagbot.control import RunControl
 from tagbot.errors import InputError
 from tagbot.io.motionfile import MotionTable, write_motion_csv
 from tagbot.io.planfile import save_plan
 from tagbot.metrics import compare_execution
 from tagbot.model import Tag
 
-__all__ = ["DEVICES", "DrawResult", "MachineRun", "draw", "write_executed_csv"]
+__all__ = [
+    "DEVICES",
+    "DrawResult",
+    "MachineRun",
+    "PreparedRun",
+    "Progress",
+    "draw",
+    "prepare",
+    "run_report",
+    "write_executed_csv",
+]
 
 DEVICES: dict[str, str] = {
-    "grbl": "tagbot.plotter.machine:draw_backend",
-    "dynamixel": "tagbot.arm:draw_backend",
+    "grbl": "tagbot.plotter.machine:prepare",
+    "dynamixel": "tagbot.arm.run:prepare",
 }
-"""Back ends by name: ``module:function`` taking ``(tag, out, profile=, overrides=, port=,
-progress=, **options)`` and returning a :class:`MachineRun`."""
+"""Back ends by name: ``module:function`` of their ``prepare``."""
+
+Progress = Callable[[int, int], None]
+"""``progress(executed, total)``: program lines (plotter) or ticks (arm) the machine has
+executed so far, out of the job's total."""
 
 
 @dataclass
@@ -52,16 +73,51 @@ class MachineRun:
 
     device: str
     motion: MotionTable
-    """Planned setpoints in machine mm: t, xy, v, speed, pen."""
+    """The whole planned timeline in machine mm (travel and pen moves included, pen 0/1)."""
     planned_runs: list[tuple[np.ndarray, np.ndarray]]
-    """Per pen-down run: planned times and positions."""
+    """Per pen-down run: planned times and positions (the job's clock)."""
     plans: list[int]
+    """The plan (index in the tag) of each pen-down run."""
     executed: np.ndarray
-    """``(N, 4)``: t, x, y, pen as executed (empty if nothing ran)."""
+    """``(N, 4)``: t, x, y, pen as executed, on the job's clock (empty if nothing ran)."""
+    executed_source: str
+    """How :attr:`executed` was obtained, e.g. ``"simulator recorder, 1 ms"``, ``"status
+    reports, 5 Hz"``, ``"read-back, 100 Hz"``."""
+    sparse: bool
+    """True when :attr:`executed` holds the machine's own reports (a few per second): the
+    report then compares like with like, planned positions at the reported instants."""
+    unit: str
+    """``"line"`` (1-based line of program.gcode) or ``"tick"`` (row of joints.csv)."""
+    total: int
+    """Lines or ticks in the job."""
+    sent: int
+    executed_steps: int
+    """How many lines or ticks the machine executed: the last executed one, counting from 1."""
+    resume_from: int | None
+    """The line to resume from after a stop (plotter), or None."""
+    planned_duration: float
+    """The job's planned duration, s (travel and pen moves included)."""
+    executed_duration: float
     placement: dict[str, Any]
-    report: dict[str, Any] = field(default_factory=dict)
+    port: str
+    """The port as named, or ``"simulator"``."""
+    details: dict[str, Any] = field(default_factory=dict)
+    """The device's own figures (acknowledged lines, buffer levels, read-back misses...)."""
+    warnings: list[str] = field(default_factory=list)
     error: BaseException | None = None
     """The fault that stopped the run (re-raised once the run folder is written)."""
+
+
+class PreparedRun(Protocol):
+    """A job checked and ready to go (nothing written, nothing sent yet)."""
+
+    device: str
+    planned: MotionTable
+    """The whole planned timeline, as :attr:`MachineRun.motion`."""
+
+    def run(
+        self, out: Path, *, progress: Progress | None = None, control: RunControl | None = None
+    ) -> MachineRun: ...
 
 
 @dataclass(frozen=True)
@@ -72,6 +128,21 @@ class DrawResult:
     report: dict[str, Any]
 
 
+def prepare(
+    tag: Tag,
+    *,
+    device: str = "grbl",
+    port: str | None = None,
+    profile: str | Path | None = None,
+    overrides: tuple[str, ...] = (),
+    **options: Any,
+) -> PreparedRun:
+    """Check everything about drawing ``tag`` on ``device`` (profile, placement, limits, port)
+    and return the job, ready to :func:`draw`; raises before anything is written or sent."""
+    backend = _backend(device)
+    return backend(tag, profile=profile, overrides=overrides, port=port, **options)  # type: ignore[no-any-return]
+
+
 def draw(
     tag: Tag,
     out: str | Path,
@@ -80,31 +151,38 @@ def draw(
     port: str | None = None,
     profile: str | Path | None = None,
     overrides: tuple[str, ...] = (),
-    progress: Callable[[int, int], None] | None = None,
+    progress: Progress | None = None,
+    control: RunControl | None = None,
     pictures: bool = True,
+    prepared: PreparedRun | None = None,
     **options: Any,
 ) -> DrawResult:
-    """Draw ``tag`` on ``device`` (simulated unless ``port`` is given); write the run folder."""
-    backend = _backend(device)
+    """Draw ``tag`` on ``device`` (simulated unless ``port`` is given); write the run folder.
+
+    ``prepared`` (from :func:`prepare`) skips the preparation; otherwise it happens here, before
+    the folder is created. A fault or Ctrl-C is raised again once the folder is written.
+    """
+    job = prepared or prepare(
+        tag, device=device, port=port, profile=profile, overrides=overrides, **options
+    )
     folder = Path(out)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise InputError(f"{folder}: cannot create the run folder ({e.strerror or e})") from e
     save_plan(tag, folder / "plan.json")
-    run = backend(
-        tag, folder, profile=profile, overrides=overrides, port=port, progress=progress, **options
-    )
+    write_motion_csv(job.planned, folder / "motion.csv")
+    try:
+        run = job.run(folder, progress=progress, control=control)
+    except BaseException as e:  # a bug or a fault the back end could not turn into a run
+        _write_json(
+            folder / "report.json",
+            {"device": job.device, "completed": False, "error": str(e) or type(e).__name__},
+        )
+        raise
     write_motion_csv(run.motion, folder / "motion.csv")
     write_executed_csv(run.executed, folder / "executed.csv")
-    report: dict[str, Any] = {"device": run.device, **run.report, "placement": run.placement}
-    if run.executed.size and run.planned_runs:
-        try:
-            comparison = compare_execution(run.planned_runs, run.executed, plans=run.plans)
-        except ValueError as e:  # nothing was drawn (a fault before the first pen-down)
-            report["comparison_error"] = str(e)
-        else:
-            report.update(comparison.as_dict())
+    report = run_report(run)
     _write_json(folder / "report.json", report)
     if pictures and run.error is None:
         report["pictures"] = [str(p.name) for p in _pictures(folder)]
@@ -114,11 +192,53 @@ def draw(
     return DrawResult(folder, report)
 
 
+def run_report(run: MachineRun) -> dict[str, Any]:
+    """``report.json``: the same keys for both devices.
+
+    ``device``, ``port``, ``simulated``, ``completed``, ``error``, ``warnings``, ``unit``
+    (``line``/``tick``), ``total``, ``sent``, ``executed`` (the last line or tick the machine
+    executed, from 1), ``resume_from``, ``planned_duration_s``, ``executed_duration_s``,
+    ``executed_source``, ``placement``, the comparison (``path_deviation_mean_mm``,
+    ``path_deviation_max_mm``, ``speed_snr_db``, drawing durations, per-run figures; or
+    ``comparison_error`` when nothing was drawn) and ``details`` (the device's own figures).
+    """
+    report: dict[str, Any] = {
+        "device": run.device,
+        "port": run.port,
+        "simulated": run.port == "simulator",
+        "completed": run.error is None,
+        "error": None if run.error is None else (str(run.error) or type(run.error).__name__),
+        "warnings": list(run.warnings),
+        "unit": run.unit,
+        "total": run.total,
+        "sent": run.sent,
+        "executed": run.executed_steps,
+        "resume_from": run.resume_from,
+        "planned_duration_s": run.planned_duration,
+        "executed_duration_s": run.executed_duration,
+        "executed_source": run.executed_source,
+        "placement": run.placement,
+    }
+    if run.executed.size and run.planned_runs:
+        try:
+            comparison = compare_execution(
+                run.planned_runs, run.executed, plans=run.plans, sparse=run.sparse
+            )
+        except ValueError as e:  # nothing was drawn (a fault before the first pen-down)
+            report["comparison_error"] = str(e)
+        else:
+            report.update(comparison.as_dict())
+    else:
+        report["comparison_error"] = "nothing was executed"
+    report["details"] = run.details
+    return report
+
+
 def _backend(name: str) -> Callable[..., Any]:
     if name not in DEVICES:
         raise InputError(f"device: unknown {name!r} (known: {', '.join(sorted(DEVICES))})")
     module, _, function = DEVICES[name].partition(":")
-    return getattr(importlib.import_module(module), function)
+    return getattr(importlib.import_module(module), function)  # type: ignore[no-any-return]
 
 
 def _pictures(folder: Path) -> list[Path]:

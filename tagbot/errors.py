@@ -34,6 +34,11 @@ class PlacementError(TagbotError, ValueError):
     the message names the overflow. Raised before anything is sent."""
 
 
+class PortError(TagbotError, ValueError):
+    """The port named cannot be a serial line to the machine (missing, not a device, no access,
+    unknown URL scheme). A usage error, found before anything is written or sent."""
+
+
 class DeviceError(TagbotError):
     """A machine or its connection failed; ``where`` names the line or tick, when known."""
 
@@ -53,3 +58,8 @@ class DeviceTimeout(DeviceError, TimeoutError):
 
 class ConnectionLost(DeviceError, ConnectionError):
     """The port could not be opened, or closed or failed during the run."""
+
+
+class Interrupted(DeviceError):
+    """The user stopped a running machine (Ctrl-C); it was stopped safely. ``where`` names the
+    last line or tick the machine executed."""
