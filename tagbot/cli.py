@@ -16,7 +16,7 @@ from typing import Any, TypeVar
 import click
 
 from tagbot.arm.cli import sim_arm_command
-from tagbot.errors import TagbotError
+from tagbot.errors import Interrupted, TagbotError
 from tagbot.plotter.cli import gcode_command, profile_options, sim_grbl_command
 from tagbot.render.cli import plot_command, render_command
 
@@ -290,6 +290,7 @@ cli.add_command(plot_command)
     help="Confirm the machine's position is right (homed or checked) for --resume-from.",
 )
 @click.option("--no-pictures", is_flag=True, help="Do not render pictures into the run folder.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary.")
 def draw_command(
     source: str,
     device: str,
@@ -302,18 +303,23 @@ def draw_command(
     resume_from: int | None,
     position_known: bool,
     no_pictures: bool,
+    quiet: bool,
 ) -> None:
     """Draw a tag on a machine and write a run folder (plan, motion, program, executed trace,
     report, pictures).
 
     INPUT is a plan file, or a trace file (GML, SVG, points) that is fitted first. Without
-    --port the machine is simulated: the default never moves hardware. A device fault stops
-    the machine safely (pen up) and is reported with the exact line or tick.
+    --port the machine is simulated: the default never moves hardware. Everything (profile,
+    placement, limits, the port) is checked before anything starts. While drawing, a progress
+    bar shows the lines or ticks executed; space or p pauses (feed hold on the plotter, pen up
+    on the arm) and resumes; Ctrl-C stops safely. A fault stops the machine safely (pen up) and
+    names the last line or tick it executed.
     """
     import time
     from pathlib import Path
 
-    from tagbot.draw import draw
+    from tagbot.control import RunControl
+    from tagbot.draw import draw, prepare
     from tagbot.errors import InputError
     from tagbot.source import load_tag
 
@@ -332,33 +338,116 @@ def draw_command(
     elif send_and_wait or unlock or resume_from:
         raise InputError("--send-and-wait, --unlock, --home and --resume-from are Grbl options")
     tag = load_tag(source)
+    job = prepare(tag, device=device, port=port, profile=profile, overrides=overrides, **options)
     if out is None:
         stem = Path(source).name.split(".")[0]
         out = str(Path("runs") / f"{stem}-{device}-{time.strftime('%Y%m%d-%H%M%S')}")
     where = "the simulator" if port is None else port
-    click.echo(f"drawing {source} on {device} ({where}) into {out}", err=True)
-    with click.progressbar(length=1, label="streaming", file=sys.stderr) as bar:
+    keys = _PauseKeys(RunControl(), enabled=not quiet)
+    if not quiet:
+        hint = "; space pauses, Ctrl-C stops" if keys.available else "; Ctrl-C stops"
+        click.echo(f"drawing {source} on {device} ({where}) into {out}{hint}", err=True)
+    unit = "tick" if device == "dynamixel" else "line"
+    with _progress_bar(unit, quiet) as bar, keys:
+        keys.report = bar.write
 
         def progress(done: int, total: int) -> None:
-            bar.length = total
-            bar.update(done - bar.pos)
+            if bar.total != total:
+                bar.reset(total=total)
+            bar.update(done - bar.n)
 
         try:
             result = draw(
                 tag,
                 out,
-                device=device,
-                port=port,
-                profile=profile,
-                overrides=overrides,
+                prepared=job,
                 progress=progress,
+                control=keys.control,
                 pictures=not no_pictures,
-                **options,
             )
         except (TagbotError, KeyboardInterrupt):
-            click.echo(f"\nrun folder (partial): {out}", err=True)
+            bar.close()
+            click.echo(f"run folder (partial): {out}", err=True)
             raise
-    click.echo(_draw_summary(result.report, out), err=True)
+    if not quiet:
+        click.echo(_draw_summary(result.report, out), err=True)
+
+
+def _progress_bar(unit: str, quiet: bool) -> Any:
+    """A progress bar on stderr with rate and ETA (quiet when not a terminal or --quiet)."""
+    from tqdm import tqdm
+
+    return tqdm(
+        total=0,
+        unit=unit,
+        file=sys.stderr,
+        disable=True if quiet else None,
+        dynamic_ncols=True,
+        leave=False,
+    )
+
+
+class _PauseKeys:
+    """Space or p toggles ``control`` (pause / resume) while stdin is a terminal.
+
+    The terminal is put in cbreak mode (keys arrive one by one, Ctrl-C still interrupts) and
+    restored on exit; a thread reads the keys. Without a terminal nothing happens.
+    """
+
+    KEYS = (b" ", b"p", b"P")
+
+    def __init__(self, control: Any, *, enabled: bool = True) -> None:
+        import threading
+
+        self.control = control
+        self.report: Callable[[str], None] = lambda text: click.echo(text, err=True)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._saved: Any = None
+        try:
+            self._fd = sys.stdin.fileno()
+            tty = enabled and os.isatty(self._fd)
+        except (AttributeError, OSError, ValueError):
+            self._fd, tty = -1, False
+        try:
+            import termios  # noqa: F401
+        except ImportError:  # not on Windows
+            tty = False
+        self.available = tty
+
+    def __enter__(self) -> _PauseKeys:
+        if not self.available:
+            return self
+        import termios
+        import threading
+        import tty
+
+        self._saved = termios.tcgetattr(self._fd)
+        tty.setcbreak(self._fd)
+        self._thread = threading.Thread(target=self._read, name="tagbot-keys", daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._thread is None:
+            return
+        import termios
+
+        self._stop.set()
+        self._thread.join()
+        termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+
+    def _read(self) -> None:
+        import select
+
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self._fd], [], [], 0.1)
+            if not ready:
+                continue
+            key = os.read(self._fd, 1)
+            if key in self.KEYS:
+                paused = self.control.toggle()
+                self.report("paused: space resumes" if paused else "resumed")
 
 
 def _draw_summary(report: dict[str, Any], out: str) -> str:
@@ -452,6 +541,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return e.exit_code
     except (_Interrupted, click.Abort, KeyboardInterrupt):
         _error("interrupted")
+        return EXIT_INTERRUPTED
+    except Interrupted as e:
+        _error(str(e))
         return EXIT_INTERRUPTED
     except TagbotError as e:
         _error(str(e))

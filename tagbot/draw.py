@@ -41,7 +41,7 @@ from tagbot.control import RunControl
 from tagbot.errors import InputError
 from tagbot.io.motionfile import MotionTable, write_motion_csv
 from tagbot.io.planfile import save_plan
-from tagbot.metrics import compare_execution
+from tagbot.metrics import compare_execution, compare_reports
 from tagbot.model import Tag
 
 __all__ = [
@@ -86,6 +86,9 @@ class MachineRun:
     sparse: bool
     """True when :attr:`executed` holds the machine's own reports (a few per second): the
     report then compares like with like, planned positions at the reported instants."""
+    executed_runs: np.ndarray | None
+    """With :attr:`sparse`: the pen-down run (index in :attr:`planned_runs`) of each executed
+    sample, -1 for none; else None (runs are found from the pen column)."""
     unit: str
     """``"line"`` (1-based line of program.gcode) or ``"tick"`` (row of joints.csv)."""
     total: int
@@ -221,9 +224,12 @@ def run_report(run: MachineRun) -> dict[str, Any]:
     }
     if run.executed.size and run.planned_runs:
         try:
-            comparison = compare_execution(
-                run.planned_runs, run.executed, plans=run.plans, sparse=run.sparse
-            )
+            if run.sparse and run.executed_runs is not None:
+                comparison = compare_reports(
+                    run.planned_runs, run.executed, run.executed_runs, plans=run.plans
+                )
+            else:
+                comparison = compare_execution(run.planned_runs, run.executed, plans=run.plans)
         except ValueError as e:  # nothing was drawn (a fault before the first pen-down)
             report["comparison_error"] = str(e)
         else:

@@ -393,3 +393,80 @@ def _align(
                 best = (b, a, b, offset)
     _, a, b, offset = best
     return float(offset), a, b
+
+
+def compare_reports(
+    planned: Sequence[tuple[ArrayLike, ArrayLike]],
+    executed: ArrayLike,
+    run_of: ArrayLike,
+    *,
+    plans: Sequence[int] | None = None,
+    spacing: float = 0.005,
+) -> ExecutionComparison:
+    """Positions a machine reported a few times a second against the plan, like with like.
+
+    ``executed`` is ``(N, 4)`` t, x, y, pen (one row per report) and ``run_of`` the planned run
+    each report belongs to (-1: pen up), as the executing line said. Per run:
+
+    - path deviation: each reported position's distance to the planned path;
+    - timing: each report's planned instant by position (where along the planned path it is),
+      and the run's offset (executed t − planned t, the median over its reports); the
+      executed duration is the planned one plus the drift of that offset over the run;
+    - speed SNR: the displacement between consecutive reports against the planned displacement
+      between the same instants (mapped with the offset), ``10·log10(Σ|Δp|² / Σ|Δe − Δp|²)``.
+
+    Reports too coarse for a velocity by differences are compared as displacements, never
+    densified into a path of their own (which would measure the chords of the 5 Hz polyline).
+    """
+    data = np.asarray(executed, dtype=float).reshape(-1, 4)
+    run_of = np.asarray(run_of, dtype=int)
+    if len(run_of) != len(data):
+        raise ValueError("compare_reports: one run index per executed row")
+    plans = list(range(len(planned))) if plans is None else list(plans)
+    distances: list[Array] = []
+    signal = noise = 0.0
+    alignments: list[RunAlignment] = []
+    for k, ((tp, xyp), plan) in enumerate(zip(planned, plans, strict=False)):
+        rows = data[(run_of == k) & (data[:, 3] > 0.5)]
+        if not len(rows):
+            continue
+        tp, xyp = np.asarray(tp, dtype=float), np.asarray(xyp, dtype=float)
+        te, xye = rows[:, 0], rows[:, 1:3]
+        arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xyp, axis=0).T))])
+        dense_arc = densify(np.column_stack([arc, np.zeros_like(arc)]), spacing)[:, 0]
+        dense = np.column_stack([np.interp(dense_arc, arc, xyp[:, i]) for i in (0, 1)])
+        d, nearest = cKDTree(dense).query(xye)
+        distances.append(d)
+        moving = np.concatenate([[True], np.diff(arc) > 0])  # interp needs rising arc length
+        t_by_position = np.interp(dense_arc[nearest], arc[moving], tp[moving])
+        lag = te - t_by_position
+        offset = float(np.median(lag))
+        xy_at = np.column_stack([np.interp(te - offset, tp, xyp[:, i]) for i in (0, 1)])
+        de, dp = np.diff(xye, axis=0), np.diff(xy_at, axis=0)
+        a, b = float(np.sum(dp * dp)), float(np.sum((de - dp) ** 2))
+        signal, noise = signal + a, noise + b
+        p_onset, p_end = _movement(tp, xyp)
+        drift = float(lag[-1] - lag[0]) if len(lag) > 1 else 0.0
+        alignments.append(
+            RunAlignment(
+                plan=int(plan),
+                planned_start=float(tp[0]),
+                executed_start=float(tp[0] + offset),
+                planned_duration=float(p_end - p_onset),
+                executed_duration=float(p_end - p_onset + drift),
+                snr_db=_db(a, b),
+            )
+        )
+    if not distances:
+        raise ValueError("compare_reports: no report while the pen was down")
+    d_all = np.concatenate(distances)
+    return ExecutionComparison(
+        deviation_mean=float(d_all.mean()),
+        deviation_max=float(d_all.max()),
+        speed_snr_db=_db(signal, noise),
+        planned_duration=sum(r.planned_duration for r in alignments),
+        executed_duration=sum(r.executed_duration for r in alignments),
+        runs=tuple(alignments),
+        planned_runs=len(planned),
+        executed_runs=len(alignments),
+    )

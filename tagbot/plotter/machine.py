@@ -1,124 +1,264 @@
-"""The pen plotter as a ``tagbot draw`` back end: place, program, stream, record.
+"""The pen plotter as a ``tagbot draw`` back end: check, program, stream, record.
 
-:func:`run_grbl` places and retimes the tag (refused before any byte if it leaves the bed),
-writes ``program.gcode``, opens the port (a simulated Grbl when none is named: the default
-never moves hardware), streams the program with :class:`~tagbot.plotter.stream.GrblStreamer`
-and returns what was planned and what was executed, for the run folder.
+:func:`prepare` loads the profile, places and retimes the tag (refused before any byte if it
+leaves the bed), builds the program and checks the port's name: nothing is written or sent.
+:meth:`PlotterJob.run` then writes ``program.gcode``, opens the port (a simulated Grbl when none
+is named: the default never moves hardware), streams the program with
+:class:`~tagbot.plotter.stream.GrblStreamer` and returns what was planned and what was executed.
+
+**The executed trace.** On the simulator it is the device's own 1 ms recorder. On a real machine
+it is the status reports (≤ 5 Hz): the position Grbl reports (``MPos``, or ``WPos`` + ``WCO``),
+with the pen and the pen-down run taken from the program at the line the machine was executing
+then (:class:`~tagbot.plotter.stream.ExecutionTracker`), not from the spindle value. The report
+then compares like with like: reported positions against the planned positions at the reported
+instants (:func:`tagbot.metrics.compare_reports`).
 """
 
 from __future__ import annotations
 
 import itertools
 import os
-from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import serial
 
-from tagbot.draw import MachineRun
-from tagbot.errors import ConnectionLost, DeviceError
+from tagbot.control import RunControl
+from tagbot.draw import MachineRun, Progress
+from tagbot.errors import ConnectionLost, DeviceError, InputError, Interrupted
 from tagbot.io.motionfile import MotionTable
 from tagbot.model import Tag
 from tagbot.plotter.place import Setpoints, place
-from tagbot.plotter.profile import Profile, device_settings, with_device_settings
+from tagbot.plotter.profile import Profile, device_settings, load_profile, with_device_settings
 from tagbot.plotter.program import Program, build_program, pen_down, pen_up
-from tagbot.plotter.stream import GrblStreamer, StreamOptions, StreamReport, resume_lines
+from tagbot.plotter.stream import (
+    GrblStreamer,
+    StreamOptions,
+    StreamReport,
+    resume_lines,
+    resume_point,
+)
+from tagbot.ports import check_port
 
-__all__ = ["draw_backend", "executed_from_statuses", "run_grbl", "setpoint_motion"]
+__all__ = ["PlotterJob", "executed_from_statuses", "prepare", "simulated_pen"]
 
 _names = itertools.count()
 
-
-def setpoint_motion(setpoints: Setpoints) -> MotionTable:
-    """The pen-down setpoints of every run, one table (pen = 1 throughout)."""
-    t = np.concatenate([r.t for r in setpoints.runs])
-    xy = np.concatenate([r.xy for r in setpoints.runs])
-    v = np.concatenate([r.v for r in setpoints.runs])
-    return MotionTable(t, xy, v, np.hypot(v[:, 0], v[:, 1]), np.ones(len(t), dtype=np.int8))
+TIMELINE_STEP = 0.01
+"""s between the samples of motion.csv's planned timeline (setpoints are exact in it)."""
 
 
 def placement_of(setpoints: Setpoints) -> dict[str, Any]:
     return {
         "mm_per_unit": setpoints.size,
         "time_scale": setpoints.scale,
+        "run_scales": [float(s) for s in getattr(setpoints, "run_scales", ())],
         "matrix": setpoints.matrix.tolist(),
         "offset": setpoints.offset.tolist(),
         "limits": dict(setpoints.limits),
     }
 
 
-def run_grbl(
+def prepare(
     tag: Tag,
-    out: Path,
     *,
-    profile: Profile,
+    profile: str | Path | None = None,
+    overrides: tuple[str, ...] = (),
     port: str | None = None,
-    options: StreamOptions | None = None,
+    mode: str = "count",
+    unlock: str = "never",
+    reset: bool = True,
     resume_from: int | None = None,
-    progress: Callable[[int, int], None] | None = None,
-) -> MachineRun:
-    """Draw ``tag`` on a Grbl plotter (simulated unless ``port`` names one).
+    line_numbers: str = "auto",
+) -> PlotterJob:
+    """Everything checked before anything starts: profile, placement, bed, limits, the program,
+    the stream options, the resume line and the port's name. Raises; writes and sends nothing.
 
     ``resume_from`` (1-based line of ``program.gcode``) resumes an interrupted job; the caller
-    vouches that the machine's position is known. Device faults are caught, the machine left
-    safe, and returned in :attr:`MachineRun.error` with what was executed until then.
+    vouches that the machine's position is known.
     """
-    setpoints = place(tag, profile)
-    program = build_program(setpoints, profile)
-    program.write(out / "program.gcode")
-    device = None
-    if port is None:
-        from sim.grbl import SimulatedGrbl
-        from sim.grbl.transport import attach_device
-
-        device = SimulatedGrbl(device_settings(profile), **simulated_pen(profile))
-        url = attach_device(device, f"draw{os.getpid()}_{next(_names)}")
-    else:
-        url = port
-        if url.startswith("grblsim://"):
-            import sim.grbl.transport  # noqa: F401  (registers the URL scheme)
-    streamer: GrblStreamer | None = None
-    error: BaseException | None = None
+    machine = load_profile(profile, overrides)
+    if port is not None:
+        check_port(port)
     try:
-        link = serial.serial_for_url(url, baudrate=profile["serial.baud"], timeout=0.01)
-    except (serial.SerialException, OSError, ValueError) as e:
-        raise ConnectionLost(f"cannot open {url}: {e}") from e
-    try:
-        streamer = GrblStreamer(link, options)
-        settings = streamer.connect()
-        if profile["limits.from_device"]:
-            profile = with_device_settings(profile, settings)
-            setpoints = place(tag, profile)
-            program = build_program(setpoints, profile)
-            program.write(out / "program.gcode")
-        first, preamble = 0, []
-        if resume_from is not None:
-            first = resume_from - 1
-            preamble = resume_lines(program.lines, first, pen_up(profile), pen_down(profile))
-        streamer.stream(
-            program.lines, first=first, preamble=preamble, pen_up=pen_up(profile), progress=progress
+        options = StreamOptions(mode=mode, unlock=unlock, reset=reset, line_numbers=line_numbers)
+    except ValueError as e:
+        raise InputError(f"stream options: {e}") from None
+    setpoints = place(tag, machine)
+    program = build_program(setpoints, machine)
+    if resume_from is not None and not 2 <= resume_from <= len(program.lines):
+        raise InputError(
+            f"--resume-from: line {resume_from} is not in the program (lines 2 to "
+            f"{len(program.lines)})"
         )
-    except (DeviceError, KeyboardInterrupt) as e:
-        error = e
-    finally:
-        link.close()
-    stream = streamer.last_report if streamer is not None else None
-    if device is not None:
-        executed = device.trace(0.001)[:, [0, 1, 2, 4]]
-    else:
-        executed = executed_from_statuses(stream.statuses if stream else [], profile)
-    return MachineRun(
-        device="grbl",
-        motion=setpoint_motion(setpoints),
-        planned_runs=[(r.t, r.xy) for r in setpoints.runs],
-        plans=[r.plan for r in setpoints.runs],
-        executed=executed,
-        placement=placement_of(setpoints),
-        report=_report(program, profile, stream, device, url, error),
-        error=error,
+    return PlotterJob(tag, machine, setpoints, program, port, options, resume_from)
+
+
+@dataclass(eq=False)
+class PlotterJob:
+    """A checked plotter job (see :func:`prepare`); :meth:`run` draws it."""
+
+    tag: Tag
+    profile: Profile
+    setpoints: Setpoints
+    program: Program
+    port: str | None
+    options: StreamOptions
+    resume_from: int | None = None
+    device: str = "grbl"
+    planned: MotionTable = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.planned = self.program.timeline(TIMELINE_STEP)
+
+    def run(
+        self, out: Path, *, progress: Progress | None = None, control: RunControl | None = None
+    ) -> MachineRun:
+        """Stream the program (simulated unless a port was named) and record what ran.
+
+        Device faults and Ctrl-C are caught after the safe stop and returned in
+        :attr:`MachineRun.error`, naming the last line the machine executed.
+        """
+        profile, program, setpoints = self.profile, self.program, self.setpoints
+        program.write(out / "program.gcode")
+        device = None
+        if self.port is None:
+            from sim.grbl import SimulatedGrbl
+            from sim.grbl.transport import attach_device
+
+            device = SimulatedGrbl(device_settings(profile), **simulated_pen(profile))
+            url = attach_device(device, f"draw{os.getpid()}_{next(_names)}")
+        else:
+            url = self.port
+        streamer: GrblStreamer | None = None
+        error: BaseException | None = None
+        lines = list(program.lines)
+        first = 0
+        try:
+            link = serial.serial_for_url(url, baudrate=profile["serial.baud"], timeout=0.01)
+        except (serial.SerialException, OSError, ValueError) as e:
+            raise ConnectionLost(f"cannot open {url}: {e}") from e
+        try:
+            streamer = GrblStreamer(link, self.options)
+            settings = streamer.connect()
+            if profile["limits.from_device"]:
+                profile = with_device_settings(profile, settings)
+                setpoints = place(self.tag, profile)
+                program = build_program(setpoints, profile)
+                program.write(out / "program.gcode")
+                lines = list(program.lines)
+            preamble: list[str] = []
+            if self.resume_from is not None:
+                first = self.resume_from - 1
+                here = streamer.query_state()
+                at = None if here.mpos is None else (here.mpos[0], here.mpos[1])
+                inside = resume_point(lines, first, at)
+                start = None
+                if inside is not None:
+                    lines[first], start = inside
+                preamble = resume_lines(lines, first, pen_up(profile), pen_down(profile), start)
+            streamer.stream(
+                lines,
+                first=first,
+                preamble=preamble,
+                pen_up=pen_up(profile),
+                progress=progress,
+                moves=program.line_moves,
+                targets=program.line_xy,
+                control=control,
+            )
+        except DeviceError as e:
+            error = e
+        except KeyboardInterrupt:
+            stream = streamer.last_report if streamer is not None else None
+            error = Interrupted("interrupted", _where(stream, len(lines)))
+        finally:
+            link.close()
+        stream = streamer.last_report if streamer is not None else None
+        executed, runs = _executed(stream, device, program, first)
+        done = stream.lines_executed if stream is not None else first
+        return MachineRun(
+            device="grbl",
+            motion=program.timeline(TIMELINE_STEP),
+            planned_runs=program.planned_runs,
+            plans=list(program.run_plans),
+            executed=executed,
+            executed_runs=runs,
+            executed_source=(
+                "simulator recorder, 1 ms"
+                if device is not None
+                else f"status reports, {self.options.poll_rate:g} Hz"
+                + (f" ({stream.tracking})" if stream is not None and stream.tracking else "")
+            ),
+            sparse=device is None,
+            unit="line",
+            total=len(lines),
+            sent=first + (stream.lines_sent if stream is not None else 0),
+            executed_steps=done,
+            resume_from=done + 1 if error is not None and 0 < done < len(lines) else None,
+            planned_duration=program.duration,
+            executed_duration=stream.duration if stream is not None else 0.0,
+            placement=placement_of(setpoints),
+            port="simulator" if device is not None else url,
+            details=_details(program, profile, stream, device),
+            error=error,
+        )
+
+
+def _where(stream: StreamReport | None, total: int) -> str:
+    done = stream.lines_executed if stream is not None else 0
+    if done == 0:
+        return "before line 1 (nothing of the program was executed)"
+    if done >= total:
+        return "after the last line"
+    return (
+        f"after line {done} (the last line the machine executed; resume with "
+        f"--resume-from {done + 1} --position-known)"
     )
+
+
+def _executed(
+    stream: StreamReport | None, device: Any, program: Program, first: int
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The executed trace on the job's clock, and the pen-down run of each sample (or None)."""
+    if stream is None:
+        return np.zeros((0, 4)), None
+    if device is not None:
+        trace = device.trace(0.001)[:, [0, 1, 2, 4]]
+        trace[:, 0] -= stream.started
+        return trace[trace[:, 0] >= 0], None
+    return executed_from_statuses(stream, program, first)
+
+
+def executed_from_statuses(
+    stream: StreamReport, program: Program, first: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(N, 4)`` t, x, y, pen from status reports, and each report's pen-down run (-1: none).
+
+    Positions are what Grbl reported (``MPos``, or ``WPos`` plus the last ``WCO``); the pen
+    and the run are the program's at the line the machine was executing then.
+    """
+    rows: list[tuple[float, float, float, float]] = []
+    runs: list[int] = []
+    wco = (0.0, 0.0, 0.0)
+    pen = np.asarray(program.line_pen, dtype=bool)
+    run_of = np.asarray(program.line_run, dtype=int)
+    for (t, status), done in zip(stream.statuses, stream.executing, strict=False):
+        if status.wco is not None:
+            wco = status.wco
+        if status.mpos is not None:
+            pos = status.mpos
+        elif status.wpos is not None:
+            pos = tuple(w + o for w, o in zip(status.wpos, wco, strict=False))
+        else:
+            continue
+        line = first + done  # the line executing (0-based), or the next one to run
+        down = line < len(pen) and bool(pen[line])
+        rows.append((t - stream.started, pos[0], pos[1], float(down)))
+        runs.append(int(run_of[line]) if down else -1)
+    return np.array(rows, dtype=float).reshape(-1, 4), np.array(runs, dtype=int)
 
 
 def simulated_pen(profile: Profile) -> dict[str, Any]:
@@ -130,95 +270,33 @@ def simulated_pen(profile: Profile) -> dict[str, Any]:
     return {"pen": "spindle", "pen_servo": (down, up), "position_mm": (*start, 0.0)}
 
 
-def executed_from_statuses(statuses: list[tuple[float, Any]], profile: Profile) -> np.ndarray:
-    """``(N, 4)`` t, x, y, pen from status reports (a real machine: ≤ 5 Hz, coarse)."""
-    rows = []
-    wco = (0.0, 0.0, 0.0)
-    up, down = profile["pen.up"], profile["pen.down"]
-    for t, status in statuses:
-        if status.wco is not None:
-            wco = status.wco
-        if status.mpos is not None:
-            pos = status.mpos
-        elif status.wpos is not None:
-            pos = tuple(w + o for w, o in zip(status.wpos, wco, strict=False))
-        else:
-            continue
-        if profile["pen.type"] == "z":
-            pen = len(pos) > 2 and abs(pos[2] - down) < abs(pos[2] - up)
-        else:
-            s = status.spindle
-            pen = s is not None and s > 0 and abs(s - down) < abs(s - up)
-        rows.append((t, pos[0], pos[1], float(pen)))
-    return np.array(rows, dtype=float).reshape(-1, 4)
-
-
-def _report(
-    program: Program,
-    profile: Profile,
-    stream: StreamReport | None,
-    device: Any,
-    url: str,
-    error: BaseException | None,
+def _details(
+    program: Program, profile: Profile, stream: StreamReport | None, device: Any
 ) -> dict[str, Any]:
     baud = profile["serial.baud"]
-    report: dict[str, Any] = {
-        "port": "simulator" if device is not None else url,
-        "lines_total": len(program.lines),
-        "planned_duration_s": program.duration,
+    details: dict[str, Any] = {
         "program_drawing_s": program.drawing_time,
         "time_scale": program.scale,
         "dt": profile.dt,
         "baud": baud,
+        "min_buffered_s": getattr(program, "min_buffered", None),
     }
     if stream is not None:
         duration = max(stream.duration, 1e-9)
-        report.update(
+        details.update(
             {
                 "first_line": stream.first_line + 1,
-                "lines_sent": stream.lines_sent,
                 "lines_acknowledged": stream.lines_acknowledged,
                 "errors": list(stream.errors),
-                "stopped_at_line": None if stream.stopped_at is None else stream.stopped_at + 1,
-                "executed_duration_s": stream.duration,
-                "duration_ratio": stream.duration / program.duration if program.duration else None,
+                "tracking": stream.tracking,
                 "bytes_sent": stream.bytes_sent,
                 "max_outstanding_bytes": stream.max_outstanding,
                 "stream_rate_bytes_per_s": stream.bytes_sent / duration,
                 "baud_limit_bytes_per_s": baud / 10,
                 "status_reports": len(stream.statuses),
+                "pauses": stream.pauses,
+                "paused_s": stream.paused_s,
             }
         )
-    if error is not None:
-        report["error"] = str(error) or type(error).__name__
-    report["starvation_events"] = len(device.starvation) if device is not None else None
-    return report
-
-
-def draw_backend(
-    tag: Tag,
-    out: Path,
-    *,
-    profile: str | Path | None = None,
-    overrides: tuple[str, ...] = (),
-    port: str | None = None,
-    progress: Callable[[int, int], None] | None = None,
-    mode: str = "count",
-    unlock: str = "never",
-    reset: bool = True,
-    resume_from: int | None = None,
-) -> MachineRun:
-    """:func:`run_grbl` with the profile loaded by name; the ``grbl`` entry of ``tagbot draw``."""
-    from tagbot.plotter.profile import load_profile
-
-    machine = load_profile(profile, overrides)
-    options = StreamOptions(mode=mode, unlock=unlock, reset=reset)
-    return run_grbl(
-        tag,
-        out,
-        profile=machine,
-        port=port,
-        options=options,
-        resume_from=resume_from,
-        progress=progress,
-    )
+    details["starvation_events"] = len(device.starvation) if device is not None else None
+    return details

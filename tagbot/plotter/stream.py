@@ -14,18 +14,30 @@ served by ``tagbot sim grbl``, or an in-process ``grblsim://`` URL. It follows G
 - **Status** ``?`` polled at ≤ 5 Hz; the reports are kept (:attr:`StreamReport.statuses`) and
   prove the device alive: no byte at all for ``silence_timeout`` seconds is a
   :class:`~tagbot.errors.DeviceTimeout`.
+- **What has run.** ``ok`` means planned, not executed: :class:`ExecutionTracker` follows the
+  line the machine is executing from each status report (``Ln:`` when the firmware reports line
+  numbers, ``Bf:`` planner blocks when ``$10`` has bit 2, and the reported position against the
+  program's segments). Progress counts executed lines, and every fault names the last line the
+  machine executed.
+- **Watchdog.** Status reports still coming but no motion and no ``ok`` for ``stall_timeout``
+  while lines are queued (a machine that stopped executing): a :class:`DeviceTimeout`.
 - **Hold / resume** (:meth:`~GrblStreamer.hold`, :meth:`~GrblStreamer.resume`, callable from
-  another thread): ``!`` and ``~``; the stream keeps its place.
+  another thread, or a :class:`~tagbot.control.RunControl`): ``!`` and ``~``; the stream keeps
+  its place.
 - **Faults**: ``error:N`` on line k, ``ALARM:N``, an unexpected reset, bytes that are not Grbl
-  messages (a lost ``ok`` would break character counting), silence, a lost port, or Ctrl-C stop
-  the stream at once: no program line is sent after the fault is seen. Then :meth:`safe_stop`:
-  feed hold, wait until the hold is complete, soft reset (which discards the lines still in
-  Grbl's buffer without losing position, since nothing moves), pen up. In Alarm the machine is
-  locked and already stopped; it is left so (unlocking is the operator's decision). The error
-  raised names the exact line (1-based, with its text) and Grbl's message.
-- **Resuming** from a line (:func:`resume_lines`) is never automatic: it needs the caller to
-  state that the machine's position is known (homed, or checked by hand), then re-creates the
-  modal state, travels pen up to where the previous line ended, and continues.
+  messages (a lost ``ok`` would break character counting), silence, a stall, a lost port, or
+  Ctrl-C stop the stream at once: no program line is sent after the fault is seen. Then
+  :meth:`safe_stop`: feed hold, wait until the hold is complete (the report then says exactly
+  which line the machine stopped in), soft reset (which discards the lines still in Grbl's
+  buffers without losing position, since nothing moves), pen up. In Alarm the machine is locked
+  and already stopped; Grbl waits 500 ms after ``ALARM:N`` and ignores a reset meanwhile on limit
+  alarms, so the reset follows ``[MSG:Reset to continue]`` (and is repeated if no banner
+  comes); the machine is left locked (unlocking is the operator's decision). The error raised
+  names the last line executed (1-based), the line at fault with its text, and Grbl's message.
+- **Resuming** from a line (:func:`resume_lines`, :func:`resume_point`) is never automatic: it
+  needs the caller to state that the machine's position is known (homed, or checked by hand),
+  then re-creates the modal state, travels pen up to where the machine stopped (inside the line
+  a feed hold stopped it in, so nothing is drawn twice), and continues.
 
 Every wait has a deadline on the port's clock (:func:`tagbot.clock.port_clock`), so simulated
 ports run faster than real time with the same code.
@@ -33,7 +45,10 @@ ports run faster than real time with the same code.
 
 from __future__ import annotations
 
+import bisect
+import contextlib
 import logging
+import math
 import threading
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -46,6 +61,7 @@ from firmware_protocols.grbl import (
     Alarm,
     Block,
     Error,
+    Feedback,
     Garbage,
     Message,
     Msg,
@@ -62,18 +78,24 @@ from firmware_protocols.grbl import (
     parse_line,
 )
 from tagbot.clock import port_clock
+from tagbot.control import RunControl
 from tagbot.errors import ConnectionLost, DeviceError, DeviceFault, DeviceTimeout
 
 __all__ = [
+    "ExecutionTracker",
     "GrblStreamer",
     "StreamOptions",
     "StreamReport",
+    "line_effects",
     "resume_lines",
+    "resume_point",
 ]
 
 log = logging.getLogger(__name__)
 
 UNLOCK_POLICIES = ("never", "unlock", "home")
+PLANNER_BLOCKS = 15
+"""Usable planner blocks of Grbl 1.1 on an AVR (16 minus one), until ``$I`` says otherwise."""
 MAX_POLL_RATE = 5.0
 """Hz: Grbl's documentation asks hosts not to poll status faster."""
 
@@ -99,6 +121,12 @@ class StreamOptions:
     ($H)."""
     read_timeout: float = 0.01
     """How long one read waits for bytes."""
+    stall_timeout: float = 2.0
+    """Status reports keep coming but nothing moves and nothing is answered for this long while
+    lines are queued (longer when the program has long dwells): a stalled machine, a timeout."""
+    line_numbers: str = "auto"
+    """Send ``N<line>`` words so status reports say the executing line (``Ln:``): ``"auto"``
+    (when the firmware's ``$I`` lists the ``N`` option), ``"on"``, ``"off"``."""
 
     def __post_init__(self) -> None:
         if self.mode not in ("count", "wait"):
@@ -109,7 +137,9 @@ class StreamOptions:
             raise ValueError(f"unlock: must be one of {', '.join(UNLOCK_POLICIES)}")
         if self.rx_buffer < 2:
             raise ValueError(f"rx_buffer: must be >= 2, got {self.rx_buffer}")
-        for name in ("silence_timeout", "welcome_timeout", "read_timeout"):
+        if self.line_numbers not in ("auto", "on", "off"):
+            raise ValueError("line_numbers: must be 'auto', 'on' or 'off'")
+        for name in ("silence_timeout", "welcome_timeout", "read_timeout", "stall_timeout"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: must be > 0")
 
@@ -136,6 +166,15 @@ class StreamReport:
     max_outstanding: int = 0
     """The largest number of unacknowledged bytes the host had in flight."""
     bytes_sent: int = 0
+    lines_executed: int = 0
+    """Program lines the machine finished (lines 1..N), by :class:`ExecutionTracker`."""
+    tracking: str = ""
+    """What told which line was executing: ``status Ln``, ``status Bf``, ``status position``."""
+    executing: list[int] = field(default_factory=list)
+    """Per status report, the program lines after ``first_line`` finished by then."""
+    pauses: int = 0
+    paused_s: float = 0.0
+    """Time spent in feed holds asked for with ``control``, s."""
 
     @property
     def duration(self) -> float:
@@ -168,6 +207,14 @@ class GrblStreamer:
         self._requests: deque[bytes] = deque()
         self._requests_lock = threading.Lock()
         self._report: StreamReport | None = None
+        self.tracker: ExecutionTracker | None = None
+        self.blocks = PLANNER_BLOCKS
+        """Planner blocks the firmware has (``$I``'s ``[OPT:…,15,128]``)."""
+        self.line_numbers = self.options.line_numbers == "on"
+        self._progress: Callable[[int, int], None] | None = None
+        self._control: RunControl | None = None
+        self._held = False
+        self._held_since = 0.0
         self.last_report: StreamReport | None = None
         """The report of the latest :meth:`stream` call, also when it raised."""
         self.port.timeout = self.options.read_timeout
@@ -233,6 +280,8 @@ class GrblStreamer:
             self.state = message
             if self._report is not None:
                 self._report.statuses.append((now, message))
+                if self.tracker is not None:
+                    self._on_status(message)
         elif self._report is not None:
             self._report.messages.append((now, message))
         else:
@@ -262,6 +311,7 @@ class GrblStreamer:
         self.welcome = message
         alarmed = self._after_reset()
         self.settings = self.read_settings()
+        self._read_build_options()
         if alarmed or self.query_state().state == State.ALARM:
             self._unlock()
         return dict(self.settings)
@@ -308,6 +358,17 @@ class GrblStreamer:
         if isinstance(result, Error):
             raise DeviceFault(f"error:{result.code} ({result.description})", repr(line))
         return before
+
+    def _read_build_options(self) -> None:
+        """``$I``: the planner's size and whether the firmware reports line numbers."""
+        for message in self.command("$I"):
+            if isinstance(message, Feedback) and message.kind == "OPT":
+                codes, _, rest = message.body.partition(",")
+                blocks = rest.split(",")[0]
+                if blocks.isdigit() and int(blocks) > 0:
+                    self.blocks = int(blocks)
+                if self.options.line_numbers == "auto":
+                    self.line_numbers = "N" in codes
 
     def read_settings(self) -> dict[int, float]:
         """``$$``: the controller's settings, ``{110: 6000.0, ...}``."""
@@ -357,74 +418,161 @@ class GrblStreamer:
         pen_up: Sequence[str] = (),
         progress: Callable[[int, int], None] | None = None,
         wait_idle: bool = True,
+        moves: Sequence[bool] | None = None,
+        targets: Sequence[Sequence[float]] | None = None,
+        control: RunControl | None = None,
     ) -> StreamReport:
         """Send ``lines[first:]`` (each ending in ``"\\n"``) after ``preamble``; wait until done.
 
-        ``pen_up`` are the lines :meth:`safe_stop` sends after a fault or Ctrl-C. ``progress``
-        gets ``(lines acknowledged, lines to send)``. With ``wait_idle`` the call returns once
-        the machine has finished moving. Any fault stops the stream (see the module docstring)
-        and raises; the report so far is :attr:`last_report`.
+        ``moves`` and ``targets`` say, per line of ``lines``, whether it creates a planner block
+        and where the machine is after it (``Program.line_moves`` and ``line_xy``; worked out
+        with Grbl's parser when not given): they let :class:`ExecutionTracker` know which line
+        the machine is executing. ``pen_up`` are the lines :meth:`safe_stop` sends after a fault
+        or Ctrl-C. ``progress`` gets ``(lines executed, lines in the program)``. ``control``
+        pauses (feed hold) and resumes. With ``wait_idle`` the call returns once the machine has
+        finished moving. Any fault stops the stream (see the module docstring) and raises, naming
+        the last line the machine executed; the report so far is :attr:`last_report`.
         """
-        queue = [(None, text) for text in preamble] + [
-            (index, lines[index]) for index in range(first, len(lines))
-        ]
-        for _, text in queue:
+        entries = self._entries(lines, first, preamble, moves, targets)
+        for entry in entries:
+            text = entry.text
             if not text.endswith("\n") or "\n" in text[:-1]:
                 raise ValueError(f"lines: each must be one line ending in a newline: {text!r}")
             if len(text) > self.options.rx_buffer - 1:
                 raise ValueError(f"lines: longer than Grbl's receive buffer: {text!r}")
         report = StreamReport(lines_total=len(lines), first_line=first)
+        start = self._machine_xy()
+        tracker = ExecutionTracker(
+            entries, first, len(preamble), self.blocks, start, numbered=self.line_numbers
+        )
+        self.tracker = tracker
+        self._progress = progress
+        self._control = control
+        self._held = False
+        self._stall_after = max(self.options.stall_timeout, 1.5 * _longest_dwell(lines) + 1.0)
         self._report = report
         self.last_report = report
         report.started = self.clock.now()
         try:
-            self._stream(queue, report, progress)
+            self._stream(entries, report)
             if wait_idle:
                 self._wait_idle(report)
         except KeyboardInterrupt:
-            report.errors.append(f"interrupted {self._acked_where(report)}")
             self._stop_after_fault(pen_up, report)
+            report.errors.append(f"interrupted {self._executed_where(report, tracker)}")
             raise
         except DeviceError as e:
-            fault = e if e.where else type(e)(str(e), self._acked_where(report))
-            report.errors.append(str(fault))
-            self._stop_after_fault(pen_up, report, alarm="ALARM:" in str(e))
-            if fault is e:
-                raise
+            alarm = isinstance(e, DeviceFault) and "ALARM:" in str(e)
+            self._stop_after_fault(pen_up, report, alarm=alarm)
+            fault = type(e)(str(e), self._executed_where(report, tracker))
+            report.errors.insert(0, str(fault))
             raise fault from e
         finally:
             report.finished = self.clock.now()
+            report.lines_executed = first + tracker.program_done
+            report.tracking = tracker.source
             self._report = None
+        report.lines_executed = len(lines)
         return report
 
-    def _stream(
+    def _entries(
         self,
-        queue: list[tuple[int | None, str]],
-        report: StreamReport,
-        progress: Callable[[int, int], None] | None,
-    ) -> None:
+        lines: Sequence[str],
+        first: int,
+        preamble: Sequence[str],
+        moves: Sequence[bool] | None,
+        targets: Sequence[Sequence[float]] | None,
+    ) -> list[_Entry]:
+        """The queue: the preamble, then ``lines[first:]`` (numbered when Grbl reports Ln)."""
+        if moves is None or targets is None:
+            moves, targets = line_effects(lines)
+        if len(moves) != len(lines) or len(targets) != len(lines):
+            raise ValueError("moves, targets: one per line")
+        here = self._machine_xy()
+        pre_moves, pre_targets = line_effects(preamble, here)
+        out = [
+            _Entry(None, text, bool(m), (float(xy[0]), float(xy[1])))
+            for text, m, xy in zip(preamble, pre_moves, pre_targets, strict=True)
+        ]
+        for index in range(first, len(lines)):
+            text = lines[index]
+            if self.line_numbers:
+                text = f"N{index + 1}{text}"
+            xy = targets[index]
+            out.append(_Entry(index, text, bool(moves[index]), (float(xy[0]), float(xy[1]))))
+        return out
+
+    def _machine_xy(self) -> tuple[float, float]:
+        position = _xy_of(self.state) if self.state is not None else None
+        return position or (0.0, 0.0)
+
+    def _on_status(self, status: Status) -> None:
+        """Track the executing line; progress; the watchdog's evidence."""
+        tracker = self.tracker
+        before = tracker.done
+        tracker.update(status, _xy_of(status))
+        report = self._report
+        if report is not None:
+            report.executing.append(tracker.program_done)
+        if self._progress is not None and tracker.done != before:
+            self._progress(tracker.first + tracker.program_done, tracker.total)
+
+    def _check_control(self, report: StreamReport) -> None:
+        """Feed hold when ``control`` pauses, resume when it resumes."""
+        control = self._control
+        if control is None or control.paused == self._held:
+            return
+        self._held = control.paused
+        now = self.clock.now()
+        if self._held:
+            self._write(bytes([Realtime.FEED_HOLD]))
+            report.pauses += 1
+            self._held_since = now
+        else:
+            self._write(bytes([Realtime.CYCLE_START]))
+            report.paused_s += now - self._held_since
+        self._last_change = now
+
+    def _watchdog(self, status: Status, queued: bool) -> None:
+        """A machine that executes nothing while lines wait: a timeout (then the safe stop)."""
+        now = self.clock.now()
+        key = (_xy_of(status), self.tracker.acked, status.state)
+        if key != self._last_key:
+            self._last_key, self._last_change = key, now
+            return
+        waiting = queued or self.tracker.queued_blocks() > 0
+        stalled = now - self._last_change > self._stall_after
+        if stalled and waiting and not self._held and status.state in (State.IDLE, State.RUN):
+            raise DeviceTimeout(
+                f"the machine stopped executing: no motion and no answer for "
+                f"{now - self._last_change:.1f} s with lines queued ({status.state.value},"
+                " status reports still coming)"
+            )
+
+    def _stream(self, queue: list[_Entry], report: StreamReport) -> None:
         capacity = 1 if self.options.mode == "wait" else self.options.rx_buffer - 1
-        in_flight: deque[tuple[int | None, int]] = deque()
+        in_flight: deque[tuple[int, int]] = deque()  # (queue position, bytes)
         outstanding = 0
         position = 0
         poll_period = 1.0 / self.options.poll_rate
         next_poll = self.clock.now()
-        self._last_rx = self.clock.now()
-        to_send = sum(1 for index, _ in queue if index is not None)
-        done = 0
+        self._last_rx = self._last_change = self.clock.now()
+        self._last_key: object = None
+        tracker = self.tracker
         while position < len(queue) or in_flight:
             self._send_requests()
+            self._check_control(report)
             while position < len(queue):
-                index, text = queue[position]
-                size = len(text)
+                entry = queue[position]
+                size = len(entry.text)
                 if in_flight and (outstanding + size > capacity or (self.options.mode == "wait")):
                     break
-                self._write(text.encode("ascii"))
-                in_flight.append((index, size))
+                self._write(entry.text.encode("ascii"))
+                in_flight.append((position, size))
                 outstanding += size
                 report.max_outstanding = max(report.max_outstanding, outstanding)
                 position += 1
-                if index is not None:
+                if entry.index is not None:
                     report.lines_sent += 1
             now = self.clock.now()
             if now >= next_poll:
@@ -434,54 +582,53 @@ class GrblStreamer:
                 if isinstance(message, Ok | Error):
                     if not in_flight:
                         raise DeviceError(f"unexpected {message!r} with no line outstanding")
-                    index, size = in_flight.popleft()
+                    at, size = in_flight.popleft()
                     outstanding -= size
-                    text = queue[position - len(in_flight) - 1][1]
+                    entry = queue[at]
                     if isinstance(message, Error):
-                        report.stopped_at = index
-                        where = "preamble" if index is None else f"line {index + 1}"
+                        report.stopped_at = entry.index
+                        where = "preamble" if entry.index is None else f"line {entry.index + 1}"
                         raise DeviceFault(
-                            f"error:{message.code} ({message.description}) for {text.strip()!r}",
-                            where,
+                            f"error:{message.code} ({message.description}) for "
+                            f"{entry.text.strip()!r} ({where})"
                         )
-                    if index is not None:
+                    tracker.acknowledge()
+                    if entry.index is not None:
                         report.lines_acknowledged += 1
-                        done += 1
-                        if progress is not None:
-                            progress(done, to_send)
+                elif isinstance(message, Status):
+                    self._note(message)
+                    self._watchdog(message, bool(in_flight))
                 elif isinstance(message, Alarm):
-                    report.stopped_at = in_flight[0][0] if in_flight else None
                     raise DeviceFault(
                         f"ALARM:{message.code} ({message.description}); the machine is locked "
-                        f"and was left so: check it, then unlock ($X) or home ($H)",
-                        self._acked_where(report),
+                        f"and was left so: check it, then unlock ($X) or home ($H)"
                     )
                 elif isinstance(message, Welcome):
-                    report.stopped_at = in_flight[0][0] if in_flight else None
-                    raise DeviceFault(
-                        "the controller reset itself (welcome banner) during the job",
-                        self._acked_where(report),
-                    )
+                    raise DeviceFault("the controller reset itself (welcome banner) during the job")
                 elif isinstance(message, Garbage):
-                    report.stopped_at = in_flight[0][0] if in_flight else None
                     raise ConnectionLost(
                         f"unexpected bytes from the device {message.data[:40]!r} (a lost 'ok' "
-                        "would break flow control)",
-                        self._acked_where(report),
+                        "would break flow control)"
                     )
                 else:
                     self._note(message)
             if self._silent_for() > self.options.silence_timeout:
-                report.stopped_at = in_flight[0][0] if in_flight else None
                 raise DeviceTimeout(
-                    f"no answer from the device for {self.options.silence_timeout:g} s",
-                    self._acked_where(report),
+                    f"no answer from the device for {self.options.silence_timeout:g} s"
                 )
 
-    def _acked_where(self, report: StreamReport) -> str:
-        if report.stopped_at is None:
-            return f"after line {report.first_line + report.lines_acknowledged}"
-        return f"line {report.stopped_at + 1}"
+    @staticmethod
+    def _executed_where(report: StreamReport, tracker: ExecutionTracker) -> str:
+        """Where the machine stopped, in the program's line numbers, and how to go on."""
+        done = report.first_line + tracker.program_done
+        if done >= report.lines_total:
+            return "after the last line"
+        if done == 0:
+            return "before line 1 (nothing of the program was executed)"
+        return (
+            f"after line {done} (the last line the machine executed; resume with "
+            f"--resume-from {done + 1})"
+        )
 
     def _wait_idle(self, report: StreamReport) -> None:
         """Poll until every queued move has run (state Idle)."""
@@ -493,15 +640,17 @@ class GrblStreamer:
                 self._write(bytes([Realtime.STATUS_REPORT]))
                 next_poll = now + poll_period
             self._send_requests()
+            self._check_control(report)
             for message in self._messages():
                 if isinstance(message, Status):
                     self._note(message)
-                    if message.state == State.IDLE:
+                    if message.state == State.IDLE and not self._held:
+                        self.tracker.finish()
                         return
+                    self._watchdog(message, False)
                 elif isinstance(message, Alarm):
                     raise DeviceFault(
-                        f"ALARM:{message.code} ({message.description}); the machine is locked",
-                        f"after line {report.first_line + report.lines_acknowledged}",
+                        f"ALARM:{message.code} ({message.description}); the machine is locked"
                     )
                 elif isinstance(message, Ok | Error | Welcome | Garbage):
                     raise DeviceError(f"unexpected {message!r} after the last line")
@@ -509,8 +658,7 @@ class GrblStreamer:
                     self._note(message)
             if self._silent_for() > self.options.silence_timeout:
                 raise DeviceTimeout(
-                    f"no answer from the device for {self.options.silence_timeout:g} s",
-                    "after the last line",
+                    f"no answer from the device for {self.options.silence_timeout:g} s"
                 )
 
     # -- stopping ---------------------------------------------------------------------------
@@ -518,6 +666,7 @@ class GrblStreamer:
     def _stop_after_fault(
         self, pen_up: Sequence[str], report: StreamReport, *, alarm: bool = False
     ) -> None:
+        self._progress = None  # the caller's callback is not called while stopping
         try:
             self.safe_stop(pen_up, alarm=alarm)
         except DeviceError as e:  # the first fault is the one to report
@@ -527,43 +676,242 @@ class GrblStreamer:
     def safe_stop(self, pen_up: Sequence[str] = (), *, alarm: bool = False) -> None:
         """Feed hold, wait for the stop, soft reset (flushes Grbl's buffers), pen up.
 
-        After an alarm the machine has stopped by itself and may wait in a critical state
-        (``[MSG:Reset to continue]``, answering nothing): it gets the soft reset only, which
-        leaves it locked in Alarm (unlocking is the operator's decision; G-code, pen commands
+        The status reports on the way say where the machine stopped (the tracker's last word).
+        After an alarm the machine has stopped by itself: Grbl waits 500 ms after printing
+        ``ALARM:N`` and, for limit alarms, ignores a reset until it has printed ``[MSG:Reset to
+        continue]``; the reset is sent after that (and repeated if no banner follows). It leaves
+        the machine locked in Alarm (unlocking is the operator's decision; G-code, pen commands
         included, is refused until then).
         """
-        self._report = None
         deadline = 5.0
-        if not alarm:
+
+        def stopped(m: Message) -> bool:
+            if isinstance(m, Status):
+                self._note(m)
+                return m.state in (State.IDLE, State.ALARM) or (
+                    m.state == State.HOLD and m.substate == 0
+                )
+            return False
+
+        if alarm:
+            # Not a limit alarm: no message, the reset is taken once the delay is over.
+            with contextlib.suppress(DeviceTimeout):
+                self._wait_for(
+                    lambda m: isinstance(m, Msg) and "Reset to continue" in m.text,
+                    "[MSG:Reset to continue]",
+                    ALARM_DELAY + 0.1,
+                )
+            # A critical alarm answers no status: the position is the last one reported.
+            with contextlib.suppress(DeviceTimeout):
+                self._wait_for(stopped, "status in Alarm", 1.0, poll=True)
+        else:
             self._write(bytes([Realtime.FEED_HOLD]))
-            self._wait_for(
-                lambda m: (
-                    isinstance(m, Status)
-                    and (
-                        m.state in (State.IDLE, State.ALARM)
-                        or (m.state == State.HOLD and m.substate == 0)
-                    )
-                ),
-                "stop after the feed hold",
-                deadline,
-                poll=True,
-            )
-        self._write(bytes([Realtime.SOFT_RESET]))
-        self._wait_for(lambda m: isinstance(m, Welcome), "welcome after the reset", deadline)
+            self._wait_for(stopped, "stop after the feed hold", deadline, poll=True)
+        self.tracker = None  # after the reset nothing more runs: the last word is said
+        for attempt in range(RESET_ATTEMPTS):
+            self._write(bytes([Realtime.SOFT_RESET]))
+            try:
+                self._wait_for(lambda m: isinstance(m, Welcome), "welcome after the reset", 1.5)
+                break
+            except DeviceTimeout:
+                if attempt == RESET_ATTEMPTS - 1:
+                    raise DeviceTimeout(
+                        f"no welcome after {RESET_ATTEMPTS} resets: the machine may still hold "
+                        "lines; switch it off"
+                    ) from None
         if self._after_reset() or alarm:
             return  # locked: leave it to the operator
         for line in pen_up:
             self.command(line.strip(), timeout=deadline)
 
 
+ALARM_DELAY = 0.5
+"""s: Grbl 1.1h waits this long after printing ``ALARM:N`` (report_alarm_message)."""
+RESET_ATTEMPTS = 3
+
+
+@dataclass(frozen=True)
+class _Entry:
+    """One line of the stream: its program index (None in a preamble), text and effect."""
+
+    index: int | None
+    text: str
+    moves: bool
+    xy: tuple[float, float]
+
+
+class ExecutionTracker:
+    """Which line the machine is executing, from its acknowledgements and status reports.
+
+    Grbl answers ``ok`` when a line is planned, not when it has run: up to ``blocks`` planner
+    blocks (15 on the AVR) are still to execute. The best evidence the firmware gives is used:
+
+    - ``Ln:`` (firmware built with line numbers; lines sent as ``N<line>…``): the number of
+      the executing block;
+    - ``Bf:`` (``$10`` with bit 2): free planner blocks, so the blocks still queued are the
+      last that many acknowledged moving lines, the first of them executing;
+    - otherwise the reported position, matched to the segments of the acknowledged lines that
+      may still be in the planner (the earliest segment within :data:`ON_SEGMENT` mm).
+
+    ``done`` counts the stream's entries (preamble included) the machine has finished;
+    :attr:`program_done` the program lines among them.
+    """
+
+    def __init__(
+        self,
+        entries: Sequence[_Entry],
+        first: int,
+        preamble: int,
+        blocks: int,
+        start: tuple[float, float],
+        *,
+        numbered: bool = False,
+    ) -> None:
+        self.entries = entries
+        self.first = first
+        self.preamble = preamble
+        self.total = first + len(entries) - preamble
+        self.blocks = blocks
+        self.numbered = numbered
+        self.acked = 0
+        self.moving: list[int] = []
+        self.done = 0
+        self.source = "acknowledgements"
+        self._queued = 0
+        self._from: list[tuple[float, float]] = []
+        here = start
+        for entry in entries:
+            self._from.append(here)
+            if entry.moves:
+                here = entry.xy
+
+    @property
+    def program_done(self) -> int:
+        """Program lines (after ``first``) the machine has finished."""
+        return max(0, self.done - self.preamble)
+
+    def acknowledge(self) -> None:
+        """The oldest line in flight was answered ``ok``."""
+        if self.entries[self.acked].moves:
+            self.moving.append(self.acked)
+        self.acked += 1
+
+    def queued_blocks(self) -> int:
+        """Planner blocks the last report said were waiting (0 when unknown)."""
+        return self._queued
+
+    def finish(self) -> None:
+        """The machine is idle with nothing in flight: everything acknowledged has run."""
+        self.done = max(self.done, self.acked)
+        self._queued = 0
+
+    def update(self, status: Status, xy: tuple[float, float] | None) -> int:
+        """Take one status report (in stream order with the ``ok``s); returns :attr:`done`."""
+        bound = self.acked  # no line that was not acknowledged can have run
+        settled = status.state == State.IDLE or (
+            status.state == State.HOLD and status.substate == 0
+        )
+        if self.numbered and status.line is not None:
+            bound = self.preamble + status.line - 1 - self.first
+            self.source = "status Ln"
+        elif status.buffer is not None:
+            self._queued = max(0, self.blocks - status.buffer[0])
+            queued = min(self._queued, len(self.moving))
+            bound = self.moving[-queued] if queued else self.acked
+            self.source = "status Bf"
+        else:
+            self.source = "status position"
+            settled = False
+        done = bound if self.source != "status position" else self.done
+        if not settled and xy is not None:
+            # In motion the stepper's segment buffer runs a few blocks the planner has already
+            # let go: the position says which of them is executing.
+            found = self._by_position(xy, bound, status.state == State.IDLE)
+            done = done if found is None else found
+        self.done = min(self.acked, max(self.done, done))
+        return self.done
+
+    def _by_position(self, xy: tuple[float, float], bound: int, idle: bool) -> int | None:
+        """The earliest acknowledged moving line from :attr:`done` to ``bound`` whose segment
+        holds ``xy`` (all acknowledged lines when idle at the last one's end); None if none."""
+        start = bisect.bisect_left(self.moving, self.done)
+        for p in self.moving[start:]:
+            if p > bound:
+                break
+            if _to_segment(xy, self._from[p], self.entries[p].xy) <= ON_SEGMENT:
+                last = p == self.moving[-1]
+                at_end = math.dist(xy, self.entries[p].xy) <= ON_SEGMENT
+                return self.acked if (idle and last and at_end) else p
+        return None
+
+
+ON_SEGMENT = 0.02
+"""mm: a reported position this close to a line's segment is on it (Grbl reports 3 decimals
+of a position quantised to motor steps)."""
+
+
+def _to_segment(p: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
+    ax, ay = b[0] - a[0], b[1] - a[1]
+    length2 = ax * ax + ay * ay
+    u = 0.0 if length2 == 0 else ((p[0] - a[0]) * ax + (p[1] - a[1]) * ay) / length2
+    u = min(1.0, max(0.0, u))
+    return math.hypot(p[0] - a[0] - u * ax, p[1] - a[1] - u * ay)
+
+
+def _xy_of(status: Status | None) -> tuple[float, float] | None:
+    """The machine position a status report gives (MPos, or WPos + the last WCO)."""
+    if status is None:
+        return None
+    if status.mpos is not None:
+        return (status.mpos[0], status.mpos[1])
+    if status.wpos is not None:
+        wco = status.wco or (0.0, 0.0)
+        return (status.wpos[0] + wco[0], status.wpos[1] + wco[1])
+    return None
+
+
+def _longest_dwell(lines: Sequence[str]) -> float:
+    longest = 0.0
+    for text in lines:
+        if text.startswith("G4P"):
+            longest = max(longest, float(text[3:]))
+    return longest
+
+
+def line_effects(
+    lines: Sequence[str], start: tuple[float, float] = (0.0, 0.0)
+) -> tuple[list[bool], list[tuple[float, float]]]:
+    """Per line, whether Grbl plans a moving block for it, and the position after it (parser)."""
+    state = ParserState(position=(start[0], start[1], 0.0))
+    moves: list[bool] = []
+    targets: list[tuple[float, float]] = []
+    for text in lines:
+        parsed = parse_line(text.strip())
+        moved = False
+        if isinstance(parsed, Block):
+            step = state.step(parsed)
+            if not isinstance(step, Error):
+                if step.target is not None:
+                    moved = step.target != state.position
+                state = step.state
+        moves.append(moved)
+        targets.append((state.position[0], state.position[1]))
+    return moves, targets
+
+
 def resume_lines(
-    lines: Sequence[str], first: int, pen_up: Sequence[str], pen_down: Sequence[str]
+    lines: Sequence[str],
+    first: int,
+    pen_up: Sequence[str],
+    pen_down: Sequence[str],
+    start: tuple[float, float] | None = None,
 ) -> list[str]:
     """The preamble that resumes ``lines`` at index ``first`` on a freshly reset machine.
 
     Runs ``lines[:first]`` through Grbl's own parser (:class:`ParserState`) to find the modal
     state and where line ``first`` starts from, then returns: units and distance modes, the pen
-    up, a rapid travel there, the pen down again if it was down (``pen_down`` applied to that
+    up, a rapid travel there (or to ``start``, a point inside line ``first``'s move: see
+    :func:`resume_point`), the pen down again if it was down (``pen_down`` applied to that
     state changes nothing), and the feed mode. The caller must know that the machine's position
     is right (homing, or a check by hand): that is why the CLI needs an explicit flag for it.
     """
@@ -576,7 +924,7 @@ def resume_lines(
         state.spindle_speed,
         state.position[2],
     )
-    x, y, _ = state.position
+    x, y = start if start is not None else state.position[:2]
     out = [f"{state.units}\n", f"{state.distance}\n", "G94\n", *pen_up]
     out.append(gcode.move(x, y, rapid=True))
     if pen_is_down:
@@ -584,6 +932,41 @@ def resume_lines(
     if state.feed_mode != "G94":
         out.append(f"{state.feed_mode}\n")
     return out
+
+
+def resume_point(
+    lines: Sequence[str], first: int, at: tuple[float, float] | None
+) -> tuple[str, tuple[float, float]] | None:
+    """Line ``first`` cut to start at ``at``, when a stop left the machine inside its move.
+
+    A feed hold stops Grbl part of the way along a line. Resuming there, rather than at the
+    line's start, draws nothing twice: the line's remaining part, sent with its inverse-time
+    feed divided by the remaining fraction (same speed), from ``at``. Returns ``(line,
+    start)``, or None when ``at`` is not inside an inverse-time (G93) move of line ``first``.
+    """
+    if at is None or not 0 < first < len(lines):
+        return None
+    state = _run_parser(ParserState(), lines[:first], "line")
+    parsed = parse_line(lines[first].strip())
+    if not isinstance(parsed, Block):
+        return None
+    step = state.step(parsed)
+    if isinstance(step, Error) or step.target is None or step.state.feed_mode != "G93":
+        return None
+    a, b = state.position[:2], step.target[:2]
+    ax, ay = b[0] - a[0], b[1] - a[1]
+    length2 = ax * ax + ay * ay
+    if length2 == 0 or _to_segment(at, a, b) > ON_SEGMENT:
+        return None
+    done = ((at[0] - a[0]) * ax + (at[1] - a[1]) * ay) / length2
+    if not RESUME_INSIDE < done < 1 - RESUME_INSIDE:
+        return None
+    feed = step.feed_rate / (1.0 - done)
+    return gcode.move(b[0], b[1], feed=feed, decimals=3), (float(at[0]), float(at[1]))
+
+
+RESUME_INSIDE = 0.02
+"""A stop within this fraction of a line's ends resumes at the line's start (or the next)."""
 
 
 def _run_parser(state: ParserState, lines: Sequence[str], what: str) -> ParserState:
