@@ -377,7 +377,10 @@ def _progress_bar(unit: str, quiet: bool) -> Any:
     """A progress bar on stderr with rate and ETA (quiet when not a terminal or --quiet)."""
     from tqdm import tqdm
 
-    return tqdm(
+    class Bar(tqdm):  # type: ignore[type-arg]
+        monitor_interval = 0  # updates come from the machine's loop: no monitor thread
+
+    return Bar(
         total=0,
         unit=unit,
         file=sys.stderr,
