@@ -21,6 +21,7 @@ from sim.grbl.executor import (
 )
 from sim.grbl.planner import (
     BLOCK_BUFFER_SIZE,
+    DWELL_TIME_STEP,
     PLANNER_CAPACITY,
     Dwell,
     GrblPlanner,
@@ -34,6 +35,7 @@ __all__ = [
     "BLOCK_BUFFER_SIZE",
     "DEFAULT_SETTINGS",
     "DT_SEGMENT",
+    "DWELL_TIME_STEP",
     "HOLD",
     "IDLE",
     "PLANNER_CAPACITY",

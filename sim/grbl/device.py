@@ -24,17 +24,48 @@ How it follows the firmware (Grbl 1.1h ``serial.c``, ``protocol.c``, ``system.c`
   with S > 0 (``pen="spindle"``; with ``pen_servo=(down, up)`` S values, while it runs nearer
   the down value: servo pens are M3 S<down> / M3 S<up>) or while Z is below ``pen_z_below``
   (``pen="z"``).
+- **Dwell.** ``G4 P`` waits for the queue to empty and the step idle delay ($1, 25 ms), then
+  ``delay_sec`` waits ``ceil(20·P)`` × 50 ms (P read in 32-bit floats, :func:`avr_read_float`),
+  letting real-time commands through only at the start of each 50 ms step: a ``?`` is answered
+  there, one in the last step after the dwell's ``ok``. The standstills measured on the real
+  firmware around ``G1 X10 / G4 P / G1 X20`` (88 / 86 / 133 / 184 / 335 ms for P = 0.002 /
+  0.012 / 0.072 / 0.15 / 0.3 s) are made of: $1 (25 ms, the step interrupt holding the motors
+  after the last step), ``ceil(20·P)`` × 50 ms, the stop's last step period (MPos counts that
+  step about 2 ms before its segment ends) and the next line's way to the machine when the host
+  sends it after the dwell's ``ok`` (the ``ok``'s transfer, the host's reaction, the line's
+  transfer: 6-7 ms for a host 5 ms late). With such a host this simulator stands 83.8 / 83.8 /
+  133.8 / 183.8 / 333.8 ms (before the rounding was modelled: 27 / 37 / 97 / 175 / 325).
 - **States** Idle, Run, Hold, Jog, Alarm, Check, Sleep; soft reset prints ``ALARM:3`` first if
   it stopped motion (the machine then stays locked, G-code answers ``error:9``, until ``$X``),
   then the welcome banner, then ``[MSG:'$H'|'$X' to unlock]`` in the Alarm state. A machine with
   homing enabled (``$22=1``) starts in Alarm, as a real plotter does.
+- **Blocking delays.** After ``ALARM:N`` the firmware waits 500 ms (``report_alarm_message``)
+  printing nothing; bytes and real-time flags are still received. For the limit alarms (1, 2) a
+  reset received by then is discarded (the critical-event loop clears it), then
+  ``[MSG:Reset to continue]``: only a reset after it works, and ``?`` is never answered; for the
+  others a reset is acted on after the delay (a ``?`` with it is lost), a ``?`` alone answered.
+  A reset in motion holds the motors for $1 (``mc_reset``'s ``st_go_idle``) before ``ALARM:3``,
+  and every reboot waits $1 (``st_reset``) before the banner: ``ALARM:3`` 25 ms after the
+  reset, the banner 550 ms after it (reset.log: 27 and 559 ms, with the transfer).
+- **Line numbers** (``line_numbers=True``, a ``USE_LINE_NUMBERS`` build, URL ``ln=1``): status
+  reports carry ``Ln:<N>`` of the planner's tail block (the one being prepared) when there is one
+  with N > 0; the planner holds 14 blocks (``Bf:14,128`` idle, ``[OPT:VN,14,128]``). N words are
+  read in every build (negative: error 4, above 10000000: error 27, repeated: error 25).
+- **Executed lines.** :attr:`SimulatedGrbl.executed_lines` and
+  :attr:`SimulatedGrbl.line_finished_at` record when each line received had taken effect.
 
 Not modelled: soft limits, overrides changing speeds (their values are only reported), homing
-motion (``$H`` sets the machine position to 0 at once), work offsets (WCO is always zero).
+motion (``$H`` sets the machine position to 0 at once), work offsets (WCO is always zero), a feed
+hold pausing a dwell (the dwell runs on), bytes lost while ``mc_reset`` busy-waits inside the
+serial interrupt, the ``Pn:`` field (the host build reports floating pins as ``Pn:PXYZRHS``),
+the phase of the first step interrupt after a start (Timer1 runs on while idle).
 
 Fault hooks for tests: :meth:`~SimulatedGrbl.inject_error`, :meth:`~SimulatedGrbl.schedule_alarm`,
 :meth:`~SimulatedGrbl.go_silent`, :meth:`~SimulatedGrbl.emit_garbage`,
-:meth:`~SimulatedGrbl.drop_connection`.
+:meth:`~SimulatedGrbl.drop_connection`, :meth:`~SimulatedGrbl.freeze_motion` (a stalled
+machine); host-side timing in :mod:`sim.grbl.transport`
+(:meth:`sim.grbl.protocol_grblsim.Serial.freeze_host`, ``Serial.write_latency``,
+``serve_pty(write_latency=...)``).
 """
 
 from __future__ import annotations
@@ -97,7 +128,7 @@ from firmware_protocols.grbl.codes import (
     RX_BUFFER_SIZE,
 )
 from sim.grbl.executor import HOLD, RUN, GrblExecutor
-from sim.grbl.planner import Dwell, GrblSettings, MotionBlock
+from sim.grbl.planner import PLANNER_CAPACITY, Dwell, GrblSettings, MotionBlock, PlanBlock
 
 DEFAULT_SETTINGS: dict[int, float] = {
     0: 10,
@@ -140,6 +171,72 @@ DEFAULT_SETTINGS: dict[int, float] = {
 RX_CAPACITY = RX_BUFFER_SIZE - 1
 """Bytes the receive ring can hold (one slot of 128 always stays empty)."""
 
+ALARM_REPORT_DELAY = 0.5
+"""``report_alarm_message``'s ``delay_ms(500)`` after printing ``ALARM:N``."""
+
+_MAX_INT_DIGITS = 8
+
+
+def avr_read_float(text: str, pos: int = 0) -> tuple[float, int] | None:
+    """Grbl's ``read_float`` as the firmware computes it, in 32-bit floats: ``(value, end)``.
+
+    The digits (at most 8 kept) make an integer, turned into a float and scaled by ``0.01``
+    and ``0.1`` steps (or ``10``), each product rounded to float32; so ``P0.15`` is
+    0.15000000596… and ``N9999999.5`` is 9999999. None when there is no digit.
+    """
+    i, end = pos, len(text)
+    negative = False
+    if i < end and text[i] in "+-":
+        negative = text[i] == "-"
+        i += 1
+    intval = exp = ndigit = 0
+    decimal = False
+    while i < end:
+        char = text[i]
+        if "0" <= char <= "9":
+            ndigit += 1
+            if ndigit <= _MAX_INT_DIGITS:
+                if decimal:
+                    exp -= 1
+                intval = intval * 10 + ord(char) - 48
+            elif not decimal:
+                exp += 1
+        elif char == "." and not decimal:
+            decimal = True
+        else:
+            break
+        i += 1
+    if not ndigit:
+        return None
+    f32 = np.float32
+    value = f32(intval)
+    if value != 0:
+        while exp <= -2:
+            value = f32(float(value) * 0.01)
+            exp += 2
+        if exp < 0:
+            value = f32(float(value) * 0.1)
+        while exp > 0:
+            value = f32(float(value) * 10.0)
+            exp -= 1
+    return (-float(value) if negative else float(value)), i
+
+
+def avr_words(text: str) -> dict[str, float]:
+    """The value words of a line in Grbl's buffer form (``N10G4P0.15``), read by
+    :func:`avr_read_float`; the last of a repeated letter wins (the parser refuses those)."""
+    words: dict[str, float] = {}
+    i = 3 if text.startswith("$J=") else 0
+    while i < len(text):
+        letter = text[i]
+        read = avr_read_float(text, i + 1)
+        if read is None:
+            i += 1
+            continue
+        words[letter], i = read
+    return words
+
+
 _WCO_REFRESH = (30, 10)  # REPORT_WCO_REFRESH_BUSY_COUNT, _IDLE_COUNT
 _OVR_REFRESH = (20, 10)  # REPORT_OVR_REFRESH_BUSY_COUNT, _IDLE_COUNT
 _CRITICAL_ALARMS = (1, 2)  # hard and soft limit: "[MSG:Reset to continue]", locked until reset
@@ -179,7 +276,8 @@ class SimulatedGrbl:
     ``start_in_alarm`` defaults to whether homing is enabled (``$22``). ``clock="real"`` makes
     :meth:`poll` follow the wall clock (for the pseudo-terminal server); ``"simulated"`` (the
     default) moves only with :meth:`advance`. ``pen`` chooses what the recorded pen column follows
-    (see the module docstring).
+    (see the module docstring). ``line_numbers`` builds the firmware with ``USE_LINE_NUMBERS``
+    (``Ln:`` in status reports, 14 planner blocks); off by default, as the stock firmware.
     """
 
     def __init__(
@@ -192,6 +290,7 @@ class SimulatedGrbl:
         pen_z_below: float = 0.0,
         pen_servo: tuple[float, float] | None = None,
         position_mm: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        line_numbers: bool = False,
     ) -> None:
         if clock not in ("simulated", "real"):
             raise ValueError(f"clock: expected 'simulated' or 'real', got {clock!r}")
@@ -206,8 +305,23 @@ class SimulatedGrbl:
         self.pen_source = pen
         self.pen_z_below = float(pen_z_below)
         self.pen_servo = None if pen_servo is None else (float(pen_servo[0]), float(pen_servo[1]))
-        self.executor = GrblExecutor(self._grbl_settings(), position_mm, auto_start=False)
+        self.line_numbers = bool(line_numbers)
+        capacity = PLANNER_CAPACITY - 1 if self.line_numbers else PLANNER_CAPACITY
+        self.executor = GrblExecutor(
+            self._grbl_settings(), position_mm, auto_start=False, planner_capacity=capacity
+        )
         self.executor.on_cycle_stop = self._cycle_stopped
+        self.executor.on_block_done = self._block_done
+        self.line_finished_at: list[float | None] = []
+        """Per line received (index 0 is line 1): the simulated time it had fully taken effect
+        and every earlier line too, None until then (forever for lines a reset threw away)."""
+        self._line_own: list[float | None] = []  # when each line itself took effect
+        self._line_blocks: dict[int, int] = {}  # line -> its planner blocks not yet executed
+        self._lines_processed: set[int] = set()
+        self._done_prefix = 0
+        self._blocked_until: float | None = None
+        self._after_block: Callable[[], None] | None = None
+        self._restart = False
         self.starvation: list[float] = []
         self._ran_dry: float | None = None
         self._flowing = False
@@ -233,6 +347,7 @@ class SimulatedGrbl:
         self._pen_events: list[tuple[float, float]] = [(0.0, 0.0)]
         homing = bool(self.settings[22])
         alarm = homing if start_in_alarm is None else start_in_alarm
+        self._reset_flags()
         self._boot(alarm)
 
     # -- host side ---------------------------------------------------------------------------
@@ -279,27 +394,35 @@ class SimulatedGrbl:
         """Move the simulated clock on to time ``t`` (no effect if it is already later), or
         only to the first event at which ``until()`` holds (then True)."""
         self._check_open()
+
+        mark = self._blocked_until
+
+        def event() -> bool:
+            self._pump()
+            changed = self._blocked_until != mark  # a blocking delay began or ended
+            return self.closed or changed or (until is not None and until())
+
         while True:
             self._pump()
             if until is not None and until():
                 return True
             due = [a for a in self._alarms if a[0] <= t]
-            end = min(due)[0] if due else t
-
-            def event() -> bool:
-                self._pump()
-                return self.closed or (until is not None and until())
-
+            mark = wake = self._blocked_until
+            if wake is not None and (wake > t or self.silent):
+                wake = None
+            end = min([a[0] for a in due] + ([wake] if wake is not None else []), default=t)
             stopped = self.executor.run_until(end, until=event)
             if self.closed:
                 return False
-            if stopped and not (due and self.now >= end):
-                return True
-            if due and self.now >= end:
+            if due and self.now >= min(due)[0]:
                 alarm = min(due)
                 self._alarms.remove(alarm)
                 self._raise_alarm(alarm[1])
                 continue
+            if self._blocked_until != mark or (wake is not None and self.now >= wake):
+                continue  # a blocking delay began or is over: the loop above carries on
+            if stopped:
+                return True
             if self.now >= t:
                 self._pump()
                 return False
@@ -348,6 +471,24 @@ class SimulatedGrbl:
         """Print ``data`` as it is, now (line noise, a wrong baud rate)."""
         with self.lock:
             self._emit_raw(bytes(data))
+
+    def freeze_motion(self, frozen: bool = True) -> None:
+        """Stall the machine, or let it go on: no step is made, no block or dwell ends, no
+        ``ok`` comes for a line waiting on the full planner, while ``?`` is still answered with
+        the same position and state (Run stays Run, Idle stays Idle), as a firmware whose stepper
+        hangs. Lines keep being taken while the planner has room."""
+        with self.lock:
+            self.executor.freeze(frozen)
+            self._pump()
+
+    @property
+    def executed_lines(self) -> int:
+        """How many of the lines received (counting every line, in order) have fully taken
+        effect, each with all the lines before it: a motion line when its block has finished
+        executing, a dwell when it has ended, any other line when processed (answered). A line
+        a reset, an alarm or a jog cancel threw away never finishes, so the count stops before
+        it (:attr:`line_finished_at` goes on for later lines)."""
+        return self._done_prefix
 
     def drop_connection(self) -> None:
         """The cable is pulled: the device closes and the transport closes with it."""
@@ -399,16 +540,22 @@ class SimulatedGrbl:
 
     # -- internals: boot and reset -----------------------------------------------------------
 
+    def _reset_flags(self) -> None:
+        """``main()``'s re-initialisation: real-time flags and the receive buffer cleared."""
+        self._critical = False
+        self._jog_cancel = False
+        self._status_pending = False
+        self._hold_pending = False
+        self._reset_pending = False
+        self._rx.clear()
+        self._rx_head = self._rx_tail = 0
+
     def _boot(self, alarm: bool) -> None:
         self._state = State.ALARM if alarm else State.IDLE
         self._critical = False
         self._line = bytearray()
         self._actions: deque[object] = deque()
         self._jogging = False
-        self._jog_cancel = False
-        self._status_pending = False
-        self._hold_pending = False
-        self._reset_pending = False
         self._overrides = [100, 100, 100]
         self._wco_counter = 0
         self._ovr_counter = 0
@@ -421,17 +568,61 @@ class SimulatedGrbl:
             self._run_startup_lines()
 
     def _soft_reset(self) -> None:
+        """Ctrl-X: ``mc_reset`` stops the steppers at once; in motion its ``st_go_idle`` holds
+        them for the step idle delay before ``ALARM:3`` (then the alarm's 500 ms), then the
+        reboot (:meth:`_reboot`)."""
         in_motion = self.executor.soft_reset()
+        self._abort_main_loop()
+        self._set_pen(0.0)  # mc_reset stops the spindle at once
         if self._state == State.CHECK:
             self._state = State.IDLE
-        if in_motion:
-            self._emit(Alarm(3))
-            self._state = State.ALARM
         if self._state == State.SLEEP:
             self._state = State.ALARM
-        self._rx.clear()
-        self._rx_head = self._rx_tail = 0
-        self._boot(self._state == State.ALARM)
+        if in_motion:
+            self._state = State.ALARM
+            self._block(self._idle_delay(alarm=True), lambda: self._report_alarm(3, self._reboot))
+        else:
+            self._reboot()
+
+    def _reboot(self) -> None:
+        """``main()`` after an abort: flags and receive buffer cleared, then ``st_reset``'s
+        ``st_go_idle`` waits the step idle delay ($1 ms, none with $1=255), then the banner."""
+        self._reset_flags()
+        self._actions.clear()
+        self._block(self._idle_delay(alarm=False), lambda: self._boot(self._state == State.ALARM))
+
+    def _abort_main_loop(self) -> None:
+        self._actions.clear()
+        self._line.clear()
+        self._restart = True
+
+    def _idle_delay(self, alarm: bool) -> float:
+        """``st_go_idle``'s busy wait: $1 ms; with $1=255 only while an alarm is flagged."""
+        ms = int(self.settings[1])
+        return ms / 1000.0 if (ms != 255 or alarm) else 0.0
+
+    def _block(self, seconds: float, then: Callable[[], None]) -> None:
+        """The firmware blocks (a ``delay_ms``) for ``seconds``, then carries on with ``then``.
+        Meanwhile nothing is printed; bytes are received and real-time flags set."""
+        if seconds <= 0:
+            then()
+            return
+        self._blocked_until = self.now + seconds
+        self._after_block = then
+
+    def _report_alarm(self, code: int, then: Callable[[], None] | None = None) -> None:
+        """``report_alarm_message``: ``ALARM:N``, then ``delay_ms(500)``; then, for the limit
+        alarms, ``[MSG:Reset to continue]`` with any reset received so far discarded."""
+
+        def after() -> None:
+            if code in _CRITICAL_ALARMS:
+                self._reset_pending = False  # the critical-event loop clears EXEC_RESET
+                self._emit(Msg(MSG_RESET_TO_CONTINUE))
+            if then is not None:
+                then()
+
+        self._emit(Alarm(code))
+        self._block(ALARM_REPORT_DELAY, after)
 
     def _run_startup_lines(self) -> None:
         for text in self.startup_lines:
@@ -503,14 +694,35 @@ class SimulatedGrbl:
         return self.closed
 
     def _pump(self) -> None:
-        """Grbl's main loop at the current time: real-time flags, then lines while it can."""
-        if self.closed or self.silent:
-            return
+        """Grbl at the current time: a blocking delay, or the main loop while it can run."""
+        while not (self.closed or self.silent):
+            if self._blocked_until is not None:
+                if self.now < self._blocked_until:
+                    return
+                then = self._after_block
+                self._blocked_until = self._after_block = None
+                if then is not None:
+                    then()
+                continue
+            self._restart = False
+            self._main_loop()
+            if not self._restart:
+                return
+
+    def _checkpoint(self) -> bool:
+        """``protocol_execute_realtime``: act on the real-time flags. False when the main loop
+        cannot go on (a reset, a critical alarm, the step interrupt's busy wait). In a dwell,
+        flags wait for the next 50 ms step of ``delay_sec``."""
+        if self._restart or self._blocked_until is not None:
+            return False
+        if self.executor.dwell_running and not self.executor.at_dwell_tick:
+            return True
         if self._reset_pending:
             self._reset_pending = False
             self._soft_reset()
+            return False
         if self._critical or self.executor.locked:
-            return  # the step interrupt busy-waits ($1): the main loop is frozen
+            return False  # the step interrupt busy-waits ($1): the main loop is frozen
         if self._hold_pending:
             self._hold_pending = False
             self.executor.feed_hold()
@@ -522,12 +734,23 @@ class SimulatedGrbl:
         if self._status_pending:
             self._status_pending = False
             self._emit(self._status())
+        return True
+
+    def _main_loop(self) -> None:
+        """``protocol_main_loop``: real-time flags, then lines while it can."""
+        if not self._checkpoint():
+            return
         if self._jogging and self.executor.idle and not self.executor.queued_blocks:
             self._jogging = False
         while True:
             if self._actions and not self._run_actions():
                 return
-            if not self._take_line():
+            if self._restart or self._blocked_until is not None:
+                return
+            taken = self._take_line()
+            if self._restart or self._blocked_until is not None:
+                return
+            if not taken:
                 break
         if self.executor.state == RUN:
             self._check_starving()
@@ -535,6 +758,7 @@ class SimulatedGrbl:
         if self.executor.queued_blocks and self.executor.idle:
             self.executor.cycle_start()
             self._ovr_counter = 0
+        self._checkpoint()
 
     def _cycle_stopped(self) -> None:
         self._check_starving()
@@ -554,21 +778,19 @@ class SimulatedGrbl:
             self._flowing = False
 
     def _busy(self) -> bool:
-        frozen = self.silent or self._critical  # lines will not move until the host acts
+        ex = self.executor
+        frozen = self.silent or self._critical or ex.frozen  # nothing moves until someone acts
         lines = not frozen and (self._actions or 0x0A in self._rx or 0x0D in self._rx)
-        return bool(
-            lines
-            or self._reset_pending
-            or not self.executor.idle
-            or self.executor.queued_blocks
-            or self.executor.locked
-            or self.executor.dwelling
-        )
+        motion = not ex.frozen and (not ex.idle or ex.queued_blocks or ex.locked or ex.dwelling)
+        blocked = self._blocked_until is not None and not self.silent
+        return bool(lines or self._reset_pending or motion or blocked)
 
     def _take_line(self) -> bool:
         """Move characters from the ring into the line; handle a complete line. False when the
         ring holds no complete line any more."""
         while self._rx:
+            if self._rx[0] in (0x0A, 0x0D) and not self._checkpoint():
+                return False  # protocol_execute_realtime at each line's end stopped the loop
             byte = self._rx.popleft()
             self._rx_tail = (self._rx_tail + 1) % RX_BUFFER_SIZE
             if byte in (0x0A, 0x0D):
@@ -581,17 +803,49 @@ class SimulatedGrbl:
 
     def _handle_line(self, text: str) -> None:
         self.lines_received += 1
-        injected = self._injected.pop(self.lines_received, None)
+        index = self.lines_received
+        self.line_finished_at.append(None)
+        self._line_own.append(None)
+        injected = self._injected.pop(index, None)
         if injected is not None:
             self._emit(Error(injected))
-            return
-        parsed = parse_line(text, self._state if self._state != State.IDLE else self.state)
-        if isinstance(parsed, Error):
-            self._emit(parsed)
-        elif isinstance(parsed, Block):
-            self._handle_block(parsed)
         else:
-            self._handle_system(parsed)
+            parsed = parse_line(text, self._state if self._state != State.IDLE else self.state)
+            if isinstance(parsed, Error):
+                self._emit(parsed)
+            elif isinstance(parsed, Block):
+                self._handle_block(parsed, index)
+            else:
+                self._handle_system(parsed)
+        self._actions.append(lambda: self._line_processed(index))
+
+    # -- internals: what has been executed -------------------------------------------------------
+
+    def _line_processed(self, index: int) -> None:
+        self._lines_processed.add(index)
+        if not self._line_blocks.get(index):
+            self._line_done(index)
+
+    def _block_done(self, block: PlanBlock) -> None:
+        index = block.source.tag
+        if not isinstance(index, int) or index not in self._line_blocks:
+            return
+        self._line_blocks[index] -= 1
+        if self._line_blocks[index] <= 0:
+            del self._line_blocks[index]
+            if index in self._lines_processed:
+                self._line_done(index)
+
+    def _line_done(self, index: int) -> None:
+        self._lines_processed.discard(index)
+        self._line_own[index - 1] = self.now
+        while self._done_prefix < len(self._line_own):
+            own = self._line_own[self._done_prefix]
+            if own is None:
+                break
+            before = self.line_finished_at[self._done_prefix - 1] if self._done_prefix else 0.0
+            self.line_finished_at[self._done_prefix] = max(own, before or 0.0)
+            self._done_prefix += 1
 
     def _run_actions(self) -> bool:
         """Carry out the current line's steps in order; True when all are done."""
@@ -604,7 +858,11 @@ class SimulatedGrbl:
                         return False
                 elif not self.executor.submit(action.item):
                     return False
-                elif self._ran_dry is not None and isinstance(action.item, MotionBlock):
+                elif isinstance(action.item, MotionBlock) and self._queued(action.item):
+                    tag = action.item.tag
+                    if isinstance(tag, int):
+                        self._line_blocks[tag] = self._line_blocks.get(tag, 0) + 1
+                if self._ran_dry is not None and isinstance(action.item, MotionBlock):
                     self.starvation.append(self._ran_dry)
                     self._ran_dry = None
             elif callable(action):
@@ -616,17 +874,22 @@ class SimulatedGrbl:
 
     # -- internals: G-code ---------------------------------------------------------------------
 
-    def _handle_block(self, block: Block) -> None:
+    def _queued(self, item: MotionBlock) -> bool:
+        """The block just submitted went into the planner (it was not dropped: no step)."""
+        planned = self.executor.last_planned
+        return planned is not None and planned.source is item
+
+    def _handle_block(self, block: Block, index: int | None = None) -> None:
         step = self.parser.step(block)
         if isinstance(step, Error):
             self._emit(step)
             return
         if block.jog:
             self._jogging = True
-        self._queue_step(step)
+        self._queue_step(step, block, index)
         self._actions.append(Ok())
 
-    def _queue_step(self, step: Step) -> None:
+    def _queue_step(self, step: Step, block: Block | None = None, tag: int | None = None) -> None:
         old = self.parser
         self.parser = step.state
         if self._state == State.CHECK:
@@ -640,17 +903,20 @@ class SimulatedGrbl:
             self._actions.append(self._touch_ovr)
         if new.coolant != old.coolant:
             self._actions.append(_Wait(None))
+        words = avr_words(block.text) if block is not None else {}
         if step.dwell is not None:
             self._actions.append(_Wait(None))
-            self._actions.append(_Wait(Dwell(step.dwell)))
+            self._actions.append(_Wait(Dwell(words.get("P", step.dwell))))
         if step.target is not None:
+            n = math.trunc(words.get("N", 0.0)) if self.line_numbers else 0
+            extra = {"line_number": n, "tag": tag}
             if step.rapid:
-                block = MotionBlock(step.target, rapid=True)
+                move = MotionBlock(step.target, rapid=True, **extra)
             elif new.feed_mode == "G93" and not step.jog:
-                block = MotionBlock(step.target, inverse_time_per_min=step.feed_rate)
+                move = MotionBlock(step.target, inverse_time_per_min=step.feed_rate, **extra)
             else:
-                block = MotionBlock(step.target, feed_mm_per_min=step.feed_rate)
-            self._actions.append(_Wait(block))
+                move = MotionBlock(step.target, feed_mm_per_min=step.feed_rate, **extra)
+            self._actions.append(_Wait(move))
         if step.program_flow == "M0":
             self._actions.append(_Wait(None))
             self._actions.append(self.executor.feed_hold)
@@ -685,7 +951,8 @@ class SimulatedGrbl:
             emit(Feedback("GC", self.parser.report(inches=bool(self.settings[13]))))
         elif isinstance(command, ViewBuildInfo):
             emit(Feedback("VER", f"1.1h.{BUILD_DATE}:{self.build_info}"))
-            emit(Feedback("OPT", f"V,15,{RX_BUFFER_SIZE}"))
+            options = "VN" if self.line_numbers else "V"
+            emit(Feedback("OPT", f"{options},{self.executor.planner.capacity},{RX_BUFFER_SIZE}"))
         elif isinstance(command, SetBuildInfo):
             self.build_info = command.text
         elif isinstance(command, ViewParameters):
@@ -790,19 +1057,26 @@ class SimulatedGrbl:
     # -- internals: alarms ---------------------------------------------------------------------
 
     def _raise_alarm(self, code: int) -> None:
-        self.executor.soft_reset()
-        self._actions.clear()
+        """A scheduled alarm: motion stops, buffers are flushed, Alarm state. A limit alarm
+        (critical) comes through ``mc_reset``, whose ``st_go_idle`` holds the motors for the
+        step idle delay first when they were moving; then :meth:`_report_alarm`. One due while
+        the firmware is in a blocking delay waits for its end."""
+        if self._blocked_until is not None:
+            self._alarms.append((self._blocked_until, code))
+            return
+        in_motion = self.executor.soft_reset()
+        self._abort_main_loop()
         self._rx.clear()
         self._rx_head = self._rx_tail = 0
-        self._line.clear()
         self._jogging = False
         self._state = State.ALARM
         self.parser = ParserState(**{**self._parser_fields(), "position": self.position_mm})
         self._set_pen(0.0)
-        self._emit(Alarm(code))
-        if code in _CRITICAL_ALARMS:
+        critical = code in _CRITICAL_ALARMS
+        if critical:
             self._critical = True
-            self._emit(Msg(MSG_RESET_TO_CONTINUE))
+        delay = self._idle_delay(alarm=True) if critical and in_motion else 0.0
+        self._block(delay, lambda: self._report_alarm(code))
 
     # -- internals: output -----------------------------------------------------------------------
 
@@ -837,12 +1111,21 @@ class SimulatedGrbl:
             mpos=position if report & 1 else None,  # type: ignore[arg-type]
             wpos=None if report & 1 else position,  # type: ignore[arg-type]
             buffer=(self.executor.free_blocks, self._rx_available()) if report & 2 else None,
+            line=self._line_number(),
             feed=self.executor.reported_rate_mm_per_min * scale,
             spindle=self.parser.spindle_speed if on else 0.0,
             wco=wco,
             overrides=overrides,  # type: ignore[arg-type]
             accessories=accessories,
         )
+
+    def _line_number(self) -> int | None:
+        """``Ln:``: the N word of the planner's tail block (the one the stepper is preparing),
+        in a line-number build, when there is one and it is above 0."""
+        block = self.executor.planner.current_block() if self.line_numbers else None
+        if block is None or block.source.line_number <= 0:
+            return None
+        return block.source.line_number
 
     def _emit(self, message: Message) -> None:
         inches = bool(self.settings[13])

@@ -29,8 +29,10 @@ simulated clock, reproducing ``stepper.c``'s timing:
 - **Soft reset** (0x18): steps stop at once, both buffers are flushed and the planner position is
   synced to where the machine is; the return value says whether motion was in progress (Grbl then
   raises ``ALARM:3``, because steps may have been lost).
-- **Dwell** (G4): waits for all motion to end, then for the dwell time; meanwhile the parser
-  takes no other line.
+- **Dwell** (G4): waits for all motion to end (and the step idle delay), then ``delay_sec``
+  waits ``ceil(20·P)`` steps of 50 ms (:attr:`~sim.grbl.planner.Dwell.duration`), checking
+  real-time commands at the start of each step (:attr:`GrblExecutor.at_dwell_tick`); meanwhile
+  the parser takes no other line.
 
 Positions are kept in steps. :attr:`GrblExecutor.position_mm` is the machine position Grbl reports
 (``sys_position``, counted by the step interrupt as it computes each step); the
@@ -48,6 +50,7 @@ from collections.abc import Callable
 import numpy as np
 
 from sim.grbl.planner import (
+    DWELL_TIME_STEP,
     PLANNER_CAPACITY,
     Dwell,
     GrblPlanner,
@@ -154,13 +157,16 @@ class GrblExecutor:
         *,
         auto_start: bool = True,
         record: bool = True,
+        planner_capacity: int = PLANNER_CAPACITY,
     ) -> None:
         self.settings = settings if settings is not None else GrblSettings()
         self.auto_start = auto_start
         self.now = 0.0
         spm = self.settings.steps_per_mm
         self._steps = tuple(lround(p * s) for p, s in zip(position_mm, spm, strict=True))
-        self.planner = GrblPlanner(self.settings, self._steps, self._tail_replanned)
+        self.planner = GrblPlanner(
+            self.settings, self._steps, self._tail_replanned, capacity=planner_capacity
+        )
         self.state = IDLE
         self.hold_complete = False
         self._exec_hold = False  # STEP_CONTROL_EXECUTE_HOLD
@@ -171,11 +177,17 @@ class GrblExecutor:
         self._cur_released = False  # its buffer slot freed (last step computed)
         self._dwell: Dwell | None = None
         self._dwell_end: float | None = None
+        self._dwell_start: float | None = None
+        self._frozen_at: float | None = None
         self._lock_until: float | None = None  # step idle delay running: main loop frozen
         self._pending_hold = False
         self.recorder: Recorder | None = Recorder(0.0, self.position_mm) if record else None
         self.on_cycle_stop: Callable[[], None] | None = None
         """Called when motion runs out of blocks and the machine stops (Run → Idle)."""
+        self.last_planned: PlanBlock | None = None
+        """The planner block the last accepted :meth:`submit` made (None: dropped, no step)."""
+        self.on_block_done: Callable[[PlanBlock], None] | None = None
+        """Called when a planner block's last step has been made (its last segment ended)."""
 
     # -- public state ------------------------------------------------------------------------
 
@@ -205,7 +217,32 @@ class GrblExecutor:
     def locked(self) -> bool:
         """True during the step idle delay ($1) after the last step of a motion: Grbl's step
         interrupt is busy waiting, so its main loop reads no line and sends no report."""
-        return self._lock_until is not None
+        return self._lock_until is not None and self._frozen_at is None
+
+    @property
+    def frozen(self) -> bool:
+        """Motion is stalled by :meth:`freeze` (a fault hook)."""
+        return self._frozen_at is not None
+
+    @property
+    def dwell_running(self) -> bool:
+        """A dwell's ``delay_sec`` loop has begun (motion has ended) and the parser has not
+        moved on from it yet (it does at the first :meth:`submit` from its end on)."""
+        return self._dwell is not None and self._dwell_end is not None
+
+    @property
+    def at_dwell_tick(self) -> bool:
+        """Now is one of the running dwell's 50 ms steps, where ``delay_sec`` lets real-time
+        commands (status, reset, hold) through; the end of the dwell is not one."""
+        end, start = self._dwell_end, self._dwell_start
+        if not self.dwell_running or start is None or end is None:
+            return False
+        if self._frozen_at is not None:
+            return True  # a stalled machine: its main loop answers at once
+        if self.now >= end:
+            return False
+        k = (self.now - start) / DWELL_TIME_STEP
+        return abs(k - round(k)) < 1e-6
 
     @property
     def position_steps(self) -> tuple[int, int, int]:
@@ -213,7 +250,8 @@ class GrblExecutor:
         seg = self._cur
         if seg is None:
             return self._steps
-        k = min(seg.n_step, int((self.now - seg.t0) / seg.step_time) + 1) if seg.n_step else 0
+        now = self.now if self._frozen_at is None else self._frozen_at
+        k = min(seg.n_step, int((now - seg.t0) / seg.step_time) + 1) if seg.n_step else 0
         return seg.block.steps_after(seg.events_before + k)
 
     @property
@@ -253,18 +291,19 @@ class GrblExecutor:
         if self._lock_until is not None:
             return False
         if self._dwell is not None:
-            if item == self._dwell and self._dwell_end is not None and self.now >= self._dwell_end:
+            end = self._dwell_end
+            if item == self._dwell and end is not None and self.now >= end and not self.frozen:
                 self._dwell = None
-                self._dwell_end = None
+                self._dwell_end = self._dwell_start = None
                 return True
             return False
         if isinstance(item, Dwell):
             self._dwell = item
             if self._motion_done():
-                self._dwell_end = self.now + item.seconds
-                if item.seconds == 0.0:
-                    self._dwell = self._dwell_end = None
+                if item.ticks <= 0:
+                    self._dwell = None
                     return True
+                self._start_dwell()
             else:
                 self._auto_cycle_start()
             return False
@@ -273,7 +312,8 @@ class GrblExecutor:
         if self.planner.full:
             self._auto_cycle_start()
             return False
-        if self.planner.buffer_line(item) is None:
+        self.last_planned = self.planner.buffer_line(item)
+        if self.last_planned is None:
             return True  # zero-length block: acknowledged, nothing queued
         if self.state == RUN:
             self._prep_buffer()
@@ -283,6 +323,28 @@ class GrblExecutor:
         elif self.auto_start:
             self._auto_cycle_start()
         return True
+
+    def freeze(self, frozen: bool = True) -> None:
+        """Stall the machine (a fault hook): no step, no segment or block ends, the dwell and
+        the step idle delay stop counting; the position holds. ``freeze(False)`` carries on
+        where it stopped, every pending time shifted by the stall."""
+        if frozen and self._frozen_at is None:
+            self._frozen_at = self.now
+            if self.recorder is not None:
+                self.recorder.add(self.now, self.position_mm)
+        elif not frozen and self._frozen_at is not None:
+            shift = self.now - self._frozen_at
+            if self.recorder is not None:
+                self.recorder.add(self.now, self.position_mm)
+            self._frozen_at = None
+            if self._cur is not None:
+                self._cur.t0 += shift
+            if self._lock_until is not None:
+                self._lock_until += shift
+            if self._dwell_end is not None and self._dwell_start is not None:
+                self._dwell_start += shift
+                self._dwell_end += shift
+            self._wake_up()
 
     def cycle_start(self) -> None:
         """Grbl's auto cycle start: begin executing queued blocks if idle.
@@ -377,7 +439,7 @@ class GrblExecutor:
         self._exec_hold = self._end_motion = False
         self.hold_complete = False
         self.state = IDLE
-        self._dwell = self._dwell_end = None
+        self._dwell = self._dwell_end = self._dwell_start = None
         self._lock_until = None
         self._pending_hold = False
         self.planner.reset(self._steps)
@@ -390,7 +452,9 @@ class GrblExecutor:
         if not self._motion_done() or len(self.planner):
             raise RuntimeError("settings can only change while idle")
         self.settings = settings
-        self.planner = GrblPlanner(settings, self._steps, self._tail_replanned)
+        self.planner = GrblPlanner(
+            settings, self._steps, self._tail_replanned, capacity=self.planner.capacity
+        )
 
     # -- internals: cycle control ------------------------------------------------------------
 
@@ -405,7 +469,7 @@ class GrblExecutor:
 
     def _wake_up(self) -> None:
         """Start executing the next prepared segment if the stepper is stopped."""
-        if self._cur is None and self._queue:
+        if self._cur is None and self._queue and self._frozen_at is None:
             self._start_next(self.now)
 
     def _start_next(self, t: float) -> None:
@@ -419,6 +483,8 @@ class GrblExecutor:
             self._prep_buffer()
 
     def _next_event(self) -> float | None:
+        if self._frozen_at is not None:
+            return None
         events = []
         seg = self._cur
         if seg is not None:
@@ -426,8 +492,11 @@ class GrblExecutor:
                 events.append(seg.t0 + seg.duration)
             else:
                 events.append(seg.t0 + (seg.n_step - 1) * seg.step_time)
-        if self._dwell_end is not None and self._dwell is not None and self._dwell_end > self.now:
-            events.append(self._dwell_end)
+        start, end = self._dwell_start, self._dwell_end
+        if self.dwell_running and start is not None and end is not None and self.now < end:
+            # delay_sec's next 50 ms step (a real-time check point), or the end.
+            k = math.floor((self.now - self._dwell_start) / DWELL_TIME_STEP + 1e-6) + 1
+            events.append(min(self._dwell_start + k * DWELL_TIME_STEP, self._dwell_end))
         if self._lock_until is not None:
             events.append(self._lock_until)
         return min(events) if events else None
@@ -462,6 +531,8 @@ class GrblExecutor:
         self._cur = None
         if self.recorder is not None:
             self.recorder.add(self.now, self._mm(self._steps))
+        if done >= seg.block.step_event_count and self.on_block_done is not None:
+            self.on_block_done(seg.block)
         if self._queue:
             self._start_next(self.now)
             return
@@ -491,7 +562,13 @@ class GrblExecutor:
 
     def _maybe_start_dwell(self) -> None:
         if self._dwell is not None and self._dwell_end is None and self._motion_done():
-            self._dwell_end = self.now + self._dwell.seconds
+            self._start_dwell()
+
+    def _start_dwell(self) -> None:
+        assert self._dwell is not None
+        start = self.now if self._frozen_at is None else self._frozen_at
+        self._dwell_start = start
+        self._dwell_end = start + self._dwell.duration
 
     def _touch(self) -> None:
         if self.recorder is not None:

@@ -42,10 +42,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+
+import numpy as np
 
 BLOCK_BUFFER_SIZE = 16
-"""Grbl's planner ring buffer; one slot is always left empty, so 15 blocks are usable."""
+"""Grbl's planner ring buffer; one slot is always left empty, so 15 blocks are usable.
+A build with ``USE_LINE_NUMBERS`` has 15 (14 usable)."""
 
 PLANNER_CAPACITY = BLOCK_BUFFER_SIZE - 1
 """Blocks the planner can hold at once (what ``Bf:`` reports as available when empty)."""
@@ -55,6 +58,9 @@ MINIMUM_FEED_RATE_MM_PER_MIN = 1.0
 
 MINIMUM_JUNCTION_SPEED = 0.0
 """Grbl's floor on junction speeds (config.h)."""
+
+DWELL_TIME_STEP = 0.050
+"""``delay_sec``'s step (``DWELL_TIME_STEP``, 50 ms): a dwell lasts a whole number of them."""
 
 _LARGE = 1.0e38  # Grbl's SOME_LARGE_VALUE: "no limit".
 
@@ -148,13 +154,16 @@ class MotionBlock:
 
     Exactly one way of giving the speed: ``rapid=True`` (G0, at the maximum rates),
     ``feed_mm_per_min`` (G1 under G94) or ``inverse_time_per_min`` (G1 under G93: the F word,
-    in 1/min, so that the block lasts 1/F minutes).
+    in 1/min, so that the block lasts 1/F minutes). ``line_number`` is the line's N word
+    (``Ln:``), ``tag`` anything the caller wants back from the planner block (not compared).
     """
 
     target_mm: tuple[float, float, float]
     feed_mm_per_min: float | None = None
     inverse_time_per_min: float | None = None
     rapid: bool = False
+    line_number: int = field(default=0, compare=False)
+    tag: object = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         try:
@@ -190,7 +199,11 @@ class MotionBlock:
 
 @dataclass(frozen=True)
 class Dwell:
-    """G4: wait for every queued move to finish, then pause ``seconds`` before the next line."""
+    """G4: wait for every queued move to finish, then pause before the next line.
+
+    ``seconds`` is the P word; the pause is :attr:`duration`: Grbl's ``delay_sec`` waits
+    ``ceil(20·P)`` steps of :data:`DWELL_TIME_STEP` (50 ms), computed in 32-bit floats.
+    """
 
     seconds: float
 
@@ -199,6 +212,16 @@ class Dwell:
         if isinstance(s, bool) or not isinstance(s, (int, float)) or not math.isfinite(s) or s < 0:
             raise ValueError(f"seconds: must be a finite number >= 0, got {s!r}")
         object.__setattr__(self, "seconds", float(s))
+
+    @property
+    def ticks(self) -> int:
+        """``delay_sec``'s loop count: ``ceil(1000 / DWELL_TIME_STEP · P)`` in float32."""
+        return math.ceil(float(np.float32(self.seconds) * np.float32(20.0)))
+
+    @property
+    def duration(self) -> float:
+        """The pause Grbl makes, seconds: :attr:`ticks` × 50 ms."""
+        return self.ticks * DWELL_TIME_STEP
 
 
 def lround(x: float) -> int:
@@ -262,9 +285,10 @@ class GrblPlanner:
     """Grbl 1.1's planner buffer: ``plan_buffer_line``, ``planner_recalculate`` and friends.
 
     ``blocks[0]`` is the buffer tail (the block the stepper is preparing, or the next one); the
-    list never holds more than :data:`PLANNER_CAPACITY` blocks. ``on_tail_replanned`` is called
-    whenever the reverse pass reaches the tail block (Grbl's ``st_update_plan_block_parameters``),
-    so that the stepper can recompute the partially prepared block's profile.
+    list never holds more than ``capacity`` (:data:`PLANNER_CAPACITY`) blocks.
+    ``on_tail_replanned`` is called whenever the reverse pass reaches the tail block (Grbl's
+    ``st_update_plan_block_parameters``), so that the stepper can recompute the partially
+    prepared block's profile.
     """
 
     def __init__(
@@ -272,8 +296,10 @@ class GrblPlanner:
         settings: GrblSettings,
         position_steps: tuple[int, int, int] = (0, 0, 0),
         on_tail_replanned: Callable[[], None] | None = None,
+        capacity: int = PLANNER_CAPACITY,
     ) -> None:
         self.settings = settings
+        self.capacity = int(capacity)
         self.blocks: list[PlanBlock] = []
         self.planned = 0  # index of the first block after the optimally planned ones
         self.position_steps = tuple(int(v) for v in position_steps)
@@ -291,12 +317,12 @@ class GrblPlanner:
     @property
     def full(self) -> bool:
         """True when ``plan_check_full_buffer`` would block the parser."""
-        return len(self.blocks) >= PLANNER_CAPACITY
+        return len(self.blocks) >= self.capacity
 
     @property
     def free_blocks(self) -> int:
         """``plan_get_block_buffer_available``: what Grbl reports as ``Bf:<blocks>,…``."""
-        return PLANNER_CAPACITY - len(self.blocks)
+        return self.capacity - len(self.blocks)
 
     def current_block(self) -> PlanBlock | None:
         return self.blocks[0] if self.blocks else None

@@ -25,7 +25,22 @@ class Serial(SimulatedSerialBase):
         self._link: Link | None = None
         self._speed: float | None = None
         self._dropped = False
+        self._host_freezes: list[tuple[float, float]] = []
+        self.write_latency: float = 0.0
+        """Seconds (simulated) every chunk written takes to start reaching the device, as a
+        USB adapter's latency: a fault hook for host-side timing. 0 by default."""
         super().__init__(*args, **kwargs)
+
+    def freeze_host(self, at: float, seconds: float) -> None:
+        """A fault hook: the host is descheduled. The first host call (``write``, ``read``,
+        ``in_waiting``, ``flush``...) at or after simulated time ``at`` first lets the line and
+        the device run alone for ``seconds`` of simulated time: the host neither sends nor
+        reads meanwhile (what it wrote before is still delivered)."""
+        at, seconds = float(at), float(seconds)
+        if not (math.isfinite(at) and math.isfinite(seconds) and seconds >= 0):
+            raise ValueError(f"freeze_host: need finite at and seconds >= 0, got {at}, {seconds}")
+        self._host_freezes.append((at, seconds))
+        self._host_freezes.sort()
 
     def open(self) -> None:
         if self._port is None:
@@ -64,9 +79,18 @@ class Serial(SimulatedSerialBase):
             raise SerialException("grblsim: connection dropped by the device")
         return self._link
 
+    def _host_call(self) -> Link:
+        """The link, once any host freeze due by now has passed (see :meth:`freeze_host`)."""
+        link = self._live_link()
+        while self._host_freezes and self._host_freezes[0][0] <= link.now:
+            _, seconds = self._host_freezes.pop(0)
+            link.advance_to(link.now + seconds)
+            link = self._live_link()
+        return link
+
     @property
     def in_waiting(self) -> int:
-        link = self._live_link()
+        link = self._host_call()
         count = link.available()
         if not count:
             link.advance_to(link.now + POLL_QUANTUM)
@@ -74,7 +98,7 @@ class Serial(SimulatedSerialBase):
         return count
 
     def read(self, size: int = 1) -> bytes:
-        link = self._live_link()
+        link = self._host_call()
         out = bytearray(link.receive(size))
         timeout = self._timeout
         deadline = math.inf if timeout is None else link.now + timeout
@@ -88,26 +112,26 @@ class Serial(SimulatedSerialBase):
         return bytes(out)
 
     def write(self, data: bytes) -> int:
-        link = self._live_link()
+        link = self._host_call()
         data = bytes(memoryview(data))
-        link.send(data)
+        link.send(data, latency=self.write_latency)
         return len(data)
 
     def flush(self) -> None:
         """Wait (in simulated time) until every written byte has reached the device."""
-        link = self._live_link()
+        link = self._host_call()
         while link.sending:
             link.advance_to(link.now + POLL_QUANTUM)
 
     def reset_input_buffer(self) -> None:
-        self._live_link().clear_to_host()
+        self._host_call().clear_to_host()
 
     def reset_output_buffer(self) -> None:
-        self._live_link().clear_to_device()
+        self._host_call().clear_to_device()
 
     @property
     def out_waiting(self) -> int:
-        return self._live_link().sending
+        return self._host_call().sending
 
     def send_break(self, duration: float = 0.25) -> None:
         self._live_link()

@@ -9,22 +9,31 @@ returns a :class:`~sim.grbl.protocol_grblsim.Serial` (a ``serial.SerialBase``) t
 simulated Grbl (``port.device``). ``grblsim://<name>`` opens a device given to
 :func:`attach_device` instead, so a test can set it up (fault hooks) before the host opens it.
 Query parameters: ``speed`` (line speed in baud; default the port's ``baudrate``), ``alarm``
-(1: start in the Alarm state), ``pen`` (``spindle`` or ``z``) and ``$N`` (a setting).
+(1: start in the Alarm state), ``pen`` (``spindle`` or ``z``), ``ln`` (1: a build with
+``USE_LINE_NUMBERS``, reporting ``Ln:``) and ``$N`` (a setting).
 
 The simulated clock moves only with the host: bytes written are delivered one by one, 10 bits
 each at the line speed; reads advance the clock until enough bytes have arrived or the read
 timeout has passed in *simulated* seconds (``in_waiting`` advances it by 1 ms when nothing is
 waiting, so a polling loop makes progress). Nothing waits on the wall clock.
 
+Host-side timing fault hooks on the port (:class:`~sim.grbl.protocol_grblsim.Serial`):
+``port.freeze_host(at, seconds)`` (a descheduled host: the first call at or after simulated time
+``at`` first lets the device run alone for ``seconds``) and ``port.write_latency`` (seconds every
+written chunk takes to start reaching the device, default 0).
+
 **Pseudo-terminal, real time** (any program): :func:`serve_pty` opens ``os.openpty()``, puts it in
 raw mode and runs a thread that pumps bytes between the master side and a device driven by the
-wall clock. ``serial.Serial(path)`` or any G-code sender opens the slave ``path``.
+wall clock. ``serial.Serial(path)`` or any G-code sender opens the slave ``path``;
+``serve_pty(device, write_latency=s)`` holds the host's bytes ``s`` seconds before the device
+gets them.
 """
 
 from __future__ import annotations
 
 import math
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from urllib.parse import parse_qsl, urlsplit
@@ -83,6 +92,8 @@ def device_from_url(url: str) -> tuple[SimulatedGrbl, float | None]:
                 options["start_in_alarm"] = value not in ("0", "false", "")
             elif key == "pen":
                 options["pen"] = value
+            elif key == "ln":
+                options["line_numbers"] = value not in ("0", "false", "")
             elif key.startswith("$") and key[1:].isdigit():
                 settings[int(key[1:])] = float(value)
             else:
@@ -124,8 +135,9 @@ class Link:
     def byte_time(self) -> float:
         return BITS_PER_BYTE / self.baud
 
-    def send(self, data: bytes) -> None:
-        t = max(self.now, self._to_device_free)
+    def send(self, data: bytes, latency: float = 0.0) -> None:
+        """Queue ``data``; its first byte starts ``latency`` seconds from now at the earliest."""
+        t = max(self.now + latency, self._to_device_free)
         for byte in data:
             t += self.byte_time
             self._to_device.append((t, byte))
@@ -195,17 +207,33 @@ class PtyServer(pty.PtyServer):
 
     name = "grblsim-pty"
 
-    def __init__(self, device: SimulatedGrbl, poll_interval: float = 0.001) -> None:
+    def __init__(
+        self, device: SimulatedGrbl, poll_interval: float = 0.001, write_latency: float = 0.0
+    ) -> None:
         if device.clock != "real":
             raise ValueError("device: serve_pty needs a device with clock='real'")
+        if not (math.isfinite(write_latency) and write_latency >= 0):
+            raise ValueError(f"write_latency: must be >= 0 s, got {write_latency!r}")
         self.device = device
         self.poll_interval = poll_interval
+        self.write_latency = float(write_latency)
+        self._delayed: deque[tuple[float, bytes]] = deque()  # (wall time due, bytes)
         super().__init__()
 
     def wait_time(self) -> float:
+        if self._delayed:
+            due = self._delayed[0][0] - time.monotonic()
+            return min(self.poll_interval, max(due, 0.0))
         return self.poll_interval
 
     def exchange(self, data: bytes) -> bytes | None:
+        if self.write_latency > 0:
+            now = time.monotonic()
+            if data:
+                self._delayed.append((now + self.write_latency, data))
+            data = b""
+            while self._delayed and self._delayed[0][0] <= now:
+                data += self._delayed.popleft()[1]
         with self.device.lock:
             if self.device.closed:
                 return None
@@ -215,9 +243,11 @@ class PtyServer(pty.PtyServer):
             return self.device.read()
 
 
-def serve_pty(device: SimulatedGrbl) -> tuple[str, Callable[[], None]]:
-    """Serve ``device`` (``clock="real"``) on a new pseudo-terminal: ``(slave path, stop)``."""
-    server = PtyServer(device)
+def serve_pty(device: SimulatedGrbl, write_latency: float = 0.0) -> tuple[str, Callable[[], None]]:
+    """Serve ``device`` (``clock="real"``) on a new pseudo-terminal: ``(slave path, stop)``.
+    ``write_latency``: wall-clock seconds the host's bytes are held before the device gets them
+    (a USB adapter's latency timer), a fault hook."""
+    server = PtyServer(device, write_latency=write_latency)
     return server.path, server.stop
 
 

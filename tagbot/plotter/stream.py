@@ -282,6 +282,10 @@ class GrblStreamer:
                 self._report.statuses.append((now, message))
                 if self.tracker is not None:
                     self._on_status(message)
+        elif isinstance(message, Ok | Error) and self.tracker is not None:
+            # Answers to lines still in flight when a fault stopped the stream (the safe stop
+            # waits for the hold): they were planned, so the tracker must count them.
+            self.tracker.acknowledge(refused=isinstance(message, Error))
         elif self._report is not None:
             self._report.messages.append((now, message))
         else:
@@ -790,9 +794,11 @@ class ExecutionTracker:
         """Program lines (after ``first``) the machine has finished."""
         return max(0, self.done - self.preamble)
 
-    def acknowledge(self) -> None:
-        """The oldest line in flight was answered ``ok``."""
-        if self.entries[self.acked].moves:
+    def acknowledge(self, *, refused: bool = False) -> None:
+        """The oldest line in flight was answered (``ok``, or ``error:N`` when ``refused``)."""
+        if self.acked >= len(self.entries):
+            return
+        if self.entries[self.acked].moves and not refused:
             self.moving.append(self.acked)
         self.acked += 1
 

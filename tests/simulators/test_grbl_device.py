@@ -119,8 +119,18 @@ def test_reset_in_motion_alarm_3_and_unlock():
     exchange(device, b"G1 X30 F300\n", 1.5)
     assert device.state.value == "Run"
     where = device.position_mm
-    out = exchange(device, b"\x18")
-    assert out == b"ALARM:3\r\n" + WELCOME + UNLOCK_MSG
+    device.write(b"\x18")
+    t0 = device.now
+    device.advance(1.0)
+    # mc_reset's st_go_idle ($1 = 25 ms), ALARM:3, report_alarm_message's 500 ms, st_reset's
+    # 25 ms, the banner. The transcript (reset.log): ALARM:3 +27 ms, banner +559 ms (with the
+    # lines' transfer at 115200 baud and the host's reading).
+    chunks = device.read_timed()
+    assert b"".join(c for _, c in chunks) == b"ALARM:3\r\n" + WELCOME + UNLOCK_MSG
+    assert chunks[0][0] - t0 == pytest.approx(0.025)
+    assert all(t - t0 == pytest.approx(0.550) for t, _ in chunks[1:])
+    assert 0 <= 0.027 - (chunks[0][0] - t0) < 0.005
+    assert 0 <= 0.559 - (chunks[-1][0] - t0) < 0.012
     status = exchange(device, b"?").decode()
     assert status.startswith("<Alarm|MPos:") and status.endswith("|WCO:0.000,0.000,0.000>\r\n")
     assert exchange(device, b"G1 X0 F300\n") == b"error:9\r\n"
@@ -133,8 +143,16 @@ def test_reset_in_motion_alarm_3_and_unlock():
 
 def test_reset_when_idle_is_just_a_banner():
     device = booted()
-    assert exchange(device, b"\x18") == WELCOME
+    # st_reset's st_go_idle waits $1 ms before the banner (the transcripts: banner 27 ms after
+    # the reset, its 30 bytes' transfer included).
+    assert exchange(device, b"\x18", 0.024) == b""
+    assert exchange(device, b"", 0.001) == WELCOME
     assert device.state.value == "Idle"
+    longer = booted(settings={1: 100})
+    assert exchange(longer, b"\x18", 0.099) == b""
+    assert exchange(longer, b"", 0.001) == WELCOME
+    locked = booted(settings={1: 255})  # 255: motors always on, no delay
+    assert exchange(locked, b"\x18") == WELCOME
 
 
 def test_homing_enabled_starts_in_alarm():
@@ -258,7 +276,7 @@ def test_check_mode():
     assert exchange(device, b"$C\n") == b"[MSG:Enabled]\r\nok\r\n"
     assert exchange(device, b"G1 X10 F100\nG1 Y1 F0\n") == b"ok\r\nerror:22\r\n"
     assert exchange(device, b"?").startswith(b"<Check|MPos:0.000,0.000,0.000|")
-    assert exchange(device, b"$C\n") == b"[MSG:Disabled]\r\nok\r\n" + WELCOME
+    assert exchange(device, b"$C\n", 0.025) == b"[MSG:Disabled]\r\nok\r\n" + WELCOME
     assert device.state.value == "Idle"
 
 
@@ -275,7 +293,7 @@ def test_system_command_answers():
 def test_startup_line_runs_after_reset():
     device = booted()
     assert exchange(device, b"$N0=G21 G91\n") == b"ok\r\n"
-    assert exchange(device, b"\x18") == WELCOME + b">G21G91:ok\r\n"
+    assert exchange(device, b"\x18", 0.025) == WELCOME + b">G21G91:ok\r\n"
     assert exchange(device, b"$G\n").startswith(b"[GC:G0 G54 G17 G21 G91 ")
 
 
@@ -294,17 +312,49 @@ def test_inject_error_fault():
     assert exchange(device, b"G21\nG21\nG21\n") == b"ok\r\nerror:33\r\nok\r\n"
 
 
+def timed(device: SimulatedGrbl) -> list[tuple[float, bytes]]:
+    """What the device printed, one entry per line, with the time it was printed."""
+    out = []
+    for t, chunk in device.read_timed():
+        out += [(t, line + b"\n") for line in chunk.split(b"\n")[:-1]]
+    return out
+
+
 def test_scheduled_alarm_fault_is_critical():
     device = booted()
     device.schedule_alarm(1.0, 1)
-    exchange(device, b"G1 X30 F300\n")
-    out = exchange(device, b"", 1.5)
-    assert out == b"ALARM:1\r\n[MSG:Reset to continue]\r\n"
+    assert exchange(device, b"G1 X30 F300\n") == b"ok\r\n"
+    assert exchange(device, b"", 1.0) == b""
     stopped = device.position_mm
     assert 0 < stopped[0] < 10
+    # mc_reset holds the moving motors for $1 (25 ms), ALARM:1, 500 ms, then the message.
+    device.advance(1.0)
+    assert timed(device) == [
+        (pytest.approx(1.025), b"ALARM:1\r\n"),
+        (pytest.approx(1.525), b"[MSG:Reset to continue]\r\n"),
+    ]
     assert exchange(device, b"?G21\n", 1.0) == b""  # deaf until reset
     assert device.position_mm == stopped
-    assert exchange(device, b"\x18") == WELCOME + UNLOCK_MSG
+    assert exchange(device, b"\x18", 0.025) == WELCOME + UNLOCK_MSG
+
+
+@pytest.mark.parametrize("when", [0.0, 0.2, 0.499])
+def test_reset_during_a_critical_alarm_delay_is_discarded(when):
+    device = booted()
+    device.schedule_alarm(0.5, 2)  # idle: no motor hold, ALARM:2 at once
+    device.advance_to(0.5)
+    assert timed(device) == [(0.5, b"ALARM:2\r\n")]
+    device.advance(when)
+    device.write(b"\x18?")  # during report_alarm_message's 500 ms
+    device.advance(2.0)
+    assert timed(device) == [(pytest.approx(1.0), b"[MSG:Reset to continue]\r\n")]
+    assert device.state.value == "Alarm"
+    device.write(b"\x18")  # after the message: this one works
+    t = device.now
+    device.advance(0.1)
+    out = timed(device)
+    assert [line for _, line in out] == [*WELCOME.splitlines(keepends=True), UNLOCK_MSG]
+    assert out[0][0] == pytest.approx(t + 0.025)
 
 
 def test_scheduled_alarm_non_critical():
@@ -312,7 +362,25 @@ def test_scheduled_alarm_non_critical():
     device.schedule_alarm(0.2, 3)
     out = exchange(device, b"G1 X30 F300\n", 0.5)
     assert out == b"ok\r\nALARM:3\r\n"
+    # During the 500 ms after ALARM:N nothing is printed; what came meanwhile is answered after.
+    device.write(b"G21\n?")
+    device.advance(0.5)
+    out = timed(device)
+    assert out[0] == (pytest.approx(0.7), b"<Alarm|MPos:" + out[0][1][12:])
+    assert out[1] == (pytest.approx(0.7), b"error:9\r\n")
     assert exchange(device, b"G21\n") == b"error:9\r\n"
+
+
+def test_reset_during_a_non_critical_alarm_delay_is_kept():
+    device = booted()
+    device.schedule_alarm(0.2, 3)
+    device.advance(0.3)
+    assert device.read() == b"ALARM:3\r\n"
+    device.write(b"?\x18G21\n")  # the reset wins; the status request and the line are lost
+    device.advance(1.0)
+    out = timed(device)
+    assert [line for _, line in out] == [*WELCOME.splitlines(keepends=True), UNLOCK_MSG]
+    assert out[0][0] == pytest.approx(0.725)  # after the delay and st_reset's 25 ms
 
 
 def test_silent_fault():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 
 import pytest
 import serial
@@ -242,3 +243,81 @@ def test_polling_in_waiting_moves_simulated_time():
         assert polls >= 150
     finally:
         port.close()
+
+
+# -- host-side timing fault hooks ------------------------------------------------------------------
+
+
+def short_segments(n: int) -> list[bytes]:
+    return [
+        f"G1X{20 * math.cos(k / 40):.3f}Y{20 * math.sin(k / 40):.3f}F6000\n".encode()
+        for k in range(n)
+    ]
+
+
+def test_freeze_host_lets_the_device_run_alone():
+    port = open_url(PLOTTER)
+    try:
+        port.write(b"G1 X10 F3000\n")
+        start = port.device.now
+        port.freeze_host(start + 0.05, 0.5)
+        assert port.out_waiting == 13  # before `at`: no freeze yet
+        assert port.device.now == start
+        port.clock.sleep_until(start + 0.05)
+        assert port.in_waiting == 4  # the host comes back after 0.5 s; the ok is there
+        assert port.device.now == pytest.approx(start + 0.55)
+        assert port.device.position_mm[0] > 5  # the machine ran meanwhile
+        assert port.in_waiting == 4 and port.device.now == pytest.approx(start + 0.55)  # once
+        with pytest.raises(ValueError):
+            port.freeze_host(0.0, -1.0)
+    finally:
+        port.close()
+
+
+@pytest.mark.parametrize("pause", [0.0, 0.5])
+def test_a_host_pause_starves_the_planner(pause):
+    port = open_url(PLOTTER, baudrate=115200)
+    try:
+        if pause:
+            port.freeze_host(port.device.now + 0.5, pause)
+        assert stream_counted(port, short_segments(300)) == [b"ok"] * 300
+        port.device.run_until_idle()
+        assert bool(port.device.starvation) == bool(pause)
+    finally:
+        port.close()
+
+
+@pytest.mark.parametrize("latency", [0.0, 0.016])
+def test_write_latency_delays_what_the_host_sends(latency):
+    port = open_url(baudrate=115200)
+    try:
+        assert port.write_latency == 0.0
+        port.write_latency = latency
+        start = port.device.now
+        port.write(b"?")
+        answer = port.readline()
+        assert answer.startswith(b"<Idle|")
+        # The byte after the latency, the report's bytes back, read in 1 ms steps.
+        expected = latency + (1 + len(answer)) * 10 / 115200
+        assert expected <= port.device.now - start < expected + 0.0011
+        port.write(b"G4 P0.1\n")
+        port.flush()  # waits until the device has the bytes: latency included
+        assert port.out_waiting == 0
+    finally:
+        port.close()
+
+
+def test_pty_write_latency():
+    device = SimulatedGrbl(clock="real")
+    path, stop = serve_pty(device, write_latency=0.2)
+    try:
+        with serial.Serial(path, 115200, timeout=2) as port:
+            assert port.read(len(WELCOME)) == WELCOME
+            port.write(b"?")
+            sent = time.monotonic()
+            assert port.read_until(b">\r\n").startswith(b"<Idle|")
+            assert 0.2 <= time.monotonic() - sent < 1.5
+    finally:
+        stop()
+    with pytest.raises(ValueError):
+        serve_pty(SimulatedGrbl(clock="real"), write_latency=-1.0)
