@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -23,11 +24,12 @@ from tagbot import load_plan
 from tagbot.cli import main
 from tagbot.draw import draw
 from tagbot.errors import DeviceFault, PlacementError, ProfileError
-from tagbot.metrics import compare_execution, executed_runs
+from tagbot.metrics import compare_execution, compare_reports, executed_runs
 from tagbot.model import Plan, Tag
 from tagbot.plotter import load_profile
 from tagbot.plotter.machine import executed_from_statuses
 from tagbot.plotter.profile import device_settings, with_device_settings
+from tagbot.plotter.stream import StreamReport
 
 ROOT = Path(__file__).resolve().parents[1]
 LETTER_B = ROOT / "tagbot" / "examples" / "letter-b.json"
@@ -60,43 +62,78 @@ def read_csv(path: Path) -> tuple[list[str], np.ndarray]:
     return rows[0], np.array(rows[1:], dtype=float)
 
 
-def test_grbl_run_folder_holds_everything_and_meets_the_plotter_goals(tmp_path):
-    result = draw(load_plan(LETTER_B), tmp_path / "run")
+COMMON_KEYS = {
+    "device",
+    "port",
+    "simulated",
+    "completed",
+    "error",
+    "warnings",
+    "unit",
+    "total",
+    "sent",
+    "executed",
+    "resume_from",
+    "planned_duration_s",
+    "executed_duration_s",
+    "executed_source",
+    "placement",
+    "path_deviation_mean_mm",
+    "path_deviation_max_mm",
+    "speed_snr_db",
+    "planned_drawing_s",
+    "executed_drawing_s",
+    "drawing_duration_ratio",
+    "pen_down_runs",
+    "runs",
+    "details",
+}
+
+
+@pytest.mark.parametrize(
+    ("device", "program", "deviation"),
+    [("grbl", "program.gcode", 0.05), ("dynamixel", "joints.csv", 0.3)],
+)
+def test_both_devices_write_the_same_run_folder(tmp_path, device, program, deviation):
+    result = draw(load_plan(LETTER_B), tmp_path / device, device=device)
     folder = result.folder
     names = {p.name for p in folder.iterdir()}
-    assert {"plan.json", "motion.csv", "program.gcode", "executed.csv", "report.json"} <= names
+    assert {"plan.json", "motion.csv", program, "executed.csv", "report.json"} <= names
     assert {"tag.png", "speed.png", "plan.png"} <= names
     header, motion = read_csv(folder / "motion.csv")
     assert header == ["t", "x", "y", "vx", "vy", "speed", "pen"]
+    # The whole planned timeline: from the job's start, pen-up travel (pen 0) included.
+    assert motion[0, 0] == pytest.approx(0.0, abs=1e-9) and np.all(np.diff(motion[:, 0]) > 0)
+    assert set(np.unique(motion[:, 6])) == {0.0, 1.0}
     header, executed = read_csv(folder / "executed.csv")
     assert header == ["t", "x", "y", "pen"] and np.all(np.diff(executed[:, 0]) > 0)
     report = json.loads((folder / "report.json").read_text())
     assert report == json.loads(json.dumps(result.report))
-    assert report["device"] == "grbl" and report["port"] == "simulator"
-    assert report["lines_sent"] == report["lines_acknowledged"] == report["lines_total"]
-    assert report["errors"] == [] and report["starvation_events"] == 0
-    assert report["path_deviation_max_mm"] <= 0.1
-    assert report["speed_snr_db"] >= 20
-    assert report["drawing_duration_ratio"] <= 1.05
+    assert set(report) >= COMMON_KEYS
+    assert report["device"] == device and report["port"] == "simulator" and report["simulated"]
+    assert report["completed"] and report["error"] is None and report["resume_from"] is None
+    assert report["total"] == report["sent"] == report["executed"] > 0
+    assert report["executed_source"] == "simulator recorder, 1 ms"
+    assert report["path_deviation_max_mm"] <= deviation
+    assert report["speed_snr_db"] >= 25
+    assert 0.98 <= report["drawing_duration_ratio"] <= 1.02
     assert report["pen_down_runs"] == {"planned": 1, "executed": 1}
+    assert report["planned_duration_s"] == pytest.approx(motion[-1, 0], abs=0.02)
+
+
+def test_grbl_program_matches_the_planned_timeline(tmp_path):
+    result = draw(load_plan(LETTER_B), tmp_path / "run", pictures=False)
+    folder = result.folder
+    _, motion = read_csv(folder / "motion.csv")
     lines = (folder / "program.gcode").read_text().splitlines()
-    assert len(lines) == report["lines_total"]
+    assert len(lines) == result.report["total"]
+    assert result.report["details"]["starvation_events"] == 0
     start = len(lines) - 1 - lines[::-1].index("G93")
     last = [line for line in lines[start : lines.index("G94", start)] if line.startswith("G1X")]
     x, y = last[-1][3:].split("F")[0].split("Y")
-    # the program ends the run on the last setpoint (to within a motor step, 1/80 mm)
-    assert motion[-1, 1:3] == pytest.approx([float(x), float(y)], abs=0.0125)
-
-
-def test_arm_run_folder(tmp_path):
-    result = draw(short_tag(), tmp_path / "arm", device="dynamixel", pictures=False)
-    names = {p.name for p in result.folder.iterdir()}
-    assert {"plan.json", "motion.csv", "joints.csv", "executed.csv", "report.json"} <= names
-    header, joints = read_csv(result.folder / "joints.csv")
-    assert header == ["t", "shoulder", "elbow", "pen"]
-    report = result.report
-    assert report["ticks_sent"] == len(joints) and report["late_ticks"] == 0
-    assert report["path_deviation_max_mm"] <= 0.5 and report["speed_snr_db"] >= 20
+    # The run ends on the program's last setpoint (to within a motor step, 1/80 mm).
+    down = motion[motion[:, 6] == 1]
+    assert down[-1, 1:3] == pytest.approx([float(x), float(y)], abs=0.0125)
 
 
 def test_outside_the_bed_is_refused_before_the_first_byte(tmp_path):
@@ -106,19 +143,23 @@ def test_outside_the_bed_is_refused_before_the_first_byte(tmp_path):
     with pytest.raises(PlacementError, match=r"outside|bed"):
         draw(short_tag(), tmp_path / "run", port=url, overrides=["place.scale=1000"])
     assert device.lines_received == 0 and device.read() == b""
+    assert not (tmp_path / "run").exists()
 
 
-def test_a_fault_leaves_a_partial_run_folder_and_is_raised(tmp_path):
-    device = SimulatedGrbl(device_settings(load_profile()), pen_servo=(30, 50))
+def test_a_fault_leaves_a_run_folder_naming_the_executed_line(tmp_path):
+    device = SimulatedGrbl({**device_settings(load_profile()), 10: 3}, pen_servo=(30, 50))
     device.read()
-    device.inject_error(40 + 1, 24)  # the handshake's $$ is line 1 of what the device receives
+    # The handshake's $$ and $I are lines 1 and 2 of what the device receives.
+    device.inject_error(2 + 200, 24)
     url = attach_device(device, "draw_fault")
-    with pytest.raises(DeviceFault, match=r"^line 40: error:24") as caught:
+    with pytest.raises(DeviceFault, match=r"^after line \d+ .*error:24.*\(line 200\)") as caught:
         draw(load_plan(LETTER_B), tmp_path / "run", port=url)
-    assert caught.value.where == "line 40"
     report = json.loads((tmp_path / "run" / "report.json").read_text())
-    assert report["stopped_at_line"] == 40 and "error:24" in report["error"]
-    assert report["lines_acknowledged"] == 39
+    done = report["executed"]
+    assert caught.value.where.startswith(f"after line {done} ")
+    assert done == device.executed_lines - 2 < 199
+    assert report["resume_from"] == done + 1 and "error:24" in report["error"]
+    assert report["details"]["lines_acknowledged"] == 199
     assert (tmp_path / "run" / "executed.csv").exists()
 
 
@@ -145,7 +186,9 @@ def test_from_device_takes_the_controllers_limits(tmp_path):
         with_device_settings(load_profile(), {120: 0.0})
 
 
-def test_draw_over_a_pseudo_terminal(tmp_path):
+def test_draw_over_a_pseudo_terminal_reports_what_the_machine_said(tmp_path):
+    """The servo-pen profile over a real serial port: the executed trace is the status reports,
+    with the pen taken from the program at the executing line, compared like with like."""
     profile = load_profile(None, FAST)
     device = SimulatedGrbl(device_settings(profile), clock="real", pen_servo=(30, 50))
     path, stop = serve_pty(device)
@@ -154,26 +197,66 @@ def test_draw_over_a_pseudo_terminal(tmp_path):
     finally:
         stop()
     report = result.report
-    assert report["port"] == path and report["lines_acknowledged"] == report["lines_total"]
-    # On hardware the executed trace is what the status reports said (<= 5 Hz).
-    assert len(report["runs"]) == 1 and report["status_reports"] >= 3
+    assert report["port"] == path and not report["simulated"]
+    assert report["executed"] == report["total"] == report["details"]["lines_acknowledged"]
+    assert report["executed_source"].startswith("status reports, 5 Hz")
+    assert report["pen_down_runs"] == {"planned": 1, "executed": 1}
+    assert report["path_deviation_max_mm"] < 0.5
+    _, executed = read_csv(tmp_path / "pty" / "executed.csv")
+    # Pen down only while the machine was on the drawing (not while leaving the park position).
+    _, motion = read_csv(tmp_path / "pty" / "motion.csv")
+    down = motion[motion[:, 6] == 1]
+    box_low, box_high = down[:, 1:3].min(axis=0) - 0.05, down[:, 1:3].max(axis=0) + 0.05
+    pen_down = executed[executed[:, 3] == 1]
+    assert len(pen_down) >= 3
+    assert np.all((pen_down[:, 1:3] >= box_low) & (pen_down[:, 1:3] <= box_high))
 
 
-def test_executed_trace_from_status_reports():
-    profile = load_profile()
-    statuses = [
-        (0.0, Status(State.IDLE, mpos=(0.0, 0.0, 0.0), spindle=50.0)),
-        (0.2, Status(State.RUN, mpos=(1.0, 2.0, 0.0), spindle=30.0)),
-        (0.4, Status(State.RUN, wpos=(1.5, 2.5, 0.0), wco=(1.0, 1.0, 0.0), spindle=30.0)),
-        (0.6, Status(State.IDLE, wpos=(2.0, 3.0, 0.0), spindle=0.0)),
+def test_executed_trace_from_status_reports_takes_the_pen_from_the_program():
+    # Lines: 0 travel (pen up), 1 and 2 drawing (run 0), 3 pen up. The spindle values say
+    # nothing here: a servo pen's S value is no evidence of where the pen is.
+    program = SimpleNamespace(line_pen=[False, True, True, False], line_run=[-1, 0, 0, -1])
+    stream = StreamReport(lines_total=4)
+    stream.started = 10.0
+    stream.statuses = [
+        (10.0, Status(State.IDLE, mpos=(0.0, 0.0, 0.0), spindle=50.0)),
+        (10.2, Status(State.RUN, mpos=(1.0, 2.0, 0.0), spindle=50.0)),
+        (10.4, Status(State.RUN, wpos=(1.5, 2.5, 0.0), wco=(1.0, 1.0, 0.0), spindle=0.0)),
+        (10.6, Status(State.IDLE, wpos=(2.0, 3.0, 0.0), spindle=30.0)),
     ]
-    executed = executed_from_statuses(statuses, profile)
+    stream.executing = [0, 1, 2, 3]
+    executed, runs = executed_from_statuses(stream, program)
     assert executed.tolist() == [
         [0.0, 0.0, 0.0, 0.0],
-        [0.2, 1.0, 2.0, 1.0],
-        [0.4, 2.5, 3.5, 1.0],
-        [0.6, 3.0, 4.0, 0.0],
+        [pytest.approx(0.2), 1.0, 2.0, 1.0],
+        [pytest.approx(0.4), 2.5, 3.5, 1.0],
+        [pytest.approx(0.6), 3.0, 4.0, 0.0],
     ]
+    assert runs.tolist() == [-1, 0, 0, -1]
+
+
+def test_compare_reports_measures_like_with_like():
+    t = np.arange(0.0, 4.0, 0.01)
+    xy = np.column_stack([30 * (1 - np.cos(np.pi * t / 4)), 5 * np.sin(t)])
+    # Reports every 0.2 s, 0.35 s late, exactly on the path: no deviation, a clean SNR.
+    te = np.arange(0.0, 4.0, 0.2) + 0.35
+    on = np.column_stack([np.interp(te - 0.35, t, xy[:, i]) for i in (0, 1)])
+    executed = np.column_stack([te, on, np.ones(len(te))])
+    comparison = compare_reports([(t, xy)], executed, np.zeros(len(te), dtype=int))
+    assert comparison.deviation_max < 0.005
+    assert comparison.runs[0].executed_start == pytest.approx(0.35, abs=0.01)
+    assert comparison.speed_snr_db > 40
+    assert comparison.duration_ratio == pytest.approx(1.0, abs=0.01)
+    # A machine that runs 10 % slow: the drift shows in the duration, the error in the SNR;
+    # the 5 Hz chords never count as deviation.
+    slow = np.column_stack([np.interp(te / 1.1, t, xy[:, i]) for i in (0, 1)])
+    executed = np.column_stack([te, slow, np.ones(len(te))])
+    comparison = compare_reports([(t, xy)], executed, np.zeros(len(te), dtype=int))
+    assert comparison.deviation_max < 0.005
+    assert comparison.duration_ratio == pytest.approx(1.1, abs=0.03)
+    assert comparison.speed_snr_db < 25
+    with pytest.raises(ValueError, match="no report while the pen was down"):
+        compare_reports([(t, xy)], executed, np.full(len(te), -1))
 
 
 def test_compare_execution_recovers_offsets_and_measures_deviation():
