@@ -1,24 +1,36 @@
-"""The DYNAMIXEL drawing arm: loop timing over a pseudo-terminal, fidelity on the example tags.
+"""The DYNAMIXEL drawing arm: job time and fidelity per tag, loop timing over a pseudo-terminal.
 
-Run from the repository root::
+Run from the repository root (``../shared/data`` adds a few fitted GML tags when present)::
 
-    python benchmarks/bench_arm.py [--seconds 4] [--rates 100,200,500] [--skip-timing]
+    python benchmarks/bench_arm.py [--gml 4] [--data ../shared/data] [--rates 100,200,500]
+                                   [--fidelity-rates 100] [--timing-tag letter-b.json]
+                                   [--skip-timing] [--skip-fidelity]
 
 Three parts, each printed as a table:
 
-1. **Loop timing** (real time): ``tagbot sim arm`` runs in a separate process (its own GIL, as a
-   user would run it) and serves the default profile's chain (1 Mbps bus) on a pseudo-terminal;
-   :class:`tagbot.arm.driver.ArmDriver` connects through the unmodified dynamixel-sdk and streams
-   ``--seconds`` of smooth joint goals at each rate, reading present positions back at the
-   profile's 100 Hz. Reported: the sustained rate (ticks ÷ wall time from the first to the last
-   tick), the period jitter (|interval between tick starts − period|, p50/p99/max), the
-   lateness after each deadline (p50/p99), late ticks (> ¼ period) and resyncs (deadlines moved
-   on after a stall).
-2. **Fidelity** (simulated time, in process): every development tag (``tagbot/examples/*.json``;
-   trace files are fitted first) drawn with :func:`tagbot.arm.draw_arm` on the simulated chain at
-   each rate; the simulator's 1 ms pen-tip recorder is compared with the planned setpoints by
-   :func:`tagbot.metrics.compare_execution` (the measure ``tagbot draw`` reports): pen-down path
-   deviation mean/max (mm) and speed SNR executed vs planned (dB; goals: ≤ 0.5 mm, ≥ 20 dB).
+1. **Job time and fidelity per tag** (in process, simulated time): the shipped examples
+   (``tagbot/examples``; captures fitted first) and, with ``--gml N`` and the shared data, N
+   development GML tags evenly spaced in name order, fitted. Each is drawn twice through the
+   back end (:func:`tagbot.arm.run.prepare`, then ``.run``) on the simulated chain: as before
+   this change (``motion.time_scale=uniform``, ``motion.trim_ticks=0``,
+   ``motion.max_deviation=0``: one time scale for the whole tag from the joint limits, every
+   lognormal onset and tail drawn whole) and with the defaults (each pen-down run slowed only as
+   much as its joint limits and the servos' predicted follow need, runs starting and ending where
+   less than one tick at the pen is left). Reported per tag: the job's planned duration before →
+   now (and the ratio; the uniform scale with trimmed runs alone in brackets), pen-down time,
+   the share of pen-down time within one tick at the pen of where the lognormal motion starts
+   and ends (the pen resting there; goal ≤ 2 %) and of the drawn run's own ends (the last tick
+   of a lognormal tail is slow motion, not rest), and, from
+   :func:`tagbot.metrics.compare_execution` on the simulator's 1 ms pen-tip recorder: the
+   smallest per-run speed SNR and the overall one (goal ≥ 25 dB), the drawing-time ratio
+   executed ÷ planned (goal 0.98–1.02) and the path deviation mean / max (goal ≤ 0.3 mm).
+2. **Loop timing** (real time): ``tagbot sim arm`` runs in its own process (as a user would run
+   it) and serves the default chain (1 Mbps bus) on a pty, clean or with every reply 16 ms late
+   (an FTDI adapter's default latency timer) plus up to 2 ms of jitter and 2 % of replies lost
+   (``--reply-latency 0.016 --reply-jitter 0.002 --drop 0.02``). The ``--timing-tag`` is drawn
+   there through ``prepare(..., port=PATH).run`` at each rate; reported from the run's figures:
+   the loop rate, the period jitter p99 (|interval between tick starts − period|), lateness
+   p99, late ticks, resyncs, read-back replies late / missed.
 3. **IK throughput**: :meth:`tagbot.arm.Arm.ik` on 10⁶ reachable points, points per second.
 """
 
@@ -29,107 +41,247 @@ import math
 import signal
 import subprocess
 import sys
+import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 import tagbot
-from tagbot.arm import Arm, ArmProfile, draw_arm, load_profile
-from tagbot.arm.driver import ArmDriver
-from tagbot.arm.kinematics import angles_to_ticks
+from tagbot.arm import Arm, build_program, load_profile
+from tagbot.arm.place import time_at_ends
+from tagbot.arm.run import prepare
 from tagbot.metrics import compare_execution
+from tagbot.source import load_tag
 
-EXAMPLES = Path(tagbot.__file__).parent / "examples"
-SERVER = "from tagbot.arm.cli import sim_arm_command; sim_arm_command()"
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "tagbot" / "examples"
+DATA = ROOT.parent / "shared" / "data"
+
+BEFORE = ("motion.time_scale=uniform", "motion.trim_ticks=0", "motion.max_deviation=0")
+"""Today's behaviour before per-run scales, trimmed runs and the tracking bound."""
+UNIFORM = ("motion.time_scale=uniform",)
+"""The uniform scale, runs trimmed."""
+
+SNR_GOAL = 25.0  # dB, per run, at least
+RATIO_GOAL = (0.98, 1.02)  # drawing time executed / planned
+DEVIATION_GOAL = 0.3  # mm, path deviation max
+SHARE_GOAL = 0.02  # pen-down time resting within one tick of the ends
+
+FAULTS = {
+    "clean": (),
+    "16 ms late, 2 % lost": (
+        "--reply-latency",
+        "0.016",
+        "--reply-jitter",
+        "0.002",
+        "--drop",
+        "0.02",
+    ),
+}
+"""Line conditions of the loop timing: ``tagbot sim arm`` options."""
 
 
-def _goals(n: int, profile: ArmProfile) -> np.ndarray:
-    """``(n, 3)`` smooth goals around the park pose (pen up): a slow Lissajous in joint space."""
-    t = np.arange(n) * profile.period
-    park = np.array(profile.park)
-    shoulder, elbow = profile.joints
-    a1 = park[0] + math.radians(20) * np.sin(2 * np.pi * 0.25 * t)
-    a2 = park[1] + math.radians(15) * np.sin(2 * np.pi * 0.4 * t)
-    pen = np.full(n, profile["pen.up"])
-    return np.column_stack([angles_to_ticks(a1, shoulder), angles_to_ticks(a2, elbow), pen])
+def mark(ok: bool) -> str:
+    return "✓" if ok else "✗"
 
 
-def timing(rates: list[int], seconds: float) -> list[dict[str, float]]:
-    """Stream to a ``tagbot sim arm`` process over its pty at each rate; loop figures."""
+# -- tags -----------------------------------------------------------------------------------------
+
+
+def example_tags() -> list[tuple[str, Callable[[], tagbot.Tag]]]:
+    """The shipped examples: plan files loaded, anything else fitted (``load_tag``)."""
+    return [
+        (path.name, lambda path=path: load_tag(str(path)))
+        for path in sorted(EXAMPLES.glob("*.json"))
+    ]
+
+
+def gml_tags(data: Path, count: int) -> list[tuple[str, Callable[[], tagbot.Tag]]]:
+    """``count`` development GML tags, evenly spaced in name order, fitted when loaded."""
+    folder = data / "gml" / "dev"
+    if count <= 0 or not folder.is_dir():
+        return []
+    files = sorted(p for p in folder.iterdir() if p.is_file() and p.name != "index.csv")
+    picks = sorted({round(i) for i in np.linspace(0, len(files) - 1, min(count, len(files)))})
+    return [
+        (f"gml/{files[i].name}", lambda path=files[i]: tagbot.fit(tagbot.load_traces(path)))
+        for i in picks
+    ]
+
+
+# -- job time and fidelity ----------------------------------------------------------------------
+
+
+def _draw(tag: tagbot.Tag, overrides: tuple[str, ...]) -> dict[str, Any]:
+    """Draw ``tag`` on the in-process simulator through the back end; planned and measured."""
+    job = prepare(tag, overrides=overrides)
+    with tempfile.TemporaryDirectory() as out:
+        run = job.run(Path(out))
+    if run.error is not None:
+        raise run.error
+    comparison = compare_execution(run.planned_runs, run.executed, plans=run.plans)
+    resting, down = time_at_ends(job.program, job.profile, tag)
+    near, _ = time_at_ends(job.program, job.profile)
+    return {
+        "job": run.planned_duration,
+        "down": down,
+        "resting": resting / down,
+        "near": near / down,
+        "snr": comparison.speed_snr_db,
+        "snr_min": min(r.snr_db for r in comparison.runs),
+        "ratio": comparison.duration_ratio,
+        "dev_mean": comparison.deviation_mean,
+        "dev_max": comparison.deviation_max,
+        "runs": f"{comparison.executed_runs}/{comparison.planned_runs}",
+        "scales": job.program.setpoints.run_scales,
+    }
+
+
+def fidelity(
+    tags: list[tuple[str, Callable[[], tagbot.Tag]]], rates: list[int]
+) -> list[dict[str, Any]]:
+    """Each tag drawn as before and as now at each rate (simulated time)."""
     rows = []
-    for rate in rates:
-        profile = load_profile(None, [f"motion.rate={rate}"])
-        server = subprocess.Popen(
-            [sys.executable, "-c", SERVER], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL
-        )
-        try:
-            assert server.stdout is not None
-            path = server.stdout.readline().decode().strip()
-            goals = _goals(round(seconds * rate), profile)
-            with ArmDriver(path, profile) as driver:
-                driver.connect()
-                driver.move_to(goals[0], 0.5)
-                result = driver.stream(goals)
-        finally:
-            server.send_signal(signal.SIGINT)
-            server.wait(timeout=10)
-        s = result.scheduler
-        assert s is not None
-        woke = np.array(s.woke)
-        jitter = np.abs(np.diff(woke) - profile.period) * 1e3
-        late = np.array(s.lateness) * 1e3
-        rows.append(
-            {
-                "rate": rate,
-                "ticks": len(goals),
-                "sustained": (len(woke) - 1) / (woke[-1] - woke[0]),
-                "jitter50": float(np.percentile(jitter, 50)),
-                "jitter99": float(np.percentile(jitter, 99)),
-                "jittermax": float(jitter.max()),
-                "late50": float(np.percentile(late, 50)),
-                "late99": float(np.percentile(late, 99)),
-                "late": s.late_ticks,
-                "resyncs": s.resyncs,
-                "reads": len(result.reads),
-            }
-        )
-    return rows
-
-
-def _tags() -> list[tuple[str, tagbot.Tag]]:
-    from tagbot.source import load_tag
-
-    return [(path.name, load_tag(str(path))) for path in sorted(EXAMPLES.glob("*.json"))]
-
-
-def fidelity(rates: list[int]) -> list[dict[str, object]]:
-    """Each example tag through the in-process simulator at each rate."""
-    rows = []
-    for name, tag in _tags():
+    for name, load in tags:
+        start = time.perf_counter()
+        tag = load()
         for rate in rates:
-            profile = load_profile(None, [f"motion.rate={rate}"])
-            start = time.perf_counter()
-            run = draw_arm(tag, profile)
-            wall = time.perf_counter() - start
-            sp = run.setpoints
-            planned = [(sp.t[sp.plan == k], sp.xy[sp.plan == k]) for k in range(len(tag.plans))]
-            comparison = compare_execution(planned, run.executed)
+            r = (f"motion.rate={rate}",)
+            before, now = _draw(tag, BEFORE + r), _draw(tag, r)
+            uniform = build_program(tag, load_profile(None, UNIFORM + r)).setpoints.duration
             rows.append(
                 {
                     "tag": name,
                     "rate": rate,
-                    "ticks": run.stats["ticks_sent"],
-                    "scale": sp.time_scale,
-                    "size": sp.mm_per_unit,
-                    "dev_mean": comparison.deviation_mean,
-                    "dev_max": comparison.deviation_max,
-                    "snr": comparison.speed_snr_db,
-                    "track": run.stats["joint_tracking_error"]["max"],
-                    "wall": wall,
+                    "plans": len(tag.plans),
+                    "before": before,
+                    "now": now,
+                    "uniform": uniform,
+                    "wall": time.perf_counter() - start,
+                }
+            )
+            start = time.perf_counter()
+    return rows
+
+
+def _fidelity_cells(m: dict[str, Any]) -> str:
+    return (
+        f" {m['snr_min']:.1f} / {m['snr']:.1f} | {m['ratio']:.3f} |"
+        f" {m['dev_mean']:.3f} / {m['dev_max']:.3f} |"
+    )
+
+
+def print_fidelity(rows: list[dict[str, Any]]) -> None:
+    print("Job time and fidelity per tag (in-process simulator, simulated time)")
+    print(
+        "| tag | Hz | plans | job s before → now (uniform, trimmed) | now ÷ before | pen-down s"
+        " before → now | resting at the ends before → now | near the drawn ends"
+        " | run scales now | mode | SNR min / all dB | drawing-time ratio | path dev mean / max"
+        " mm | goals |"
+    )
+    print("|---|---:|---:|---|---:|---|---|---:|---|---|---|---:|---|---|")
+    ratios = []
+    for row in rows:
+        b, n = row["before"], row["now"]
+        ratios.append(n["job"] / b["job"])
+        scales = ", ".join(f"{s:.2f}" for s in n["scales"])
+        if len(n["scales"]) > 6:
+            scales = f"{min(n['scales']):.2f} … {max(n['scales']):.2f}"
+        ok = (
+            n["resting"] <= SHARE_GOAL
+            and n["snr_min"] >= SNR_GOAL
+            and RATIO_GOAL[0] <= n["ratio"] <= RATIO_GOAL[1]
+            and n["dev_max"] <= DEVIATION_GOAL
+        )
+        head = (
+            f"| {row['tag']} | {row['rate']} | {row['plans']} | {b['job']:.2f} → {n['job']:.2f}"
+            f" ({row['uniform']:.2f}) | {n['job'] / b['job']:.3f} | {b['down']:.2f} →"
+            f" {n['down']:.2f} | {100 * b['resting']:.1f} % → {100 * n['resting']:.2f} % |"
+            f" {100 * n['near']:.1f} % | {scales} |"
+        )
+        print(f"{head} before |{_fidelity_cells(b)} |")
+        print(f"| | | | | | | | | | now |{_fidelity_cells(n)} {mark(ok)} |")
+    if ratios:
+        print(
+            f"\nJob time now ÷ before: median {np.median(ratios):.3f}, range"
+            f" {min(ratios):.3f} to {max(ratios):.3f} over {len(ratios)} runs (tag, rate). Goals:"
+            f" resting ≤ {100 * SHARE_GOAL:g} %, SNR min ≥ {SNR_GOAL:g} dB, drawing-time ratio"
+            f" {RATIO_GOAL[0]} to {RATIO_GOAL[1]}, path deviation max ≤ {DEVIATION_GOAL} mm."
+        )
+
+
+# -- loop timing --------------------------------------------------------------------------------
+
+
+def timing(rates: list[int], tag: tagbot.Tag) -> list[dict[str, Any]]:
+    """Draw ``tag`` over a ``tagbot sim arm`` pty at each rate, clean and with late replies."""
+    rows = []
+    for fault, options in FAULTS.items():
+        for rate in rates:
+            rate_option = f"motion.rate={rate}"
+            server = subprocess.Popen(
+                [sys.executable, "-m", "tagbot", "sim", "arm", "--set", rate_option, *options],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+            )
+            try:
+                assert server.stdout is not None
+                path = server.stdout.readline().decode().strip()
+                job = prepare(tag, overrides=(rate_option,), port=path)
+                with tempfile.TemporaryDirectory() as out:
+                    run = job.run(Path(out))
+            finally:
+                server.send_signal(signal.SIGINT)
+                server.wait(timeout=10)
+            d = run.details
+            rows.append(
+                {
+                    "fault": fault,
+                    "rate": rate,
+                    "ticks": d.get("ticks_sent", 0),
+                    "error": None if run.error is None else str(run.error),
+                    **{key: d.get(key, math.nan) for key in _TIMING_KEYS},
                 }
             )
     return rows
+
+
+_TIMING_KEYS = (
+    "loop_rate_hz",
+    "period_jitter_p99_ms",
+    "lateness_p99_ms",
+    "late_ticks",
+    "resyncs",
+    "readback_requests",
+    "readback_late_replies",
+    "readback_missed_replies",
+    "reply_delay_p99_ms",
+)
+
+
+def print_timing(rows: list[dict[str, Any]], tag: str) -> None:
+    print(f"Loop timing over a pty (tagbot sim arm in its own process), drawing {tag}")
+    print(
+        "| line | rate Hz | ticks | loop rate Hz | jitter p99 ms | lateness p99 ms | late ticks"
+        " | resyncs | read-backs | late / missed replies (per servo) | reply delay p99 ms"
+        " | result |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---|")
+    for row in rows:
+        result = "completed" if row["error"] is None else f"stopped: {row['error']}"
+        print(
+            f"| {row['fault']} | {row['rate']} | {row['ticks']} | {row['loop_rate_hz']:.1f} |"
+            f" {row['period_jitter_p99_ms']:.3f} | {row['lateness_p99_ms']:.3f} |"
+            f" {row['late_ticks']} | {row['resyncs']} | {row['readback_requests']} |"
+            f" {row['readback_late_replies']} / {row['readback_missed_replies']} |"
+            f" {row['reply_delay_p99_ms']:.1f} | {result} |"
+        )
+
+
+# -- IK -----------------------------------------------------------------------------------------
 
 
 def ik_throughput(points: int = 1_000_000) -> float:
@@ -149,41 +301,24 @@ def ik_throughput(points: int = 1_000_000) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=4.0, help="streaming time per rate")
-    parser.add_argument("--rates", default="100,200,500", help="loop rates, Hz")
+    parser.add_argument("--gml", type=int, default=4, help="GML tags from ../shared/data")
+    parser.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
+    parser.add_argument("--rates", default="100,200,500", help="loop rates of the timing, Hz")
+    parser.add_argument("--fidelity-rates", default="100", help="loop rates of part 1, Hz")
+    parser.add_argument("--timing-tag", default="letter-b.json", help="example drawn over the pty")
     parser.add_argument("--skip-timing", action="store_true", help="no real-time pty part")
+    parser.add_argument("--skip-fidelity", action="store_true", help="no per-tag part")
     args = parser.parse_args()
     rates = [int(r) for r in args.rates.split(",")]
 
-    if not args.skip_timing:
-        print(f"Loop timing over a pty (tagbot sim arm in its own process), {args.seconds:g} s")
-        print(
-            "| rate Hz | ticks | sustained Hz | jitter p50 / p99 / max ms | lateness p50 / p99 ms"
-            " | late | resyncs | read-backs |"
-        )
-        print("|---:|---:|---:|---|---|---:|---:|---:|")
-        for row in timing(rates, args.seconds):
-            print(
-                f"| {row['rate']} | {row['ticks']} | {row['sustained']:.1f} |"
-                f" {row['jitter50']:.3f} / {row['jitter99']:.3f} / {row['jittermax']:.2f} |"
-                f" {row['late50']:.3f} / {row['late99']:.3f} | {row['late']} |"
-                f" {row['resyncs']} | {row['reads']} |"
-            )
+    if not args.skip_fidelity:
+        tags = example_tags() + gml_tags(args.data, args.gml)
+        print_fidelity(fidelity(tags, [int(r) for r in args.fidelity_rates.split(",")]))
         print()
-
-    print("Fidelity on the example tags (in-process simulator, simulated time)")
-    print(
-        "| tag | rate Hz | ticks | time scale | mm/unit | path dev mean / max mm"
-        " | speed SNR dB | joint tracking max ° | wall s |"
-    )
-    print("|---|---:|---:|---:|---:|---|---:|---:|---:|")
-    for row in fidelity(rates):
-        print(
-            f"| {row['tag']} | {row['rate']} | {row['ticks']} | {row['scale']:.2f} |"
-            f" {row['size']:.3g} | {row['dev_mean']:.3f} / {row['dev_max']:.3f} |"
-            f" {row['snr']:.1f} | {row['track']:.3f} | {row['wall']:.2f} |"
-        )
-    print()
+    if not args.skip_timing:
+        tag = load_tag(str(EXAMPLES / args.timing_tag))
+        print_timing(timing(rates, tag), args.timing_tag)
+        print()
     print(f"IK throughput: {ik_throughput() / 1e6:.1f} M points/s")
 
 

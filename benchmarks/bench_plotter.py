@@ -1,46 +1,62 @@
-"""The pen plotter end to end: development tags through the simulated Grbl at 115200 baud (issue 4).
+"""The pen plotter: what its program asks of Grbl, and what the simulated Grbl did (issue 12).
 
 Run from the repository root (``../shared/data`` adds a few fitted GML tags when present)::
 
-    python benchmarks/bench_plotter.py [--dt 0.01] [--gml 5] [--data ../shared/data]
-                                       [--sweep-dt 0.002,0.005,0.01,0.02] [--sweep-tag NAME]
-                                       [--csv plotter.csv] [--keep DIR]
+    python benchmarks/bench_plotter.py [--gml 5] [--data ../shared/data] [--modes new,uniform,old]
+                                       [--set KEY=VALUE] [--pause 0.5,2] [--csv plotter.csv]
+                                       [--keep DIR] [--no-draw]
 
-Every development tag is drawn with the public API, exactly as ``tagbot draw TAG --device grbl``
-does without ``--port``: :func:`tagbot.draw.draw` with the default profile (an A3 servo-pen
-plotter, 115200 baud, one inverse-time G-code line per setpoint) on the in-process simulated
-Grbl 1.1h (128-byte receive buffer, 15-block look-ahead planner, stepper segments, 1 ms recorder
-of the pen), streamed with character counting. The tags:
+Every tag is drawn with the public API, exactly as ``tagbot draw TAG --device grbl`` does without
+``--port``: :func:`tagbot.draw.draw` on the in-process simulated Grbl 1.1h (1 ms recorder of the
+pen), once per *mode*, each a set of profile overrides so that today's and the new behaviour are
+measured in one run:
 
-- the shipped examples ``tagbot/examples/*.json`` (plan files as they are; other inputs, such as
-  the DustTag capture, fitted first by :func:`tagbot.source.load_tag`);
-- with ``--gml N`` (default 5) and the shared data present, N tags of ``gml/dev`` evenly spaced
-  in name order, fitted with ``tagbot.fit(tagbot.load_traces(path))``.
+- ``new``: the packaged defaults (per-run time scale, adaptive setpoints, trimmed run ends, lines
+  never slower than Grbl steps);
+- ``uniform``: the same with ``motion.time_scale=uniform`` (one scale for the whole tag);
+- ``old``: the behaviour before issue 12: ``motion.time_scale=uniform``, ``motion.setpoints=fixed``
+  (a line every ``motion.dt``), ``motion.trim=false``, ``motion.slow_lines=dwell`` (dwells before
+  lines slower than Grbl's slowest step; now rounded to Grbl's 50 ms steps and counted), and
+  ``motion.min_buffer=0``.
 
-From each run's ``report.json`` (the issue's goals in brackets):
+The tags: the shipped examples ``tagbot/examples/*.json`` (plan files as they are; other inputs
+fitted by :func:`tagbot.source.load_tag`) and, with ``--gml N`` (default 5) and the shared data
+present, N tags of ``gml/dev`` evenly spaced in name order, fitted with
+``tagbot.fit(tagbot.load_traces(path))``.
 
-- lines of G-code, the uniform time scale of the retiming and the limit that set it (from
-  ``placement.limits``; every limit within 1 % of the scale is named);
-- speed SNR executed vs planned, dB (≥ 20);
-- pen-down path deviation mean / max, mm (max ≤ 0.1);
-- drawing duration executed / planned, pen-down runs from first to last movement (≤ 1.05),
-  and the whole job's executed duration over the program's estimate (travel, pen dwells);
-- planner starvation events (0): the planner ran dry though no line asked for a stop;
-- streaming: bytes sent over the executed duration (status polls included), against the link's
-  capacity (115200 baud, 8N1: 11,520 bytes/s); and what the job *needs*: the bytes of the
-  pen-down G-code (between ``G93`` and ``G94``) per second of their planned time, overall and
-  over the busiest second;
-- wall time of the whole ``draw`` call (placement, program, simulation, comparison) and the
-  speed-up of the simulation over real time (executed duration ÷ wall time).
+Figures per tag and mode (the issue's goals in brackets), from the program (placed and built
+again with the same profile: deterministic) and from the run's ``report.json``:
 
-``--sweep-dt`` repeats the figures for one tag (``--sweep-tag``, default the DustTag capture) at
-other time steps, to show where the 115200-baud link or Grbl's planner becomes the limit.
+- job: planned and executed duration, s, and the executed job time against ``old``'s;
+- rest: share of the planned pen-down motion time within one motor step of a run's first or
+  last point (≤ 2 %);
+- G4: dwells in the program, and those shorter than Grbl's 50 ms step (0); for ``old``, in
+  brackets, how many sub-50 ms dwells the program before issue 12 wrote (now carried into the
+  next line);
+- min buffered: the least motion time, s, held by 15 consecutive setpoint lines of a run
+  (``Program.min_buffered``), and by the 14 queued behind the executing one plus the 4 lines
+  surely in the 128-byte receive buffer (``min_buffered_rx``: what a host pause may use; > 0.5);
+- speed SNR executed vs planned, overall and the worst run, dB (≥ 25);
+- drawing-time ratio executed / planned (0.98-1.02) and the job's;
+- path deviation mean / max, mm (max ≤ 0.02);
+- plan vs tag: the largest distance, mm, between the program's plan (straight lines in time
+  between setpoints) and the exact retimed lognormal motion, and the worst run's speed SNR of
+  the plan against the exact speed, dB: what the adaptive setpoints cost in fidelity;
+- lines, the run time scales; planner starvation events (0);
+- host pauses (``--pause 0.5,2``, default): the program streamed again into the simulated Grbl
+  while the host stalls 0.5 s every 2 s of simulated time (the port's ``freeze_host`` hook:
+  nothing sent or read meanwhile, as the 0.39-0.52 s stalls measured on a loaded host), with
+  the planner's starvation events (0) and the executed job time.
+
+``--set`` adds a profile override to every mode but ``old`` (e.g. to sweep
+``motion.tolerance``); ``--no-draw`` prints the program figures only (no simulation).
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import re
 import tempfile
@@ -53,18 +69,32 @@ import numpy as np
 
 import tagbot
 from tagbot.draw import draw
+from tagbot.model.motion import evaluate_plan
+from tagbot.plotter import build_program, load_profile, place
+from tagbot.plotter.program import DWELL_STEP, resting_share
 from tagbot.source import load_tag
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "tagbot" / "examples"
 DATA = ROOT.parent / "shared" / "data"
 
-SNR_GOAL = 20.0  # dB, at least
-DEVIATION_GOAL = 0.1  # mm, path deviation max at most
-RATIO_GOAL = 1.05  # executed / planned duration, at most
-STARVATION_GOAL = 0
+MODES: dict[str, tuple[str, ...]] = {
+    "new": (),
+    "uniform": ("motion.time_scale=uniform",),
+    "old": (
+        "motion.time_scale=uniform",
+        "motion.setpoints=fixed",
+        "motion.trim=false",
+        "motion.slow_lines=dwell",
+        "motion.min_buffer=0",
+    ),
+}
 
-_FEED = re.compile(r"F([0-9.]+)")
+REST_GOAL = 0.02
+SNR_GOAL = 25.0
+RATIO_GOAL = (0.98, 1.02)
+DEVIATION_GOAL = 0.02
+BUFFER_GOAL = 0.5
 
 
 def mark(ok: bool) -> str:
@@ -106,210 +136,278 @@ def gml_tags(data: Path, count: int) -> list[tuple[str, Callable[[], tagbot.Tag]
 # -- figures ------------------------------------------------------------------------------------
 
 
-def drawing_demand(program: Path) -> tuple[float, float, float, int]:
-    """What the pen-down G-code asks of the link: ``(bytes/s overall, bytes/s in the busiest
-    second, planned drawing seconds, drawing bytes)``.
-
-    Pen-down lines are those between ``G93`` and ``G94``; each lasts ``60/F`` s (inverse time) or
-    its ``G4 P`` dwell; a line's bytes count its newline.
-    """
-    sections: list[list[tuple[float, int]]] = []
-    current: list[tuple[float, int]] | None = None
-    for line in program.read_text(encoding="ascii").splitlines():
-        if line == "G93":
-            current = []
-            sections.append(current)
-        elif line == "G94":
-            current = None
-        elif current is not None:
-            if line.startswith("G4P"):
-                seconds = float(line[3:])
-            else:
-                feed = _FEED.search(line)
-                seconds = 60.0 / float(feed.group(1)) if feed else 0.0
-            current.append((seconds, len(line) + 1))
-    total_s = sum(s for sec in sections for s, _ in sec)
-    total_b = sum(b for sec in sections for _, b in sec)
-    peak = 0.0
-    for sec in sections:
-        if not sec:
+def plan_fidelity(tag: tagbot.Tag, setpoints: Any, program: Any) -> tuple[float, float]:
+    """How closely the program's plan follows the tag: the largest distance, mm, between the
+    planned position and the exact retimed motion (the tag's instants mapped to the job clock
+    through the setpoints), and the worst run's speed SNR, dB, planned vs exact."""
+    worst_dev, worst_snr = 0.0, math.inf
+    for k, run in enumerate(setpoints.runs):
+        lines = np.flatnonzero(program.line_run == k)
+        if len(run.t) < 2 or not len(lines):
             continue
-        t = np.cumsum([s for s, _ in sec])
-        b = np.cumsum([n for _, n in sec])
-        if t[-1] <= 1.0:
-            peak = max(peak, b[-1] / max(t[-1], 1e-9))
-            continue
-        # bytes whose lines end within (t_i - 1 s, t_i]
-        start = np.searchsorted(t, t - 1.0, side="right")
-        before = np.where(start > 0, b[np.maximum(start - 1, 0)], 0)
-        peak = max(peak, float(np.max(b - before)))
-    return total_b / total_s if total_s else math.nan, peak, total_s, total_b
+        job = np.concatenate([[program.line_start[lines[0]]], program.line_end[lines]])
+        count = max(200, int((job[-1] - job[0]) / 0.002))
+        instants = np.linspace(run.tag_t[0], run.tag_t[-1], count)
+        p, v = evaluate_plan(tag.plans[run.plan], instants, tag.size)
+        exact = p @ setpoints.matrix.T + setpoints.offset
+        xy, velocity, _ = program.at(np.interp(instants, run.tag_t, job))
+        worst_dev = max(worst_dev, float(np.max(np.hypot(*(exact - xy).T))))
+        speed = np.hypot(*(v @ setpoints.matrix.T).T) / run.scale
+        planned = np.hypot(*velocity.T)
+        noise = float(np.sum((speed - planned) ** 2))
+        if noise > 0:
+            worst_snr = min(worst_snr, 10 * math.log10(float(np.sum(speed**2)) / noise))
+    return worst_dev, worst_snr
 
 
-def run_tag(name: str, tag: tagbot.Tag, dt: float, keep: Path | None) -> dict[str, Any]:
-    """Draw ``tag`` on the simulated Grbl at step ``dt``; the figures of one row."""
-    with tempfile.TemporaryDirectory(prefix="bench_plotter_") as scratch:
-        slug = re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
-        out = (keep if keep is not None else Path(scratch)) / f"{slug}_dt{dt:g}"
-        start = time.perf_counter()
-        result = draw(tag, out, device="grbl", pictures=False, overrides=(f"motion.dt={dt}",))
-        wall = time.perf_counter() - start
-        need, need_peak, drawing_s, drawing_bytes = drawing_demand(out / "program.gcode")
-    r = result.report
-    limits = r["placement"]["limits"]
-    capacity = r["baud_limit_bytes_per_s"]
-    scale = max(limits.values())
+def program_figures(tag: tagbot.Tag, overrides: tuple[str, ...]) -> dict[str, Any]:
+    """What the program asks of the machine (no simulation)."""
+    profile = load_profile(None, overrides)
+    start = time.perf_counter()
+    setpoints = place(tag, profile)
+    program = build_program(setpoints, profile)
+    build_s = time.perf_counter() - start
+    dwells = [float(line[3:]) for line in program.lines if line.startswith("G4P")]
+    deviation, snr = plan_fidelity(tag, setpoints, program)
     return {
-        "tag": name,
-        "dt": dt,
-        "lines": r["lines_total"],
-        "acked": r["lines_acknowledged"],
-        "errors": len(r["errors"]),
-        "time_scale": r["time_scale"],
-        # which limit set the scale: every one within 1 % of it (the speed limit and the
-        # short-segment cap are often within a rounding of each other)
-        "limit": "/".join(
-            k for k in sorted(limits, key=limits.get, reverse=True) if limits[k] >= 0.99 * scale
-        ),
-        "mm_per_unit": r["placement"]["mm_per_unit"],
+        "lines": len(program.lines),
+        "planned_s": program.duration,
+        "drawing_s": program.drawing_time,
+        "scale_max": max(program.run_scales, default=1.0),
+        "scale_min": min(program.run_scales, default=1.0),
+        "runs": len(program.run_scales),
+        "rest": resting_share(program, profile),
+        "dwells": len(dwells),
+        "short_dwells": sum(p < DWELL_STEP - 1e-9 for p in dwells),
+        "short_before": int(program.notes.get("short_surpluses", 0)),
+        "min_buffered_s": program.min_buffered,
+        "min_buffered_rx_s": program.min_buffered_rx,
+        "plan_dev_mm": deviation,
+        "plan_snr_db": snr,
+        "build_s": build_s,
+    }
+
+
+def draw_figures(tag: tagbot.Tag, overrides: tuple[str, ...], out: Path) -> dict[str, Any]:
+    """Draw on the simulated Grbl; the report's figures."""
+    start = time.perf_counter()
+    draw(tag, out, device="grbl", pictures=False, overrides=overrides)
+    wall = time.perf_counter() - start
+    r = json.loads((out / "report.json").read_text(encoding="utf-8"))
+    runs = r.get("runs") or []
+    snrs = [run["speed_snr_db"] for run in runs if run.get("speed_snr_db") is not None]
+    details = r.get("details", {})
+    executed = r["executed_duration_s"]
+    return {
+        "executed_s": executed,
+        "job_ratio": executed / r["planned_duration_s"] if r["planned_duration_s"] else math.nan,
+        "drawing_ratio": r["drawing_duration_ratio"],
         "snr_db": r["speed_snr_db"],
-        "run_snr_min_db": min(run["speed_snr_db"] for run in r["runs"]),
+        "run_snr_min_db": min(snrs) if snrs else math.nan,
         "dev_mean_mm": r["path_deviation_mean_mm"],
         "dev_max_mm": r["path_deviation_max_mm"],
-        "drawing_ratio": r["drawing_duration_ratio"],
-        "job_ratio": r["duration_ratio"],
-        "executed_s": r["executed_duration_s"],
-        "starvation": r["starvation_events"],
-        "max_outstanding": r["max_outstanding_bytes"],
-        "bytes_sent": r["bytes_sent"],
-        "rate": r["stream_rate_bytes_per_s"],
-        "capacity": capacity,
-        "need": need,
-        "need_peak": need_peak,
-        "drawing_bytes": drawing_bytes,
-        "drawing_s": drawing_s,
+        "starvation": details.get("starvation_events"),
         "wall_s": wall,
-        "speedup": r["executed_duration_s"] / wall,
     }
 
 
-def goals(row: dict[str, Any]) -> dict[str, bool]:
-    return {
-        "snr": row["snr_db"] >= SNR_GOAL,
-        "dev": row["dev_max_mm"] <= DEVIATION_GOAL,
-        "drawing": row["drawing_ratio"] <= RATIO_GOAL,
-        "job": row["job_ratio"] <= RATIO_GOAL,
-        "starvation": row["starvation"] == STARVATION_GOAL,
-    }
+def pause_figures(
+    tag: tagbot.Tag, overrides: tuple[str, ...], pause: float, every: float, name: str
+) -> dict[str, Any]:
+    """Stream the program into the simulated Grbl while the host stalls ``pause`` s every
+    ``every`` s (the port's ``freeze_host`` hook: nothing sent or read meanwhile); the planner's
+    starvation events and the executed job time."""
+    import serial
+
+    from sim.grbl import SimulatedGrbl
+    from sim.grbl.transport import attach_device
+    from tagbot.plotter.machine import simulated_pen
+    from tagbot.plotter.profile import device_settings
+    from tagbot.plotter.program import pen_up
+    from tagbot.plotter.stream import GrblStreamer, StreamOptions
+
+    profile = load_profile(None, overrides)
+    program = build_program(place(tag, profile), profile)
+    device = SimulatedGrbl(device_settings(profile), **simulated_pen(profile))
+    url = attach_device(device, re.sub(r"\W", "_", f"bench_pause_{name}"))
+    link = serial.serial_for_url(url, baudrate=profile["serial.baud"], timeout=0.01)
+    try:
+        streamer = GrblStreamer(link, StreamOptions())
+        streamer.connect()
+        start = link.clock.now()
+        for k in range(1, int(program.duration / every) + 1):
+            link.freeze_host(start + k * every, pause)
+        streamer.stream(
+            list(program.lines),
+            pen_up=pen_up(profile),
+            moves=program.line_moves,
+            targets=program.line_xy,
+        )
+        executed = streamer.last_report.duration
+    finally:
+        link.close()
+    return {"pause_starvation": len(device.starvation), "pause_executed_s": executed}
+
+
+def measure(
+    name: str,
+    tag: tagbot.Tag,
+    modes: list[str],
+    simulate: bool,
+    keep: Path | None,
+    pause: tuple[float, float] | None = None,
+) -> list[dict[str, Any]]:
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="bench_plotter_") as scratch:
+        slug = re.sub(r"[^A-Za-z0-9_.-]+", "_", name)
+        for mode in modes:
+            row: dict[str, Any] = {"tag": name, "mode": mode}
+            row.update(program_figures(tag, MODES[mode]))
+            if simulate:
+                out = (keep if keep is not None else Path(scratch)) / f"{slug}_{mode}"
+                row.update(draw_figures(tag, MODES[mode], out))
+                if pause is not None:
+                    row.update(pause_figures(tag, MODES[mode], *pause, f"{slug}_{mode}"))
+            rows.append(row)
+    old = next((r for r in rows if r["mode"] == "old"), None)
+    for row in rows:
+        key = "executed_s" if "executed_s" in row else "planned_s"
+        row["vs_old"] = row[key] / old[key] if old else math.nan
+    return rows
 
 
 # -- printing -------------------------------------------------------------------------------------
 
 
-def print_tags(rows: list[dict[str, Any]]) -> None:
+def print_program(rows: list[dict[str, Any]]) -> None:
     print(
-        "| tag | lines | time scale (limit) | speed SNR dB (≥ 20) | deviation mean / max mm"
-        " (max ≤ 0.1) | drawing ratio (≤ 1.05) | job ratio | starvation (0) |"
-        " stream B/s (% of link) | needed B/s mean / busiest s (% of link) | wall s | speed-up |"
+        "| tag | mode | lines | runs | run scale min-max | planned job s (vs old) | drawing s"
+        " | rest (≤ 2 %) | G4 / < 50 ms (0) | min buffered 15 lines s | + RX s (> 0.5) |"
+        " plan vs tag: max mm / worst run SNR dB | build s |"
     )
-    print("|---|---:|---|---:|---|---:|---:|---:|---|---|---:|---:|")
-    for row in rows:
-        g = goals(row)
-        cap = row["capacity"]
+    print("|---|---|---:|---:|---|---:|---:|---:|---|---:|---:|---|---:|")
+    for r in rows:
         print(
-            f"| {row['tag']} | {row['lines']:,} | {row['time_scale']:.2f} ({row['limit']}) |"
-            f" {row['snr_db']:.1f} {mark(g['snr'])} |"
-            f" {row['dev_mean_mm']:.4f} / {row['dev_max_mm']:.4f} {mark(g['dev'])} |"
-            f" {row['drawing_ratio']:.3f} {mark(g['drawing'])} |"
-            f" {row['job_ratio']:.3f} {mark(g['job'])} |"
-            f" {row['starvation']} {mark(g['starvation'])} |"
-            f" {row['rate']:,.0f} ({100 * row['rate'] / cap:.0f} %) |"
-            f" {row['need']:,.0f} / {row['need_peak']:,.0f}"
-            f" ({100 * row['need'] / cap:.0f} / {100 * row['need_peak'] / cap:.0f} %) |"
-            f" {row['wall_s']:.2f} | {row['speedup']:.0f} x |"
+            f"| {r['tag']} | {r['mode']} | {r['lines']:,} | {r['runs']} |"
+            f" {r['scale_min']:.1f}-{r['scale_max']:.1f} |"
+            f" {r['planned_s']:.1f} ({r['planned_s'] / r['old_planned_s']:.2f}) |"
+            f" {r['drawing_s']:.1f} | {100 * r['rest']:.1f} % {mark(r['rest'] <= REST_GOAL)} |"
+            f" {r['dwells']} / {r['short_dwells']} {mark(r['short_dwells'] == 0)}"
+            + (f" (before: {r['short_before']})" if r["mode"] == "old" else "")
+            + " |"
+            f" {r['min_buffered_s']:.3f} | {r['min_buffered_rx_s']:.3f}"
+            f" {mark(r['min_buffered_rx_s'] > BUFFER_GOAL)} |"
+            f" {r['plan_dev_mm']:.4f} / {r['plan_snr_db']:.1f} | {r['build_s']:.2f} |"
         )
 
 
-def print_sweep(rows: list[dict[str, Any]]) -> None:
+def print_draw(rows: list[dict[str, Any]]) -> None:
     print(
-        "| dt ms | lines | time scale (limit) | pen-down G-code s | speed SNR dB"
-        " | deviation max mm | drawing ratio | job ratio | starvation |"
-        " needed B/s mean / busiest s (% of link) | stream B/s (% of link) | wall s |"
+        "| tag | mode | executed job s (vs old) | job ratio | drawing ratio (0.98-1.02) |"
+        " speed SNR dB / worst run (≥ 25) | deviation mean / max mm (≤ 0.02) | starvation |"
+        " with host pauses: starvation (0) / job s | wall s |"
     )
-    print("|---:|---:|---|---:|---:|---:|---:|---:|---:|---|---|---:|")
-    for row in rows:
-        g = goals(row)
-        cap = row["capacity"]
+    print("|---|---|---:|---:|---:|---|---|---:|---|---:|")
+    for r in rows:
+        ratio_ok = RATIO_GOAL[0] <= r["drawing_ratio"] <= RATIO_GOAL[1]
         print(
-            f"| {1000 * row['dt']:g} | {row['lines']:,} |"
-            f" {row['time_scale']:.2f} ({row['limit']}) | {row['drawing_s']:.1f} |"
-            f" {row['snr_db']:.1f} {mark(g['snr'])} | {row['dev_max_mm']:.4f} {mark(g['dev'])} |"
-            f" {row['drawing_ratio']:.3f} {mark(g['drawing'])} |"
-            f" {row['job_ratio']:.3f} {mark(g['job'])} |"
-            f" {row['starvation']} {mark(g['starvation'])} |"
-            f" {row['need']:,.0f} / {row['need_peak']:,.0f}"
-            f" ({100 * row['need'] / cap:.0f} / {100 * row['need_peak'] / cap:.0f} %) |"
-            f" {row['rate']:,.0f} ({100 * row['rate'] / cap:.0f} %) | {row['wall_s']:.2f} |"
+            f"| {r['tag']} | {r['mode']} | {r['executed_s']:.1f} ({r['vs_old']:.2f}) |"
+            f" {r['job_ratio']:.3f} | {r['drawing_ratio']:.3f} {mark(ratio_ok)} |"
+            f" {r['snr_db']:.1f} / {r['run_snr_min_db']:.1f}"
+            f" {mark(r['run_snr_min_db'] >= SNR_GOAL)} |"
+            f" {r['dev_mean_mm']:.4f} / {r['dev_max_mm']:.4f}"
+            f" {mark(r['dev_max_mm'] <= DEVIATION_GOAL)} | {r['starvation']} |"
+            + (
+                f" {r['pause_starvation']} {mark(r['pause_starvation'] == 0)} /"
+                f" {r['pause_executed_s']:.1f} |"
+                if "pause_starvation" in r
+                else " - |"
+            )
+            + f" {r['wall_s']:.1f} |"
+        )
+
+
+def print_totals(rows: list[dict[str, Any]], simulate: bool) -> None:
+    key = "executed_s" if simulate else "planned_s"
+    print()
+    for mode in dict.fromkeys(r["mode"] for r in rows):
+        mine = [r for r in rows if r["mode"] == mode]
+        total = sum(r[key] for r in mine)
+        old = sum(r[key] for r in rows if r["mode"] == "old")
+        versus = f" ({total / old:.2f} of old)" if old else ""
+        print(
+            f"- {mode}: {len(mine)} tags, {total:.0f} s of {key[:-2]} job time{versus};"
+            f" rest ≤ 2 % on {sum(r['rest'] <= REST_GOAL for r in mine)}, no short dwell on"
+            f" {sum(r['short_dwells'] == 0 for r in mine)}, buffer > 0.5 s on"
+            f" {sum(r['min_buffered_rx_s'] > BUFFER_GOAL for r in mine)}"
+            + (
+                f", run SNR ≥ 25 dB on {sum(r['run_snr_min_db'] >= SNR_GOAL for r in mine)},"
+                f" deviation ≤ 0.02 mm on {sum(r['dev_max_mm'] <= DEVIATION_GOAL for r in mine)},"
+                " drawing ratio in 0.98-1.02 on"
+                f" {sum(RATIO_GOAL[0] <= r['drawing_ratio'] <= RATIO_GOAL[1] for r in mine)}"
+                if simulate
+                else ""
+            )
         )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--dt", type=float, default=0.01, help="setpoint time step, s")
     parser.add_argument("--gml", type=int, default=5, help="GML tags from ../shared/data")
     parser.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
+    parser.add_argument("--modes", default="new,uniform,old", help="modes to compare")
     parser.add_argument(
-        "--sweep-dt", default="", help="time steps for the sweep, s, e.g. 0.005,0.01,0.02"
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a profile override for every mode but old (repeatable)",
     )
-    parser.add_argument("--sweep-tag", default="dusttag-142.json", help="tag of the sweep")
+    parser.add_argument(
+        "--pause",
+        default="0.5,2",
+        help="host stalls SECONDS,EVERY (simulated; empty: none), e.g. 0.5,2",
+    )
+    parser.add_argument("--no-draw", action="store_true", help="program figures only")
     parser.add_argument("--csv", type=Path, help="write every row to this CSV file")
     parser.add_argument("--keep", type=Path, help="keep the run folders under this directory")
     args = parser.parse_args()
+    modes = [m.strip() for m in args.modes.split(",") if m.strip()]
+    unknown = [m for m in modes if m not in MODES]
+    if unknown:
+        raise SystemExit(f"--modes: unknown {', '.join(unknown)} (known: {', '.join(MODES)})")
+    if "old" not in modes:
+        modes.append("old")
+    simulate = not args.no_draw
+    pause = tuple(float(v) for v in args.pause.split(",")) if args.pause else None
+    if pause is not None and len(pause) != 2:
+        raise SystemExit("--pause: expected SECONDS,EVERY, e.g. 0.5,2")
+    for mode in modes:
+        if mode != "old":
+            MODES[mode] = (*MODES[mode], *args.set)
 
-    tags = example_tags() + gml_tags(args.data, args.gml)
     rows: list[dict[str, Any]] = []
     failures: list[str] = []
-    loaded: dict[str, tagbot.Tag] = {}
-    for name, load in tags:
+    for name, load in example_tags() + gml_tags(args.data, args.gml):
         try:
-            tag = loaded[name] = load()
-            rows.append({"part": "tags", **run_tag(name, tag, args.dt, args.keep)})
+            rows += measure(name, load(), modes, simulate, args.keep, pause)
         except Exception as e:  # a failure is a figure, never dropped
             failures.append(f"{name}: {type(e).__name__}: {e}")
+    old_planned = {r["tag"]: r["planned_s"] for r in rows if r["mode"] == "old"}
+    for r in rows:
+        r["old_planned_s"] = old_planned[r["tag"]]
 
-    print(
-        f"Development tags through the simulated Grbl, 115200 baud, dt = {1000 * args.dt:g} ms"
-        " (✓ goal met, ✗ missed)"
-    )
-    print_tags(rows)
+    print("Programs (default A3 servo-pen profile; ✓ goal met, ✗ missed)")
+    print_program(rows)
+    if simulate:
+        print("\nOn the simulated Grbl 1.1h, 115200 baud")
+        print_draw(rows)
+    print_totals(rows, simulate)
     for failure in failures:
         print(f"FAILED {failure}")
-    if rows:
-        totals = {k: sum(r[k] for r in rows) for k in ("executed_s", "wall_s")}
-        met = {k: sum(goals(r)[k] for r in rows) for k in goals(rows[0])}
-        print(
-            f"\n{len(rows)} tags, {totals['executed_s']:.0f} s of machine time simulated in"
-            f" {totals['wall_s']:.1f} s wall ({totals['executed_s'] / totals['wall_s']:.0f} x)."
-            " Goals met: " + ", ".join(f"{k} {v}/{len(rows)}" for k, v in met.items()) + "."
-        )
-
-    if args.sweep_dt:
-        steps = [float(s) for s in args.sweep_dt.split(",") if s.strip()]
-        name = args.sweep_tag
-        if name not in loaded:
-            known = dict(tags)
-            if name not in known:
-                raise SystemExit(f"--sweep-tag: unknown tag {name!r} (known: {', '.join(known)})")
-            loaded[name] = known[name]()
-        sweep = [run_tag(name, loaded[name], dt, args.keep) for dt in steps]
-        rows += [{"part": "sweep", **row} for row in sweep]
-        print(f"\nTime-step sweep on {name} (same profile, only motion.dt changed)")
-        print_sweep(sweep)
-
     if args.csv and rows:
-        fields = list(rows[0])
         with open(args.csv, "w", newline="", encoding="utf-8") as f:
-            writer = csv.DictWriter(f, fieldnames=fields)
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
             writer.writeheader()
             writer.writerows(rows)
 

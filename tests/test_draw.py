@@ -176,7 +176,7 @@ def test_from_device_takes_the_controllers_limits(tmp_path):
         overrides=["limits.from_device=true"],
     )
     fast = draw(short_tag(), tmp_path / "fast", pictures=False)
-    assert slow.report["time_scale"] > 1.5 * fast.report["time_scale"]
+    assert slow.report["placement"]["time_scale"] > 1.5 * fast.report["placement"]["time_scale"]
     profile = with_device_settings(load_profile(), settings)
     assert (
         profile["limits.x_acceleration"] == 100.0
@@ -341,6 +341,6 @@ def test_demo_makes_everything_it_lists(tmp_path, capsys):
     assert len(list((folder / "variations").glob("*.json"))) == 6
     for device in ("plotter", "arm"):
         report = json.loads((folder / device / "report.json").read_text())
-        assert "error" not in report and report["speed_snr_db"] > 15
+        assert report["completed"] and report["error"] is None and report["speed_snr_db"] > 25
     assert f"demo folder: {folder}" in out
     assert os.path.getsize(folder / "tag.gif") > 10_000

@@ -3,7 +3,8 @@
 - :class:`SimulatedServo` (:mod:`.servo`): one XL430-W250 or XM430-W350 — control table, write
   rules and error codes, velocity- and time-based motion profiles;
 - :class:`SimulatedChain` (:mod:`.chain`): servos on one bus at the byte level, with bus timing,
-  Return Delay Time, Status Return Level, fault hooks and a recorder
+  Return Delay Time, Status Return Level, fault hooks (silence, corrupt or late and lost
+  replies, hardware errors) and a recorder
   (:meth:`~SimulatedChain.trace`, :meth:`~SimulatedChain.pen_trace` with :class:`ArmGeometry`);
 - :mod:`.transport`: the ``dxlsim://`` pyserial URL handler (simulated time, ``port.clock``) and
   :func:`serve_pty` (a raw pseudo-terminal served in real time, for the unmodified
@@ -16,6 +17,7 @@ Example::
 
     port = serial.serial_for_url("dxlsim://?ids=1,2,3&models=XL430-W250", timeout=0)
     port.chain.set_hardware_error(2, 0x20)  # overload on ID 2
+    port.chain.set_reply_faults(latency=0.016, drop=0.02)  # a slow adapter on a noisy line
 """
 
 from sim.dynamixel.chain import BITS_PER_BYTE, ArmGeometry, SimulatedChain

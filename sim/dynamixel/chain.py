@@ -34,7 +34,9 @@ Protocol behaviour (ROBOTIS e-Manual, Protocol 2.0 page, and the X-series contro
 Not simulated: Secondary ID, Protocol 1.0, indirect addresses, Control Table Backup.
 
 Fault hooks: :meth:`~SimulatedChain.silence`, :meth:`~SimulatedChain.corrupt_next`,
-:meth:`~SimulatedChain.set_hardware_error`, :meth:`~SimulatedChain.set_model_number`.
+:meth:`~SimulatedChain.set_hardware_error`, :meth:`~SimulatedChain.set_model_number`, and
+:meth:`~SimulatedChain.set_reply_faults`: status packets that reach the host late (a USB adapter's
+latency timer, a loaded host) or never (a lost packet), in order, as through a real adapter.
 Recorder: :meth:`~SimulatedChain.trace` (joint ticks) and :meth:`~SimulatedChain.pen_trace`
 (planar two-link forward kinematics, see :class:`ArmGeometry`).
 """
@@ -42,6 +44,7 @@ Recorder: :meth:`~SimulatedChain.trace` (joint ticks) and :meth:`~SimulatedChain
 from __future__ import annotations
 
 import math
+import random
 import threading
 import time
 from bisect import bisect_right, insort
@@ -201,7 +204,14 @@ class SimulatedChain:
         self._in_free = 0.0  # when the last queued host byte has arrived
         # bus -> host: [start time, bytes, taken]
         self._out: deque[list] = deque()
-        self._out_free = 0.0
+        self._out_free = 0.0  # when the host side of the line is free (delivery, with latency)
+        self._bus_free = 0.0  # when the bus itself is free (the servos' own timing)
+        self.reply_latency = 0.0
+        self.reply_jitter = 0.0
+        self.reply_drop = 0.0
+        self._fault_rng = random.Random(0)
+        self.replies_dropped = 0
+        """Status packets :meth:`set_reply_faults` dropped so far."""
         self.packets_received = 0
         """Instruction packets decoded so far (any ID)."""
 
@@ -382,6 +392,30 @@ class SimulatedChain:
         """Cut servo ``id``'s reply line: it still hears and executes, but sends nothing."""
         with self.lock:
             self.servo(id).silent = on
+
+    def set_reply_faults(
+        self, latency: float = 0.0, jitter: float = 0.0, drop: float = 0.0, seed: int = 0
+    ) -> None:
+        """Deliver every status packet ``latency`` + U(0, ``jitter``) s late, and lose each one
+        with probability ``drop`` (``seed`` seeds the draws; all zero: a clean line again).
+
+        The servos keep their own timing on the bus (a SYNC_READ's replies follow one another
+        as usual) and execute every instruction; only the host's view is delayed or missing.
+        Packets stay in order, as through a USB adapter: one delayed packet delays those behind
+        it. ``drop=1`` is a line on which the host hears nothing at all.
+        """
+        for name, value in (("latency", latency), ("jitter", jitter)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name}: must be a finite number of seconds >= 0, got {value!r}")
+        if not (math.isfinite(drop) and 0 <= drop <= 1):
+            raise ValueError(f"drop: must be a probability 0..1, got {drop!r}")
+        with self.lock:
+            self.reply_latency, self.reply_jitter, self.reply_drop = (
+                float(latency),
+                float(jitter),
+                float(drop),
+            )
+            self._fault_rng = random.Random(seed)
 
     def corrupt_next(self, id: int, count: int = 1) -> None:
         """Give the next ``count`` status packets of servo ``id`` a wrong CRC."""
@@ -672,11 +706,21 @@ class SimulatedChain:
         self._schedule(bytes(frame), t + answers[0][0].return_delay)
 
     def _schedule(self, frame: bytes, ready: float) -> float:
-        """Put ``frame`` on the line from ``ready`` (or when it is free); returns its end."""
-        start = max(ready, self._out_free)
+        """Put ``frame`` on the bus from ``ready`` (or when it is free) and on its way to the host
+        (delayed or lost by :meth:`set_reply_faults`); returns its end on the bus."""
+        on_bus = max(ready, self._bus_free)
+        self._bus_free = on_bus + len(frame) * self.byte_time
+        delay = 0.0
+        if self.reply_drop or self.reply_latency or self.reply_jitter:
+            rng = self._fault_rng
+            if self.reply_drop and rng.random() < self.reply_drop:
+                self.replies_dropped += 1
+                return self._bus_free
+            delay = self.reply_latency + self.reply_jitter * rng.random()
+        start = max(on_bus + delay, self._out_free)
         self._out.append([start, frame, 0])
         self._out_free = start + len(frame) * self.byte_time
-        return self._out_free
+        return self._bus_free
 
 
 __all__ = ["BITS_PER_BYTE", "ArmGeometry", "SimulatedChain"]

@@ -13,7 +13,7 @@ import math
 from serial.serialutil import PortNotOpenError, SerialException, to_bytes
 
 from sim.dynamixel.chain import SimulatedChain
-from sim.dynamixel.transport import BusClock, chain_from_url, wait_step
+from sim.dynamixel.transport import POLL_QUANTUM, BusClock, chain_from_url, wait_step
 from sim.serial_port import SimulatedSerialBase
 
 
@@ -49,8 +49,8 @@ class Serial(SimulatedSerialBase):
     def in_waiting(self) -> int:
         chain = self._live()
         count = chain.in_waiting
-        if not count:
-            wait_step(chain, 1)
+        if not count:  # a host polling this must see time move, but never past its deadlines
+            wait_step(chain, 1, chain.now() + POLL_QUANTUM)
             count = chain.in_waiting
         return count
 

@@ -16,6 +16,9 @@ The clock contract: ``port.clock.now()`` is the chain's simulated time in second
 ``port.clock.sleep_until(t)`` runs the bus and the servos to time ``t`` without waiting on the
 wall clock (so a host can pace 100,000 ticks faster than real time). Reads move the clock too:
 
+- ``in_waiting`` counts the bytes that have arrived; when there are none it moves the clock by
+  at most :data:`POLL_QUANTUM` towards the next event (a host polling it between its own
+  deadlines is not carried past them);
 - a read that finds its bytes waiting returns them at once;
 - a non-blocking read (``timeout=0``, what dynamixel-sdk uses) that finds nothing moves the clock
   to when the bytes asked for (or the last ones on their way) will have arrived, or when the

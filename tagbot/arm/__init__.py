@@ -8,6 +8,9 @@ Usage::
     run = draw_arm(tag, profile, "/dev/ttyUSB0")  # the real arm (or a `tagbot sim arm` pty)
     run.setpoints, run.joints, run.executed, run.stats
 
+    job = prepare(tag, overrides=["motion.rate=200"], port=None)  # checked, nothing sent yet
+    machine_run = job.run(folder, progress=..., control=RunControl())  # tagbot draw's contract
+
 :func:`~tagbot.arm.place.build_program` alone places, retimes and checks a tag without any
 device (PlacementError before the first packet).
 """
@@ -15,10 +18,11 @@ device (PlacementError before the first packet).
 from tagbot.arm.kinematics import Arm
 from tagbot.arm.place import ArmProgram, Placement, Setpoints, build_program, check_program, place
 from tagbot.arm.profile import ArmProfile, ProfileError, load_profile, packaged_profiles
-from tagbot.arm.run import ArmRun, draw_arm, draw_backend
+from tagbot.arm.run import ArmJob, ArmRun, draw_arm, latency_timer_warning, prepare
 
 __all__ = [
     "Arm",
+    "ArmJob",
     "ArmProfile",
     "ArmProgram",
     "ArmRun",
@@ -28,8 +32,9 @@ __all__ = [
     "build_program",
     "check_program",
     "draw_arm",
-    "draw_backend",
+    "latency_timer_warning",
     "load_profile",
     "packaged_profiles",
     "place",
+    "prepare",
 ]

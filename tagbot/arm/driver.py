@@ -3,16 +3,21 @@
 **Port.** :class:`UrlPortHandler` is the SDK's ``PortHandler`` opening its port with
 ``serial.serial_for_url`` instead of ``serial.Serial`` (``setupPort``), so a device path
 (``/dev/ttyUSB0``, a pseudo-terminal from ``tagbot sim arm``, ``COM3``) and any pyserial URL
-(``dxlsim://…`` for the in-process simulator, ``rfc2217://…``) work alike. Two details differ
-from the SDK's own: a 1 ms read timeout instead of 0 (see :data:`READ_WAIT`), and, on a port
-with a simulated clock, ``getCurrentTime`` on that clock so the SDK's packet timeouts are
-simulated time too. Packets, timeouts and result codes are the unmodified SDK's.
+(``dxlsim://…`` for the in-process simulator, ``rfc2217://…``) work alike. Details that differ
+from the SDK's own: a 1 ms read timeout instead of 0 (see :data:`READ_WAIT`); no output drain
+before every packet (``clearPort``: the SDK's ``tcdrain`` made each tick wait for the far end);
+the packets' reply allowance is ``bus.silence_timeout`` instead of the SDK's 34 ms; and, on a
+port with a simulated clock, ``getCurrentTime`` on that clock so packet timeouts are simulated
+time too. Instruction packets and result codes are the unmodified SDK's.
 
 **Connect.** Open at ``bus.baud``; ping every profile ID (a missing one → :class:`DeviceError`
 listing what a broadcast ping finds on the bus); check each model number; with torque off set
 Return Delay Time, Drive Mode = time-based profile, Operating Mode = position and (optionally)
 Min/Max Position Limit from the joint limits (EEPROM, written only when different); Profile
 Velocity = ``servo.profile_ms`` and Profile Acceleration a fraction of it (RAM); then torque on.
+Each of these transactions waits up to ``bus.silence_timeout`` for its status and is tried
+:data:`ATTEMPTS` times (a late reply to a failed try is drained first), so a line that delays or
+loses some replies still connects.
 
 **Time-based profile.** Every goal is a move the servo completes in ``servo.profile_ms``
 (Profile Velocity in ms), whatever its length, so the joints' speed follows the plan without a
@@ -30,17 +35,25 @@ than the larger of a period and a quarter of the profile time re-anchors the dea
 as a resync) instead of bursting the backlog, which would overspeed the joints.
 
 **Read-back.** Present positions are read with a ``GroupSyncRead`` every ``readback_every``
-ticks (about ``bus.readback_rate``, 100 Hz by default). A read is a round trip through the USB
-adapter (1 to 2 ms with a 1 ms FTDI latency timer, 16+ ms at its default), so reading at 500 Hz
-would eat the whole period on real hardware, while 100 Hz gives the executed trace and stops a
-run within 10 ms of a hardware error. The status packets are received with ``readRx`` per ID,
-which keeps each status error byte (the SDK's ``GroupSyncRead.rxPacket`` drops them).
+ticks (about ``bus.readback_rate``, 100 Hz by default). The read-back only watches (goals are
+sync-written and need no reply), so it never holds the loop: :class:`ReadBack` sends the
+request and takes the replies whenever they have arrived, at the following ticks, matching each
+to its own request (a late reply is not taken for a later read). A round trip through a USB
+adapter takes 1 to 2 ms with a 1 ms FTDI latency timer and 16+ ms at its default; on a loaded
+host replies come tens of ms late. Late and lost replies are counted; only a servo missing more
+than ``bus.max_missed`` read-backs in a row, or no reply for ``bus.silence_timeout``, is a fault.
 
-**Errors.** SDK result codes and status error bytes become tagbot exceptions: ``COMM_RX_TIMEOUT``
-→ :class:`DeviceTimeout`, an error byte → :class:`DeviceFault` (the hardware alert bit reads
-Hardware Error Status and names overload, overheating…), ``COMM_TX_FAIL`` and serial exceptions →
-:class:`ConnectionLost`, ``COMM_RX_CORRUPT`` → counted and skipped up to ``bus.max_corrupt`` in a
-row, then :class:`DeviceError`. ``where`` names the tick.
+**Pause.** With a :class:`~tagbot.control.RunControl` paused, the loop stops before the next
+tick: pen up, the arm holding its last goals, the read-back still watching; on resume the pen
+goes back as it was (``pen.move_time``) and the deadlines are re-anchored at that tick.
+
+**Errors.** SDK result codes and status error bytes become tagbot exceptions: a missing reply
+while connecting → :class:`DeviceTimeout`, while streaming the faults above; an error byte →
+:class:`DeviceFault` (the hardware alert bit reads Hardware Error Status and names overload,
+overheating…); ``COMM_TX_FAIL`` and serial exceptions → :class:`ConnectionLost`; corrupt
+read-back replies are counted and skipped up to ``bus.max_corrupt`` read-backs in a row, then
+:class:`DeviceError`. While streaming ``where`` is ``tick N``: the last tick sent, counting from
+1 (the N-th row of ``joints.csv``), which the arm still reaches: nothing is sent after it.
 
 **Safe end and torque policy.** On success the program ends at park, pen up; torque stays on
 (holding the arm) unless ``servo.torque_off_at_end``. On an error or KeyboardInterrupt nothing more
@@ -56,6 +69,7 @@ a sleep that finishes with short yields, typically within 0.1 ms).
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 from collections import deque
@@ -78,10 +92,12 @@ from firmware_protocols.dynamixel.control_table import MODELS, DriveMode
 from tagbot.arm.kinematics import angles_to_ticks
 from tagbot.arm.profile import ArmProfile
 from tagbot.clock import Clock, MonotonicClock, simulated_clock
+from tagbot.control import RunControl
 from tagbot.errors import ConnectionLost, DeviceError, DeviceFault, DeviceTimeout
 
 __all__ = [
     "ArmDriver",
+    "ReadBack",
     "Scheduler",
     "StreamResult",
     "UrlPortHandler",
@@ -114,6 +130,21 @@ ARRIVED = 20
 HISTORY = 32
 """Bus operations kept for the debug log when something fails."""
 
+ATTEMPTS = 3
+"""Tries of a transaction awaiting its status while connecting (a lost or corrupt reply)."""
+
+DRAIN_QUIET = 0.005
+"""Seconds without input that end a drain before a retry."""
+
+BUS_MARGIN = 0.0002
+"""Seconds added to a read-back's time on the bus before the next goals may go out."""
+
+SETTLE = 0.001
+"""Seconds a USB adapter with a 1 ms latency timer may hold replies (see :class:`ReadBack`)."""
+
+STATUS = 0x55
+"""Protocol 2.0 status packet instruction."""
+
 
 class Scheduler:
     """Absolute deadlines ``t_k = t_0 + k·period`` on a clock; lateness measured at each tick.
@@ -141,16 +172,47 @@ class Scheduler:
         self.ticks = 0
         self.late_ticks = 0
         self.resyncs = 0
+        self.resync_delay = 0.0
+        """Seconds the deadlines moved on at resyncs, in all."""
         self.max_lateness = 0.0
         self.lateness: list[float] = []
         """Per tick, seconds after its deadline that it woke."""
         self.woke: list[float] = []
         """Per tick, the clock time it woke (for period jitter)."""
+        self.anchors: list[tuple[int, float, float | None]] = []
+        """``(k, t0, held)``: from tick ``k`` on, the deadlines were ``t0 + k·period`` (the
+        start, then each resync and each resume after a pause); ``held``: the clock time the
+        hold before it began (a pause), None for a resync (the late tick's old deadline)."""
 
     def start(self, t0: float | None = None) -> float:
         """Anchor tick 0 at ``t0`` (default: now); returns it."""
         self.t0 = self.clock.now() if t0 is None else float(t0)
+        self.anchors = [(0, self.t0, None)]
         return self.t0
+
+    def reanchor(self, k: int, at: float, held: float | None = None) -> None:
+        """Make tick ``k`` due at clock time ``at``, the ticks after it following (after a pause
+        that began at clock time ``held``)."""
+        self.t0 = float(at) - k * self.period
+        self.anchors.append((k, self.t0, held))
+
+    def program_time(self, clock: NDArray[np.float64], lag: float = 0.0) -> NDArray[np.float64]:
+        """The program time (tick ``k`` at ``k·period``) of clock instants whose state the goals
+        sent ``lag`` s earlier set; NaN inside a hold (a resync's or a pause's gap, when no
+        goal was due). Before tick 0 the first anchor extends backwards."""
+        c = np.asarray(clock, dtype=float)
+        s = c - lag
+        out = np.full(s.shape, np.nan)
+        anchors = self.anchors or [(0, self.t0, None)]
+        for i, (k, t0, _) in enumerate(anchors):
+            inside = s >= (-np.inf if i == 0 else t0 + k * self.period)
+            if i + 1 < len(anchors):  # until the next hold starts
+                k_next, _, held = anchors[i + 1]
+                inside &= s < t0 + k_next * self.period
+                if held is not None:  # a pause: from the moment the pen began to lift
+                    inside &= c < held
+            out[inside] = s[inside] - t0
+        return out
 
     def deadline(self, k: int) -> float:
         return self.t0 + k * self.period
@@ -170,24 +232,296 @@ class Scheduler:
         if late > self.resync_after:
             self.t0 += late
             self.resyncs += 1
+            self.resync_delay += late
+            self.anchors.append((k, self.t0, None))
         return late
 
 
 @dataclass
 class StreamResult:
-    """What :meth:`ArmDriver.stream` measured."""
+    """What :meth:`ArmDriver.stream` measured (also after a fault: up to it)."""
 
     ticks_sent: int = 0
-    """Goal rows written."""
+    """Goal rows written: the last tick executed, counting from 1."""
     reads: list[tuple[float, int, int, int]] = field(default_factory=list)
-    """Read-backs: ``(program time s, shoulder, elbow, pen ticks)``."""
+    """Complete read-backs: ``(program time s, shoulder, elbow, pen ticks)``, the time on the
+    program's clock (samples inside a pause or a resync gap are left out)."""
+    read_clock: list[tuple[float, int, int, int]] = field(default_factory=list)
+    """The same read-backs with the clock time the servos sampled them."""
     origin: float = 0.0
-    """Clock time of program time 0: when the servos should be at the first setpoint (after
-    the last resync, if any: each resync delays what follows by its lateness)."""
+    """Clock time of program time 0 under the last anchor (after the last resync or pause)."""
+    start: float = 0.0
+    """Clock time of tick 0's deadline."""
     end: float = 0.0
-    """Clock time when the stream ended."""
+    """Clock time when the stream ended (the last goal reached, or the fault)."""
+    lead: float = 0.0
+    """Seconds between sending a goal and when the servos should be there."""
     scheduler: Scheduler | None = None
+    readback: ReadBack | None = None
     corrupt_replies: int = 0
+    paused: float = 0.0
+    """Seconds spent paused (pen up, pose held), in all."""
+    pauses: int = 0
+
+    def program_time(self, clock: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Program time of clock instants (NaN inside pauses and resync gaps)."""
+        assert self.scheduler is not None
+        return self.scheduler.program_time(clock, self.lead)
+
+
+@dataclass
+class _Request:
+    """One SYNC_READ of present positions on its way."""
+
+    tick: int
+    sent: float
+    sampled: float
+    got: dict[int, int] = field(default_factory=dict)
+    late: bool = False
+    """Still open when the next request was sent."""
+    last: int = -1
+    """Index (in the bus order of IDs) of the last servo whose reply came."""
+    corrupt: bool = False
+
+
+class ReadBack:
+    """Present positions, read without ever holding up the goal stream.
+
+    :meth:`request` sends one ``GroupSyncRead`` (the SDK's packet) and returns at once;
+    :meth:`poll` takes whatever status bytes have arrived (``in_waiting``, never a blocking read)
+    and matches each reply to its request: replies come in the order of the requests and, within
+    one, of the IDs, so a reply from a servo that already answered the oldest open request, or
+    from one before it, belongs to a later request and closes that one (what it still lacks was
+    lost). A late reply is therefore never taken for a later read: it is kept with its own
+    request's sampling time, and counted late when it came after the next request was sent.
+    Replies that match nothing open (after a request was given up), or are no read-back, are
+    discarded as stale.
+
+    Faults (``where`` names the tick): a servo that misses more than ``bus.max_missed``
+    read-backs in a row while others answer, or no reply from a servo for ``bus.silence_timeout``
+    (:class:`DeviceTimeout`); a status error (:class:`DeviceFault`, naming the hardware error);
+    more than ``bus.max_corrupt`` read-backs in a row with a corrupt reply (:class:`DeviceError`).
+    """
+
+    def __init__(self, driver: ArmDriver, started: float) -> None:
+        p = driver.profile
+        self.driver = driver
+        self.ids = list(driver.ids)
+        self.index = {id: i for i, id in enumerate(self.ids)}
+        self.max_missed = int(p["bus.max_missed"])
+        self.silence = max(float(p["bus.silence_timeout"]), 2 * p.readback_every * p.period)
+        """No reply for this long is a fault: ``bus.silence_timeout``, or two read-back
+        intervals when read-backs are rarer than that."""
+        self.max_corrupt = int(p["bus.max_corrupt"])
+        assert driver.port is not None
+        self.port = driver.port
+        self.group = sdk.GroupSyncRead(self.port, driver.ph, PRESENT_POSITION, 4)
+        for id in self.ids:
+            self.group.addParam(id)
+        byte = 10.0 / p["bus.baud"]
+        self.request_time = (14 + len(self.ids)) * byte
+        """Seconds the request takes on the bus: the servos sample when it has arrived."""
+        self.busy = self.request_time + len(self.ids) * (
+            15 * byte + 1e-6 * float(p["bus.return_delay_us"])
+        )
+        """Seconds the bus is taken by a request and its replies (half duplex: the next goals
+        wait for the end, see :attr:`bus_free`)."""
+        self.bus_free = -math.inf
+        """Clock time when the last request's replies are over on the bus."""
+        self.window = self.busy + SETTLE
+        """Seconds after a request when its replies can be there (bus time, and an adapter's
+        1 ms): when the loop looks again, before the next tick."""
+        self.open: deque[_Request] = deque()
+        self.buffer = bytearray()
+        self.heard = dict.fromkeys(self.ids, started)
+        """Clock time of each servo's last reply (the stream's start before the first)."""
+        self.in_a_row = dict.fromkeys(self.ids, 0)
+        self.samples: list[tuple[float, int, int, int]] = []
+        self.requests = 0
+        self.replies = 0
+        self.late = 0
+        self.missed = 0
+        self.most_in_a_row = 0
+        self.stale = 0
+        self.corrupt = 0
+        self.corrupt_in_a_row = 0
+        self.delays: list[float] = []
+        """Per reply, seconds from its request until the loop saw it (to within a tick)."""
+
+    def request(self, tick: int, where: str) -> None:
+        """Send one SYNC_READ (no waiting)."""
+        d = self.driver
+        now = d.clock.now()
+        for old in self.open:
+            old.late = True
+        self.port.is_using = False
+        result = d._guard(self.group.txPacket, "read-back", where)
+        self.port.is_using = False  # the SDK keeps it for a reply it is not going to wait for
+        d._check(result, 0, None, "SYNC_READ of present positions", where)
+        self.open.append(_Request(tick, now, now + self.request_time))
+        self.bus_free = now + self.busy + BUS_MARGIN
+        self.requests += 1
+
+    def poll(self, where: str) -> None:
+        """Take what has arrived, match it, and raise the faults (see the class docstring)."""
+        if not self.open:
+            return  # nothing awaited: stale bytes, if any, wait for the next look
+        d = self.driver
+        ser = self.port.ser
+        waiting = d._guard(lambda: ser.in_waiting, "read-back", where)
+        if waiting:
+            self.buffer += d._guard(lambda: ser.read(waiting), "read-back", where)
+        now = d.clock.now()
+        if self.buffer:
+            self._parse(now, where)
+        silent = [id for id in self.ids if now - self.heard[id] > self.silence]
+        if silent:
+            names = _and([d.who(id) for id in silent])
+            raise DeviceTimeout(
+                f"{names} did not answer SYNC_READ of present positions for"
+                f" {now - max(self.heard[id] for id in silent):.2f} s (bus.silence_timeout:"
+                f" {self.silence:g} s)",
+                where,
+            )
+        while self.open and now - self.open[0].sent > self.silence:
+            self._close(self.open.popleft(), where)  # given up: what it lacks counts as lost
+
+    def _parse(self, now: float, where: str) -> None:
+        buf = self.buffer
+        ph = self.driver.ph
+        while True:
+            at = buf.find(b"\xff\xff\xfd")
+            if at < 0:
+                del buf[: max(0, len(buf) - 2)]
+                return
+            if at:
+                del buf[:at]
+            if len(buf) < 7:
+                return
+            length = buf[5] | (buf[6] << 8)
+            if buf[3] != 0 or length < 4 or length > 64:  # not a status header: resynchronise
+                del buf[:1]
+                continue
+            if len(buf) < 7 + length:
+                return
+            packet = list(buf[: 7 + length])
+            crc = packet[-2] | (packet[-1] << 8)
+            if ph.updateCRC(0, packet, len(packet) - 2) != crc or packet[7] != STATUS:
+                self.corrupt += 1
+                log.debug("%s: corrupt read-back reply (ID byte %d)", where, packet[4])
+                del buf[:1]  # its other bytes hold no header: skipped by the scan
+                if packet[4] in self.index:
+                    self._answer(packet[4], None, 0, now, where)
+                continue
+            del buf[: 7 + length]
+            packet = ph.removeStuffing(packet)
+            id, error = packet[4], packet[8]
+            if id not in self.index or (length != 8 and not error):
+                self.stale += 1  # not a read-back (a late status from the setup)
+                continue
+            value = int.from_bytes(bytes(packet[9:13]), "little", signed=True) if length == 8 else 0
+            self._answer(id, value, error, now, where)
+
+    def _answer(self, id: int, value: int | None, error: int, now: float, where: str) -> None:
+        """A reply from ``id`` (``value`` None: corrupt) seen at ``now``."""
+        d = self.driver
+        i = self.index[id]
+        while self.open:
+            r = self.open[0]
+            if i > r.last:
+                break
+            self._close(self.open.popleft(), where)  # a later request's reply
+        else:
+            self.stale += 1  # its request was given up already
+            self.heard[id] = now
+            self.in_a_row[id] = 0
+            return
+        for j in range(r.last + 1, i):
+            self._lost(self.ids[j], where)
+        r.last = i
+        self.heard[id] = now
+        self.replies += 1
+        self.delays.append(now - r.sent)
+        if r.late:
+            self.late += 1
+        if value is None:
+            r.corrupt = True
+        else:
+            self.in_a_row[id] = 0
+            r.got[id] = value
+        if error:
+            d.history.append(f"{where}: SYNC_READ reply of {d.who(id)}: error {error}")
+            if error & 0x80:
+                d.drain(DRAIN_QUIET)
+                raise DeviceFault(d._hardware_error(id), where)
+            raise DeviceFault(
+                f"{d.who(id)} answered SYNC_READ of present positions with {describe_error(error)}",
+                where,
+            )
+        if i == len(self.ids) - 1:
+            self._close(self.open.popleft(), where)
+
+    def _close(self, r: _Request, where: str) -> None:
+        for j in range(r.last + 1, len(self.ids)):
+            self._lost(self.ids[j], where)
+        if len(r.got) == len(self.ids):
+            self.samples.append((r.sampled, *(r.got[id] for id in self.ids)))
+        if r.corrupt:
+            self.corrupt_in_a_row += 1
+            if self.corrupt_in_a_row > self.max_corrupt:
+                raise DeviceError(
+                    f"{self.corrupt_in_a_row} corrupt read-backs in a row (more than"
+                    f" bus.max_corrupt = {self.max_corrupt}): noise on the bus?",
+                    where,
+                )
+        elif len(r.got) == len(self.ids):
+            self.corrupt_in_a_row = 0
+
+    def _lost(self, id: int, where: str) -> None:
+        self.missed += 1
+        self.in_a_row[id] += 1
+        n = self.in_a_row[id]
+        self.most_in_a_row = max(self.most_in_a_row, n)
+        if n > self.max_missed:
+            raise DeviceTimeout(
+                f"{self.driver.who(id)} did not answer SYNC_READ of present positions {n} times"
+                f" in a row (more than bus.max_missed = {self.max_missed}) while the others did",
+                where,
+            )
+
+    def figures(self) -> dict[str, Any]:
+        """Counts and reply delays for the report."""
+        delays = np.array(self.delays) * 1e3 if self.delays else np.zeros(1)
+        return {
+            "readback_requests": self.requests,
+            "readback_replies": self.replies,
+            "readback_late_replies": self.late,
+            "readback_missed_replies": self.missed,
+            "readback_most_missed_in_a_row": self.most_in_a_row,
+            "readback_stale_replies": self.stale,
+            "readback_corrupt_replies": self.corrupt,
+            "reply_delay_p50_ms": float(np.percentile(delays, 50)),
+            "reply_delay_p99_ms": float(np.percentile(delays, 99)),
+            "reply_delay_max_ms": float(delays.max()),
+        }
+
+
+class _RealTime:
+    """What the tick loop changes in the interpreter while it runs, and puts back (:meth:`end`):
+    ``gc.freeze()``, so that everything allocated before the stream (the program's rows, the
+    profile, the caller's objects) leaves the collector's view and a full collection during the
+    stream looks at the stream's few new objects only, not for milliseconds at the whole heap.
+    """
+
+    def __init__(self) -> None:
+        gc.freeze()
+
+    def end(self) -> None:
+        gc.unfreeze()
+
+
+def _and(names: list[str]) -> str:
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
 class UrlPortHandler(sdk.PortHandler):
@@ -201,6 +535,19 @@ class UrlPortHandler(sdk.PortHandler):
     """
 
     clock: Clock | None = None
+    reply_allowance_ms: float = 2.0 * sdk.port_handler.LATENCY_TIMER + 2.0
+    """What the SDK's packet timeout allows beyond the bytes' own time, ms (the SDK's 34 ms
+    unless the driver sets it: ``bus.silence_timeout`` while connecting)."""
+
+    def clearPort(self) -> None:
+        """Nothing. The SDK calls this before every packet it sends, and pyserial's ``flush``
+        behind it drains the output (``tcdrain``): the loop would wait, at every tick, until the
+        far end has taken the bytes (on a pseudo-terminal, until its server is scheduled).
+        Stale input is the read-back's business (:class:`ReadBack`)."""
+
+    def setPacketTimeout(self, packet_length: int) -> None:
+        self.packet_start_time = self.getCurrentTime()
+        self.packet_timeout = self.tx_time_per_byte * packet_length + self.reply_allowance_ms
 
     def setupPort(self, cflag_baud: int) -> bool:
         if self.is_open:
@@ -325,6 +672,7 @@ class ArmDriver:
         if not opened:
             raise ConnectionLost(f"cannot open {self.port_name} at {baud} bps", "connect")
         self.port = port
+        port.reply_allowance_ms = 1000.0 * self.profile["bus.silence_timeout"]
         if not self._clock_given and port.clock is not None:
             self.clock = port.clock
         log.info("opened %s at %d bps", self.port_name, baud)
@@ -341,12 +689,9 @@ class ArmDriver:
         port, where = self.port, "connect"
         missing = []
         for id in self.ids:
-            for _attempt in range(2):
-                model, result, error = self._guard(
-                    lambda id=id: self.ph.ping(port, id), f"ping {id}", where
-                )
-                if result != sdk.COMM_RX_CORRUPT:
-                    break
+            model, result, error = self._transact(
+                lambda id=id: self.ph.ping(port, id), f"ping {id}", where
+            )
             if result == sdk.COMM_RX_TIMEOUT:
                 missing.append(id)
                 continue
@@ -418,9 +763,42 @@ class ArmDriver:
             out[joint.id] = (int(ends.min()), int(ends.max()))
         return out
 
+    def _transact(self, action: Callable[[], tuple[Any, ...]], what: str, where: str) -> Any:
+        """One SDK transaction awaiting its status, tried :data:`ATTEMPTS` times while the reply
+        is missing or corrupt; before a retry the late reply to the last try, if it comes, is
+        drained so that it is not taken for the next one's."""
+        for attempt in range(ATTEMPTS):
+            answer = self._guard(action, what, where)
+            result = answer[-2]
+            if result not in (sdk.COMM_RX_TIMEOUT, sdk.COMM_RX_CORRUPT) or attempt == ATTEMPTS - 1:
+                return answer
+            log.debug("%s: %s: result %d, trying again", where, what, result)
+            self.history.append(f"{where}: {what} -> result {result}, retried")
+            self.drain(DRAIN_QUIET)
+        return answer  # pragma: no cover - the loop returns
+
+    def drain(self, quiet: float = 0.0) -> int:
+        """Discard input until none has come for ``quiet`` s (0: what is there now); returns the
+        bytes discarded."""
+        assert self.port is not None
+        port = self.port
+        port.is_using = False
+        dropped = 0
+        end = self.clock.now() + quiet
+        while True:
+            waiting = self._guard(lambda: port.ser.in_waiting, "drain", "drain")
+            if waiting:
+                data = self._guard(lambda n=waiting: port.ser.read(n), "drain", "drain")
+                dropped += len(data)
+                end = self.clock.now() + quiet
+            elif self.clock.now() >= end:
+                return dropped
+            else:
+                self.clock.sleep_until(min(end, self.clock.now() + 0.001))
+
     def _read(self, id: int, address: int, size: int, where: str) -> int:
         call = {1: self.ph.read1ByteTxRx, 2: self.ph.read2ByteTxRx, 4: self.ph.read4ByteTxRx}[size]
-        value, result, error = self._guard(
+        value, result, error = self._transact(
             lambda: call(self.port, id, address), f"read {address}", where
         )
         self._check(result, error, id, f"READ of address {address}", where)
@@ -428,7 +806,7 @@ class ArmDriver:
 
     def _write(self, id: int, address: int, size: int, value: int, where: str) -> None:
         call = {1: self.ph.write1ByteTxRx, 4: self.ph.write4ByteTxRx}[size]
-        result, error = self._guard(
+        result, error = self._transact(
             lambda: call(self.port, id, address, value & 0xFFFFFFFF), f"write {address}", where
         )
         self._check(result, error, id, f"WRITE of {value} to address {address}", where)
@@ -513,98 +891,161 @@ class ArmDriver:
         self._check(result, 0, None, "SYNC_WRITE of goal positions", where)
 
     def stream(
-        self, goals: NDArray[np.int64], progress: Callable[[int, int], None] | None = None
+        self,
+        goals: NDArray[np.int64],
+        progress: Callable[[int, int], None] | None = None,
+        control: RunControl | None = None,
     ) -> StreamResult:
-        """Send ``goals`` ``(N, 3)`` (shoulder, elbow, pen ticks), one row per tick. Stops safely
-        on any error or KeyboardInterrupt and re-raises it; see the module docstring."""
+        """Send ``goals`` ``(N, 3)`` (shoulder, elbow, pen ticks), one row per tick, reading
+        present positions back on the side; obey ``control`` (pause: pen up, pose held). Stops
+        safely on any error or KeyboardInterrupt and re-raises it, ``where`` naming the last tick
+        sent (from 1); :attr:`result` holds what was measured up to then. See the module
+        docstring."""
         goals = np.asarray(goals, dtype=np.int64)
         if goals.ndim != 2 or goals.shape[1] != 3 or not len(goals):
             raise ValueError(f"goals: must be a non-empty (N, 3) array, got shape {goals.shape}")
+        assert self.port is not None
         p = self.profile
         period, lead, every = p.period, p.lead, p.readback_every
-        max_corrupt = int(p["bus.max_corrupt"])
         # Late by up to a quarter of the profile time, the servos are still on their way to the
         # last goal and catching up costs at most 25 % of speed for a moment; later, re-anchor.
         scheduler = Scheduler(self.clock, period, resync_after=max(period, lead / 4))
-        out = StreamResult(scheduler=scheduler)
+        out = StreamResult(scheduler=scheduler, lead=lead)
+        self.result = out
         writer = sdk.GroupSyncWrite(self.port, self.ph, GOAL_POSITION, 4)
         for id, goal in zip(self.ids, goals[0], strict=True):
             writer.addParam(id, _u32(int(goal)))
-        reader = sdk.GroupSyncRead(self.port, self.ph, PRESENT_POSITION, 4)
-        for id in self.ids:
-            reader.addParam(id)
         total = len(goals)
         notify = max(1, round(p["motion.rate"] / 10))
-        corrupt_run = 0
-        scheduler.start(self.clock.now() + period)
+        dropped = self.drain()  # late replies from the setup
+        if dropped:
+            log.debug("dropped %d stale bytes before streaming", dropped)
+        out.start = scheduler.start(self.clock.now() + period)
+        readback = ReadBack(self, out.start)
+        out.readback = readback
+        ids = self.ids
         log.info("streaming %d ticks at %g Hz, read-back every %d", total, p["motion.rate"], every)
+        rows = goals.tolist()
+        k = 0
+        realtime = _RealTime()  # after the rows: frozen, out of the collector's way
         try:
-            for k, row in enumerate(goals):
-                where = f"tick {k}"
+            while k < total:
                 scheduler.wait(k)
-                for id, goal in zip(self.ids, row, strict=True):
-                    writer.changeParam(id, _u32(int(goal)))
+                if control is not None and control.paused:
+                    self._pause(k, goals, readback, control, out)  # then tick k is due
+                where = f"tick {k + 1}"
+                if readback.bus_free > self.clock.now():  # slow bus: replies still on the line
+                    self.clock.sleep_until(readback.bus_free)
+                for id, goal in zip(ids, rows[k], strict=True):
+                    writer.changeParam(id, _u32(goal))
                 result = self._guard(writer.txPacket, "goal positions", where)
                 self._check(result, 0, None, "SYNC_WRITE of goal positions", where)
-                out.ticks_sent += 1
+                out.ticks_sent = k + 1
+                readback.poll(where)
                 if k % every == 0:
-                    before = self.clock.now()
-                    present = self._sync_read(reader, where)
-                    if present is None:
-                        out.corrupt_replies += 1
-                        corrupt_run += 1
-                        if corrupt_run > max_corrupt:
-                            raise DeviceError(
-                                f"{corrupt_run} corrupt read-backs in a row (more than"
-                                f" bus.max_corrupt = {max_corrupt}): noise on the bus?",
-                                where,
-                            )
-                    else:
-                        corrupt_run = 0
-                        sampled = 0.5 * (before + self.clock.now())
-                        out.reads.append((sampled - scheduler.t0 - lead, *present))
+                    readback.request(k + 1, where)
+                    # Look again once the replies could be here, if that leaves half the
+                    # period before the next deadline (else at the next tick).
+                    settle = readback.open[-1].sent + readback.window
+                    if settle < scheduler.deadline(k) + 0.5 * period:
+                        self.clock.sleep_until(settle)
+                        readback.poll(where)
                 if progress is not None and (k % notify == 0 or k == total - 1):
                     progress(k + 1, total)
-            out.origin = scheduler.t0 + lead
-            # Let the last move finish before anything else (torque off, the recorder's end).
-            self.clock.sleep_until(scheduler.deadline(total - 1) + lead)
-            out.end = self.clock.now()
+                k += 1
+            # Let the last move finish before anything else (torque off, the recorder's end),
+            # still watching the replies.
+            where = f"tick {total}"
+            last = scheduler.deadline(total - 1) + lead
+            while self.clock.now() < last:
+                self.clock.sleep_until(min(last, self.clock.now() + period))
+                readback.poll(where)
         except BaseException as exc:
-            out.origin = scheduler.t0 + lead
             log.warning("stopping: %s", exc if str(exc) else type(exc).__name__)
             for line in self.history:
                 log.debug("  %s", line)
             self.safe_stop(error=True)
             raise
+        finally:
+            realtime.end()
+            out.end = self.clock.now()
+            out.origin = scheduler.t0 + lead
+            out.corrupt_replies = readback.corrupt
+            out.read_clock = list(readback.samples)
+            if readback.samples:
+                reads = np.array(readback.samples, dtype=float)
+                t = out.program_time(reads[:, 0])
+                keep = np.isfinite(t)
+                out.reads = [
+                    (float(t[i]), *(int(v) for v in reads[i, 1:])) for i in np.flatnonzero(keep)
+                ]
         log.info(
-            "sent %d ticks: %d late (max %.2f ms), %d resyncs, %d corrupt read-backs",
+            "sent %d ticks: %d late (max %.2f ms), %d resyncs; read-back: %d missed, %d late,"
+            " %d corrupt replies",
             out.ticks_sent,
             scheduler.late_ticks,
             1e3 * scheduler.max_lateness,
             scheduler.resyncs,
-            out.corrupt_replies,
+            readback.missed,
+            readback.late,
+            readback.corrupt,
         )
         self.finish()
         return out
 
-    def _sync_read(self, reader: sdk.GroupSyncRead, where: str) -> list[int] | None:
-        """One SYNC_READ of present positions with each status error byte checked; None when a
-        reply was corrupt (the rest of the replies are flushed)."""
-        result = self._guard(reader.txPacket, "read-back", where)
-        self._check(result, 0, None, "SYNC_READ of present positions", where)
-        values = []
-        for id in self.ids:
-            data, result, error = self._guard(
-                lambda id=id: self.ph.readRx(self.port, id, 4), "read-back", where
-            )
-            if result == sdk.COMM_RX_CORRUPT:
-                log.debug("%s: corrupt read-back reply from %s", where, self.who(id))
-                self.port.is_using = False
-                self._guard(self.port.clearPort, "flush", where)
-                return None
-            self._check(result, error, id, "SYNC_READ of present positions", where)
-            values.append(int.from_bytes(bytes(data[:4]), "little", signed=True))
-        return values
+    def _pause(
+        self,
+        k: int,
+        goals: NDArray[np.int64],
+        readback: ReadBack,
+        control: RunControl,
+        out: StreamResult,
+    ) -> None:
+        """Before tick ``k``: lift the pen, hold the pose (the last goals), keep watching the
+        read-back until ``control`` resumes; then put the pen back as it was, and make tick ``k``
+        due now."""
+        p, clock, scheduler = self.profile, self.clock, out.scheduler
+        assert scheduler is not None
+        where = f"tick {k}"
+        began = clock.now()
+        out.pauses += 1
+        held = goals[k - 1] if k else None
+        log.info("paused at %s: pen up, holding the pose", where)
+        lifted = held is not None and int(held[2]) != p["pen.up"]
+        if lifted:
+            assert held is not None
+            self._pen_ramp(int(held[2]), p["pen.up"], readback, where)
+        interval = p.readback_every * p.period
+        next_read = clock.now()
+        while control.paused:
+            now = clock.now()
+            if now >= next_read:
+                readback.request(k, where)
+                next_read = now + interval
+            readback.poll(where)
+            clock.sleep_until(min(next_read, clock.now() + 0.01))
+        if lifted:
+            assert held is not None
+            self._pen_ramp(p["pen.up"], int(held[2]), readback, where)
+            settled = clock.now() + p.lead  # the last pen goal's own move
+            while clock.now() < settled:
+                readback.poll(where)
+                clock.sleep_until(min(settled, clock.now() + p.period))
+        resumed = clock.now()
+        scheduler.reanchor(k, resumed, began)
+        out.paused += resumed - began
+        log.info("resumed at %s after %.1f s", where, resumed - began)
+
+    def _pen_ramp(self, start: int, end: int, readback: ReadBack, where: str) -> None:
+        """Move the pen alone from ``start`` to ``end`` ticks in ``pen.move_time``, one goal a
+        tick (as the program's pen moves), the read-back still watching."""
+        p, clock = self.profile, self.clock
+        steps = max(1, math.ceil(p["pen.move_time"] / p.period - 1e-9))
+        t0 = clock.now()
+        for i in range(1, steps + 1):
+            clock.sleep_until(max(t0 + (i - 1) * p.period, readback.bus_free))
+            self._goals({p["pen.id"]: round(start + (end - start) * i / steps)}, where)
+            readback.poll(where)
 
     def finish(self) -> None:
         """After a successful stream: torque off if ``servo.torque_off_at_end``."""

@@ -20,6 +20,7 @@ from firmware_protocols.dynamixel import TICKS_PER_REV
 from tagbot.arm.profile import ArmProfile, Joint
 
 __all__ = [
+    "RAD_PER_TICK",
     "Arm",
     "angles_to_ticks",
     "ticks_to_angles",
@@ -30,6 +31,7 @@ __all__ = [
 Array = NDArray[np.float64]
 TAU = 2.0 * math.pi
 RAD_PER_TICK = TAU / TICKS_PER_REV
+"""One servo tick, radians (360°/4096)."""
 
 
 @dataclass(frozen=True)
@@ -107,6 +109,22 @@ class Arm:
         vx = -self.l1 * np.sin(a1) * w1 - self.l2 * np.sin(a12) * w12
         vy = self.l1 * np.cos(a1) * w1 + self.l2 * np.cos(a12) * w12
         return np.stack([vx, vy], axis=-1)
+
+    def tip_resolution(self, angles: ArrayLike, step: float = RAD_PER_TICK) -> Array:
+        """The pen-tip distance (mm) below which every joint moves less than ``step`` (rad).
+
+        A pen move ``d`` needs joint moves ``Δq = J⁻¹·d`` with ``|Δq| ≤ |d| / σ_min(J)``, so
+        any move shorter than ``step·σ_min(J)`` is below one tick on both joints: the machine's
+        resolution at the pen at that pose. ``σ_min`` depends on the elbow angle only:
+        ``σ_min² = 2·det² / (S + √(S² − 4·det²))`` with ``S = l1² + 2·l2² + 2·l1·l2·cos a2``
+        (the squared column norms of J) and ``det = l1·l2·sin a2``.
+        """
+        q = np.asarray(angles, dtype=float)
+        a2 = q[..., 1]
+        s = self.l1**2 + 2.0 * self.l2**2 + 2.0 * self.l1 * self.l2 * np.cos(a2)
+        det2 = (self.l1 * self.l2 * np.sin(a2)) ** 2
+        root = np.sqrt(np.maximum(s * s - 4.0 * det2, 0.0))
+        return step * np.sqrt(2.0 * det2 / (s + root))
 
 
 def wrap_into(a: ArrayLike, lower: float, upper: float) -> tuple[Array, NDArray[np.bool_]]:

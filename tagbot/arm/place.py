@@ -7,11 +7,26 @@ putting the tag's pen-down bounding box inside the arm's *safe workspace*: the p
 the joint limits. With ``place.scale = "fit"`` it is the largest such box (bisection on the scale,
 the centre searched on a grid, then refined), placed at the middle of where it fits.
 
-:func:`build_program` then picks ONE time scale ``s ≥ 1`` for the whole tag, so that every joint
-rate ``|ȧ_i| ≤ max_speed_i`` and acceleration ``|ä_i| ≤ max_acceleration_i`` along every pen-down
-motion (joint rates from ``J⁻¹·v`` on a 1 ms grid of the tag's clock, accelerations by
-differences): the drawn motion is ``p(τ/s)``, same path, same lognormal speed shape, speeds ÷ s.
-It samples everything at the loop period ``1/motion.rate``:
+:func:`build_program` then draws each plan over its *drawn window* (:func:`drawn_window`): it
+starts where the pen has moved less than ``motion.trim_ticks`` (default 1) ticks at the pen since
+the plan's start and ends where less than that is left to draw. One tick at the pen is
+:meth:`~tagbot.arm.kinematics.Arm.tip_resolution` (360°/4096 through the Jacobian, its smallest
+singular value: any shorter move is under one tick on both joints); the motion is bounded by
+``Σ D_j·W_j(t)`` (each lognormal's share of its curve). The lognormal onsets and tails under it
+would only rest the pen on the paper. Each run ``k`` gets a time scale ``s_k ≥ 1`` so that every
+joint rate ``|ȧ_i| ≤ max_speed_i`` and acceleration ``|ä_i| ≤ max_acceleration_i`` (joint rates
+from ``J⁻¹·v`` on a 1 ms grid of the tag's clock, accelerations by differences, then checked on the
+samples, the arm standing still before and after the run): the drawn motion is
+``p(start_k + τ/s_k)``, same path, same lognormal speed shape, speeds ÷ s_k. ``s_k`` is then
+raised, if need be, until the servos' predicted follow of the run strays at most
+``motion.max_deviation`` from its path (:func:`_tracking`: each goal is a move over
+``servo.profile_ms``, a lag that cuts curves in proportion to the joint accelerations, ∝ 1/s²),
+never beyond ``motion.max_time_scale``. With ``motion.time_scale = "run"`` (the default) each
+run is slowed only as much as it needs; with ``"uniform"`` every run by the largest ``s_k``
+(``"uniform"`` with ``trim_ticks = 0`` and ``max_deviation = 0`` is the behaviour before runs
+were trimmed and scaled one by one). Pen moves and travel are at the machine's own speed, whatever
+the scales and the tag's pen-lift times. It samples everything at the loop period
+``1/motion.rate``:
 
     park ─► travel ─► pen down ─► plan 0 ─► pen up ─► travel ─► … ─► pen up ─► travel ─► park
 
@@ -25,20 +40,28 @@ the safe workspace, every sample within the joint limits and 0..4095 ticks, join
 accelerations by differences between ticks (of the planned angles: the goals' ±½-tick rounding
 is the servos' resolution, not motion). Anything wrong is a :class:`PlacementError` naming the
 tick, its time, what it belongs to and the limit.
+
+:func:`time_at_ends` measures what the trimming saves: the pen-down time within one tick at the
+pen of a run's ends.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.signal import lfilter
+from scipy.spatial import cKDTree
+from scipy.special import ndtr
 
 from tagbot.arm.kinematics import Arm, angles_to_ticks, ticks_to_angles, unwrap_into, wrap_into
 from tagbot.arm.profile import ArmProfile, Joint
 from tagbot.errors import PlacementError
-from tagbot.model import Tag
+from tagbot.metrics import densify
+from tagbot.model import Plan, Tag
 from tagbot.model.motion import evaluate_plan, sample_plan
 
 __all__ = [
@@ -49,14 +72,18 @@ __all__ = [
     "approach",
     "build_program",
     "check_program",
+    "drawn_window",
     "place",
     "safe",
+    "time_at_ends",
 ]
 
 Array = NDArray[np.float64]
 
 FINE_STEP = 0.001
 """Seconds (tag clock) between the samples used for extent, joint rates and accelerations."""
+TRACK_SPACING = 0.01
+"""mm between the points of a run's path that the predicted follow is measured against."""
 MIN_JERK_PEAK_RATE = 1.875
 """Peak rate of a minimum-jerk move, in units of (distance ÷ duration)."""
 MIN_JERK_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
@@ -84,7 +111,8 @@ class Placement:
 class Setpoints:
     """The planned pen-tip motion at the loop period, mm; ``pen`` True when the pen is down.
 
-    ``plan`` is the plan index of each sample (−1 for travel and pen moves).
+    ``plan`` is the plan index of each sample (−1 for travel and pen moves); a run's samples
+    are exactly those with ``pen`` True, its first one where the pen has just come down.
     """
 
     t: Array
@@ -95,11 +123,22 @@ class Setpoints:
     period: float
     mm_per_unit: float
     time_scale: float
-    """The uniform slow-down ``s ≥ 1`` of the pen-down motion (1: the tag's own timing)."""
+    """The largest slow-down ``s_k ≥ 1`` of a pen-down run (1: the tag's own timing); with
+    ``motion.time_scale = "uniform"`` every run's."""
     limits: dict[str, float]
-    """The ``s`` each limit alone asks for: ``speed``, ``acceleration`` (1 ms grid), and
-    ``sampled`` when the samples at the loop period needed a hair more."""
+    """The ``s`` each limit alone asks for, over all runs: ``speed``, ``acceleration`` (1 ms
+    grid), ``sampled`` when the samples at the loop period needed a hair more, and ``tracking``
+    when the servos' follow needed more (``motion.max_deviation``)."""
     placement: Placement
+    run_scales: tuple[float, ...] = ()
+    """Each plan's slow-down ``s_k``: its drawn motion is ``p(start_k + τ/s_k)``."""
+    run_windows: tuple[tuple[float, float], ...] = ()
+    """Each plan's drawn window ``(start_k, end_k)`` on the tag's clock
+    (:func:`drawn_window`): its first pen-down sample is the tag at ``start_k``, and machine time
+    ``τ`` after it is tag time ``start_k + τ/s_k``."""
+    run_tracking: tuple[float, ...] = ()
+    """Each plan's predicted path deviation (mm) of the servos' follow (the lag of their
+    time-based profile, :func:`_tracking`), which ``motion.max_deviation`` bounds."""
 
     def __len__(self) -> int:
         return len(self.t)
@@ -280,9 +319,15 @@ def place(tag: Tag, profile: ArmProfile) -> Placement:
     arm = Arm.from_profile(profile)
     theta = math.radians(profile["place.rotation"])
     rotation = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
-    points = np.concatenate([sample_plan(tag, k, FINE_STEP)[1] for k in range(len(tag.plans))])
+    samples = [sample_plan(tag, k, FINE_STEP) for k in range(len(tag.plans))]
+    points = np.concatenate([xy for _, xy, _ in samples])
     turned = points @ rotation.T
-    low, high = turned.min(axis=0), turned.max(axis=0)
+    # Between two samples a coordinate with |x''| <= A exceeds both by at most A·step²/8 (A
+    # from the velocities' differences, doubled for their peaks): the box holds the motion at
+    # any instant, whatever times the program samples it at.
+    pad = max(float(np.max(np.hypot(*np.diff(v, axis=0).T), initial=0.0)) for _, _, v in samples)
+    pad *= FINE_STEP / 4.0
+    low, high = turned.min(axis=0) - pad, turned.max(axis=0) + pad
     extent = high - low
     largest = _largest(extent, profile, arm)
     if largest <= 0.0:
@@ -296,9 +341,10 @@ def place(tag: Tag, profile: ArmProfile) -> Placement:
     centre = _best_centre(extent * size, profile, arm, 61)
     if centre is None:
         raise PlacementError(
-            f"place.scale: {size:g} mm per unit makes the tag {extent[0] * size:.1f} x"
-            f" {extent[1] * size:.1f} mm, which fits nowhere in the arm's safe reach inside the"
-            f' area; the largest that fits is {largest:.4g} mm per unit (or use "fit")'
+            f"place.scale: {size:g} mm per unit makes the tag {(extent[0] - 2 * pad) * size:.1f}"
+            f" x {(extent[1] - 2 * pad) * size:.1f} mm, which fits nowhere in the arm's safe"
+            f" reach inside the area; the largest that fits is {largest:.4g} mm per unit"
+            ' (or use "fit")'
         )
     matrix = size * rotation
     offset = centre - size * (low + high) / 2
@@ -370,10 +416,13 @@ class _Builder:
         pen = np.full(n, float(self.pen[-1][-1]))
         self._add(kind, plan, q, pen, self.arm.fk(q), self.arm.tip_velocity(q, w))
 
-    def pen_move(self, to: int, plan: int) -> None:
+    def pen_move(self, to: int, plan: int, *, last: bool = True) -> None:
+        """The pen to ``to`` in ``pen.move_time``, the arm still; without ``last``, all but the
+        final sample (the pen down there is the run's first sample, drawn next)."""
         start = float(self.pen[-1][-1])
         n = max(1, math.ceil(self.profile["pen.move_time"] / self.period - 1e-9))
-        pen = start + (to - start) * np.arange(1, n + 1) / n
+        pen = (start + (to - start) * np.arange(1, n + 1) / n)[: None if last else -1]
+        n = len(pen)
         q = np.repeat(self.here[None, :], n, axis=0)
         self._add("pen", plan, q, pen, self.arm.fk(q), np.zeros((n, 2)))
 
@@ -390,101 +439,246 @@ def _run_angles(xy: Array, arm: Arm, joints: tuple[Joint, Joint]) -> Array:
     return q
 
 
-def _time_scale(
-    tag: Tag, placement: Placement, profile: ArmProfile, arm: Arm
-) -> tuple[float, dict[str, float]]:
-    """The slow-down each limit asks for over every pen-down motion; refuses s > max."""
-    joints = profile.joints
-    limits = {"speed": 1.0, "acceleration": 1.0}
-    worst: dict[str, str] = {}
-    for k in range(len(tag.plans)):
-        t, xy, v = sample_plan(tag, k, FINE_STEP)
-        xy = xy @ placement.matrix.T + placement.offset
-        v = v @ placement.matrix.T
-        q = _run_angles(xy, arm, joints)
-        bad = np.flatnonzero(np.isnan(q[:, 0]))
-        if len(bad):
-            raise PlacementError(
-                f"plan {k} at t = {t[bad[0]] - tag.plans[k].start:.3f} s: ({xy[bad[0], 0]:.2f},"
-                f" {xy[bad[0], 1]:.2f}) mm is out of the arm's reach"
-            )
-        w = arm.joint_velocity(q, v)
-        acc = np.diff(w, axis=0) / FINE_STEP
-        for i, joint in enumerate(joints):
-            speed = float(np.max(np.abs(w[:, i])) / joint.max_speed)
-            accel = (
-                math.sqrt(float(np.max(np.abs(acc[:, i]))) / joint.max_acceleration)
-                if len(acc)
-                else 0.0
-            )
-            for name, value in (("speed", speed), ("acceleration", accel)):
-                if value > limits[name]:
-                    limits[name] = value
-                    worst[name] = f"{joint.name}.max_{name} in plan {k}"
-    scale = max(limits.values())
-    cap = profile["motion.max_time_scale"]
-    if scale > cap:
-        name = max(limits, key=lambda n: limits[n])
+# -- the drawn window of each run, its time scale and the samples -------------------------------
+
+
+def _motion_done(plan: Plan, t: float) -> tuple[float, float]:
+    """Path drawn by time ``t`` and path still to draw after it, tag units, as upper bounds:
+    ``Σ D_j·W_j(t)`` and ``Σ D_j·(1 − W_j(t))`` (stroke ``j`` of length ``D_j`` has travelled
+    ``D_j·W_j`` of its curve; the pen has moved no farther than the sum)."""
+    elapsed = t - plan.onsets
+    w = np.zeros(len(elapsed))
+    on = elapsed > 0.0
+    w[on] = ndtr((np.log(elapsed[on]) - plan.mu[on]) / plan.sigma[on])
+    length = plan.geometry.length
+    return float(np.sum(length * w)), float(np.sum(length * (1.0 - w)))
+
+
+def _bisect(f: Callable[[float], bool], low: float, high: float) -> float:
+    """The boundary in ``[low, high]`` of a predicate true below it and false above it."""
+    for _ in range(60):
+        mid = 0.5 * (low + high)
+        if f(mid):
+            low = mid
+        else:
+            high = mid
+        if high - low <= 1e-9 * max(1.0, abs(high)):
+            break
+    return low
+
+
+def drawn_window(
+    tag: Tag, k: int, placement: Placement, profile: ArmProfile, arm: Arm | None = None
+) -> tuple[float, float]:
+    """The part of plan ``k`` that is drawn, ``(start, end)`` on the tag's clock.
+
+    The run starts at the last instant where the pen has moved less than ``motion.trim_ticks``
+    times the machine's resolution at the pen (:meth:`Arm.tip_resolution` at the plan's first
+    target) and ends at the first instant where less than that is left to draw (resolution at
+    the last target): the lognormal onset and tail below it would only rest the pen on the
+    paper. With ``motion.trim_ticks = 0``, the plan's whole span ``start .. end(size)``. A plan
+    shorter than both margins together (a dot) is drawn whole.
+    """
+    plan = tag.plans[k]
+    start, end = plan.start, plan.end(tag.size)
+    ticks = profile["motion.trim_ticks"]
+    if ticks <= 0.0:
+        return start, end
+    arm = arm or Arm.from_profile(profile)
+    ends = np.array([plan.targets[0], plan.targets[-1]]) @ placement.matrix.T + placement.offset
+    q = _run_angles(ends, arm, profile.joints)
+    if np.isnan(q).any():  # out of reach: _run_limits names the sample
+        return start, end
+    budget = ticks * arm.tip_resolution(q) / placement.mm_per_unit  # tag units
+    if float(np.sum(plan.geometry.length)) <= budget.sum():
+        return start, end
+    first = _bisect(lambda t: _motion_done(plan, t)[0] <= budget[0], start, end)
+    last = _bisect(lambda t: _motion_done(plan, t)[1] > budget[1], first, end)
+    return first, max(first, last)
+
+
+def _run_limits(
+    tag: Tag,
+    k: int,
+    window: tuple[float, float],
+    placement: Placement,
+    profile: ArmProfile,
+    arm: Arm,
+) -> tuple[dict[str, float], dict[str, str], Array]:
+    """The slow-down each limit asks for over the drawn window of plan ``k`` (1 ms grid of the
+    tag's clock), which joint's limit that is, and the placed path on that grid (mm)."""
+    plan, joints = tag.plans[k], profile.joints
+    start, end = window
+    t = start + np.arange(math.ceil((end - start) / FINE_STEP - 1e-9) + 1) * FINE_STEP
+    xy, v = evaluate_plan(plan, t, tag.size)
+    xy = xy @ placement.matrix.T + placement.offset
+    v = v @ placement.matrix.T
+    q = _run_angles(xy, arm, joints)
+    bad = np.flatnonzero(np.isnan(q[:, 0]))
+    if len(bad):
         raise PlacementError(
-            f"joint {name}: the tag must be slowed down {scale:.3g} times to keep within"
-            f" {worst[name]}, more than motion.max_time_scale = {cap:g} (raise it, or the"
-            " joint limits, or draw smaller)"
+            f"plan {k} at t = {t[bad[0]] - plan.start:.3f} s: ({xy[bad[0], 0]:.2f},"
+            f" {xy[bad[0], 1]:.2f}) mm is out of the arm's reach"
         )
-    return scale, limits
+    w = arm.joint_velocity(q, v)
+    acc = np.diff(w, axis=0) / FINE_STEP
+    limits = {"speed": 1.0, "acceleration": 1.0}
+    worst = {"speed": "", "acceleration": ""}
+    for i, joint in enumerate(joints):
+        speed = float(np.max(np.abs(w[:, i])) / joint.max_speed)
+        accel = (
+            math.sqrt(float(np.max(np.abs(acc[:, i]))) / joint.max_acceleration)
+            if len(acc)
+            else 0.0
+        )
+        for name, value in (("speed", speed), ("acceleration", accel)):
+            if value > limits[name]:
+                limits[name] = value
+                worst[name] = f"{joint.name}.max_{name} in plan {k}"
+    return limits, worst, xy
 
 
 def _sample_run(
-    tag: Tag, k: int, placement: Placement, scale: float, profile: ArmProfile, arm: Arm
+    tag: Tag,
+    k: int,
+    window: tuple[float, float],
+    placement: Placement,
+    scale: float,
+    profile: ArmProfile,
+    arm: Arm,
 ) -> tuple[Array, Array, Array]:
-    """Plan ``k`` retimed by ``scale`` at the loop period: angles, positions (mm), velocities."""
+    """Plan ``k``'s drawn window retimed by ``scale`` at the loop period: angles, positions (mm),
+    velocities (mm/s); the first sample is at the window's start."""
     plan, T = tag.plans[k], profile.period
-    n = math.ceil((plan.end(tag.size) - plan.start) * scale / T - 1e-9)
-    xy, v = evaluate_plan(plan, plan.start + np.arange(n + 1) * T / scale, tag.size)
+    start, end = window
+    n = math.ceil((end - start) * scale / T - 1e-9)
+    xy, v = evaluate_plan(plan, start + np.arange(n + 1) * T / scale, tag.size)
     xy = xy @ placement.matrix.T + placement.offset
     v = v @ placement.matrix.T / scale
     return _run_angles(xy, arm, profile.joints), xy, v
 
 
 def _excess(q: Array, T: float, joints: tuple[Joint, Joint]) -> float:
-    """How much the sampled run must slow down (> 1) to keep every joint within its limits."""
+    """How much the sampled run must slow down (> 1) to keep every joint within its limits,
+    the arm standing still before and after it (the pen moves)."""
+    q = np.concatenate([q[:1], q, q[-1:]])
     worst = 0.0
     for i, joint in enumerate(joints):
-        if len(q) >= 2:
-            worst = max(worst, float(np.max(np.abs(np.diff(q[:, i])))) / T / joint.max_speed)
-        if len(q) >= 3:
-            acc = float(np.max(np.abs(np.diff(q[:, i], 2)))) / T**2 / joint.max_acceleration
-            worst = max(worst, math.sqrt(acc))
+        worst = max(worst, float(np.max(np.abs(np.diff(q[:, i])))) / T / joint.max_speed)
+        acc = float(np.max(np.abs(np.diff(q[:, i], 2)))) / T**2 / joint.max_acceleration
+        worst = max(worst, math.sqrt(acc))
     return worst * (1.0 + 1e-7)
 
 
+def _retime(
+    tag: Tag, placement: Placement, profile: ArmProfile, arm: Arm
+) -> tuple[
+    list[tuple[float, float]], list[float], dict[str, float], list[tuple[Array, ...]], list[float]
+]:
+    """Each run's drawn window and time scale, the scale each limit asks for (the largest over
+    the runs) and the sampled runs.
+
+    ``motion.time_scale = "run"``: each run gets the smallest ``s_k ≥ 1`` that keeps it within
+    the joint limits; ``"uniform"``: every run gets the largest of those.
+    """
+    n = len(tag.plans)
+    windows = [drawn_window(tag, k, placement, profile, arm) for k in range(n)]
+    limits = {"speed": 1.0, "acceleration": 1.0}
+    scales, worst, paths = [], [], []
+    for k in range(n):
+        found, names, path = _run_limits(tag, k, windows[k], placement, profile, arm)
+        paths.append(cKDTree(densify(path, TRACK_SPACING)))
+        for name in limits:
+            limits[name] = max(limits[name], found[name])
+        key = max(found, key=lambda m: found[m])
+        scales.append(found[key])
+        worst.append((key, names[key]))
+    top = int(np.argmax(scales))
+    if scales[top] > profile["motion.max_time_scale"]:
+        name, what = worst[top]
+        raise PlacementError(
+            f"joint {name}: the tag must be slowed down {scales[top]:.3g} times to keep within"
+            f" {what}, more than motion.max_time_scale ="
+            f" {profile['motion.max_time_scale']:g} (raise it, or the joint limits, or draw"
+            " smaller)"
+        )
+    uniform = profile["motion.time_scale"] == "uniform"
+    groups = [list(range(n))] if uniform else [[k] for k in range(n)]
+    if uniform:
+        scales = [scales[top]] * n
+    T, joints = profile.period, profile.joints
+    tolerance, cap = profile["motion.max_deviation"], profile["motion.max_time_scale"]
+    runs: list[tuple[Array, ...]] = [()] * n
+    deviations = [0.0] * n
+    for group in groups:
+        s = scales[group[0]]
+        for _ in range(40):
+            sampled = {
+                k: _sample_run(tag, k, windows[k], placement, s, profile, arm) for k in group
+            }
+            # The 1 ms grid may miss a peak by a hair: measure the differences the servos see.
+            excess = max(_excess(sampled[k][0], T, joints) for k in group)
+            if excess > 1.0:
+                s *= excess * (1.0 + 1e-4)
+                limits["sampled"] = max(limits.get("sampled", 1.0), s)
+                continue
+            found = {k: _tracking(sampled[k][0], paths[k], profile, arm) for k in group}
+            worst_deviation = max(found.values())
+            if tolerance <= 0.0 or worst_deviation <= tolerance or s >= cap:
+                break
+            # The servos' lag is in proportion to the joint accelerations: ∝ 1/s².
+            s = min(cap, s * math.sqrt(worst_deviation / tolerance) * 1.02)
+            limits["tracking"] = max(limits.get("tracking", 1.0), s)
+        else:  # pragma: no cover - converges in a few rounds
+            raise PlacementError("retiming: did not converge")
+        if s > cap:
+            raise PlacementError(
+                f"joint limits: plan {group[0]} must be slowed down {s:.3g} times, more than"
+                f" motion.max_time_scale = {cap:g}"
+            )
+        for k in group:
+            scales[k] = s
+            runs[k] = sampled[k]
+            deviations[k] = found[k]
+    return windows, scales, limits, runs, deviations
+
+
+def _tracking(q: Array, path: cKDTree, profile: ArmProfile, arm: Arm) -> float:
+    """How far (mm) the servos' follow of the run's samples ``q`` strays from its path.
+
+    Each goal is a move the servo completes in ``servo.profile_ms`` from where it is (the
+    time-based profile with ``servo.acceleration_fraction = 0``); with a goal every period ``T``
+    that is a first-order lag, ``y ← y + (T / profile)·(goal − y)``, whatever the lead the goals
+    are sent with (a time shift: the same path). The arm stands still at the run's first pose
+    before it and at its last after it (the pen moves); the distance is to the planned path,
+    over the run and one period after it.
+    """
+    T, tau = profile.period, max(profile.lead, profile.period)
+    alpha = T / tau
+    goals = np.concatenate([q, q[-1:]])
+    follow = np.empty_like(goals)
+    for i in range(2):
+        # follow[n]: where the servo is one period after goal n arrived.
+        follow[:, i] = lfilter(
+            [alpha], [1.0, alpha - 1.0], goals[:, i], zi=[(1 - alpha) * q[0, i]]
+        )[0]
+    distance, _ = path.query(arm.fk(follow))
+    return float(np.max(distance))
+
+
 def build_program(tag: Tag, profile: ArmProfile, placement: Placement | None = None) -> ArmProgram:
-    """Place, retime and sample ``tag`` into per-tick goals, then :func:`check_program` it."""
+    """Place, trim, retime and sample ``tag`` into per-tick goals, then :func:`check_program`
+    it."""
     arm = Arm.from_profile(profile)
     placement = placement or place(tag, profile)
-    scale, limits = _time_scale(tag, placement, profile, arm)
-    joints = profile.joints
+    windows, scales, limits, runs, deviations = _retime(tag, placement, profile, arm)
     T = profile.period
-    for _ in range(20):
-        runs = [_sample_run(tag, k, placement, scale, profile, arm) for k in range(len(tag.plans))]
-        # The 1 ms grid may miss a peak by a hair: measure the differences the servos will see.
-        excess = max(_excess(q, T, joints) for q, _, _ in runs)
-        if excess <= 1.0:
-            break
-        scale *= excess * (1.0 + 1e-4)
-        limits["sampled"] = scale
-    else:  # pragma: no cover - converges in a round or two
-        raise PlacementError("retiming: did not converge")
-    if scale > profile["motion.max_time_scale"]:
-        raise PlacementError(
-            f"joint limits: the tag must be slowed down {scale:.3g} times, more than"
-            f" motion.max_time_scale = {profile['motion.max_time_scale']:g}"
-        )
     park = np.array(profile.park)
     b = _Builder(profile, arm, park)
     for k, (q, xy, v) in enumerate(runs):
         b.travel(q[0], k)
-        b.pen_move(profile["pen.down"], k)
-        b.draw(k, q[1:], xy[1:], v[1:])
+        b.pen_move(profile["pen.down"], k, last=False)
+        b.draw(k, q, xy, v)
         b.pen_move(profile["pen.up"], k)
     b.travel(park, len(tag.plans) - 1, kind="park")
 
@@ -492,7 +686,7 @@ def build_program(tag: Tag, profile: ArmProfile, placement: Placement | None = N
     pen_ticks = np.concatenate(b.pen)
     n = len(angles)
     t = np.arange(n) * T
-    shoulder, elbow = joints
+    shoulder, elbow = profile.joints
     goals = np.column_stack(
         [
             angles_to_ticks(angles[:, 0], shoulder),
@@ -508,9 +702,12 @@ def build_program(tag: Tag, profile: ArmProfile, placement: Placement | None = N
         plan=np.concatenate(b.plan).astype(np.intp),
         period=T,
         mm_per_unit=placement.mm_per_unit,
-        time_scale=scale,
+        time_scale=max(scales),
         limits=limits,
         placement=placement,
+        run_scales=tuple(scales),
+        run_windows=tuple(windows),
+        run_tracking=tuple(deviations),
     )
     program = ArmProgram(
         setpoints, angles, np.column_stack([t, goals.astype(float)]), tuple(b.segments)
@@ -621,3 +818,54 @@ def approach(present: NDArray[np.int64], profile: ArmProfile) -> tuple[NDArray[n
         dtype=np.int64,
     )
     return goals, duration
+
+
+# -- what the program spends near the ends of its runs -----------------------------------------
+
+
+def time_at_ends(
+    program: ArmProgram, profile: ArmProfile, tag: Tag | None = None
+) -> tuple[float, float]:
+    """Pen-down time spent within one tick at the pen of a run's ends, and all pen-down time, s.
+
+    For each pen-down run (its first sample, the pen just down, to its last), the time until
+    the pen is first :meth:`Arm.tip_resolution` (at the run's first pose) away from the start
+    plus the time from when it is last that far (at the last pose) from the end; crossings are
+    interpolated between samples and a run that never gets that far counts whole. The start and
+    end are the run's own first and last positions, or with ``tag`` the plan's first and last
+    targets (where the lognormal motion itself starts and ends): the time the pen rests there.
+    The share is the first figure ÷ the second.
+    """
+    arm = Arm.from_profile(profile)
+    sp = program.setpoints
+    T = sp.period
+    near = total = 0.0
+    for kind, k, first, stop in program.segments:
+        if kind != "draw":
+            continue
+        xy, q = sp.xy[first:stop], program.angles[first:stop]
+        duration = (len(xy) - 1) * T
+        total += duration
+        if len(xy) < 2:
+            continue
+        ends = xy[[0, -1]]
+        if tag is not None:
+            targets = tag.plans[k].targets[[0, -1]]
+            ends = targets @ sp.placement.matrix.T + sp.placement.offset
+        limit = arm.tip_resolution(q[[0, -1]])
+        head = _inside_for(np.hypot(*(xy - ends[0]).T), float(limit[0]), T)
+        tail = _inside_for(np.hypot(*(xy - ends[1]).T)[::-1], float(limit[1]), T)
+        near += min(duration, head + tail)
+    return near, total
+
+
+def _inside_for(distance: Array, limit: float, T: float) -> float:
+    """How long (s) samples ``T`` apart stay below ``limit`` from the first one on."""
+    out = np.flatnonzero(distance >= limit)
+    if not len(out):
+        return (len(distance) - 1) * T
+    i = int(out[0])  # distance[i - 1] < limit <= distance[i]
+    if i == 0:
+        return 0.0
+    a, b = float(distance[i - 1]), float(distance[i])
+    return (i - 1 + (limit - a) / (b - a)) * T

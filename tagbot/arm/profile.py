@@ -93,6 +93,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "rate": POSITIVE,
         "travel_speed": POSITIVE,
         "max_time_scale": POSITIVE,
+        "time_scale": ("run", "uniform"),
+        "trim_ticks": NON_NEGATIVE,
+        "max_deviation": NON_NEGATIVE,
         "park_shoulder": NUMBER,
         "park_elbow": NUMBER,
     },
@@ -108,6 +111,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "return_delay_us": NON_NEGATIVE,
         "readback_rate": POSITIVE,
         "max_corrupt": INTEGER,
+        "max_missed": INT,
+        "silence_timeout": POSITIVE,
     },
 }
 """Every section and key a profile may hold, with the kind of value it takes."""

@@ -1,8 +1,22 @@
-"""The arm back end's entry point: :func:`draw_arm` plans, checks, connects, streams, reports.
+"""The arm back end: :func:`prepare` plans and checks a job, its ``run`` streams and reports.
+
+:func:`prepare` loads the profile, places, retimes and checks the whole program
+(:class:`~tagbot.errors.PlacementError`) and checks the port's name
+(:func:`tagbot.ports.check_port`) before anything is written or sent; :meth:`ArmJob.run` then
+writes ``joints.csv``, connects, streams and returns a :class:`~tagbot.draw.MachineRun`, also
+after a fault or Ctrl-C (in :attr:`~tagbot.draw.MachineRun.error`, once the arm stopped safely:
+pen up), with the executed trace up to there. :func:`draw_arm` is the same for the library,
+raising instead.
 
 Without a port it builds a simulated servo chain from the profile (IDs, models, baud rate,
 geometry for its pen-tip recorder) and streams to it in process, in simulated time; with a port
-(a device path, a pseudo-terminal or a pyserial URL) it streams there in real time.
+(a device path, a pseudo-terminal or a pyserial URL) it streams there in real time, and warns when
+the port is a USB serial adapter whose latency timer is above 1 ms
+(:func:`latency_timer_warning`).
+
+The executed trace is the simulator's 1 ms pen-tip recorder when the port is an in-process
+simulator, else the read-back present positions through forward kinematics; either way on the
+program's clock (0 = the pen at the first setpoint), with pauses and resync gaps taken out.
 """
 
 from __future__ import annotations
@@ -10,6 +24,7 @@ from __future__ import annotations
 import itertools
 import logging
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,19 +36,33 @@ from numpy.typing import NDArray
 from tagbot.arm.driver import ArmDriver, StreamResult
 from tagbot.arm.kinematics import Arm, angles_to_ticks, ticks_to_angles
 from tagbot.arm.place import ArmProgram, Setpoints, approach, build_program
-from tagbot.arm.profile import ArmProfile
+from tagbot.arm.profile import ArmProfile, load_profile
+from tagbot.control import RunControl
 from tagbot.draw import MachineRun
-from tagbot.errors import DeviceError
+from tagbot.errors import DeviceError, InputError, Interrupted, ProfileError
 from tagbot.io.motionfile import MotionTable
 from tagbot.model import Tag
+from tagbot.ports import check_port
 
-__all__ = ["ArmRun", "draw_arm", "draw_backend", "executed_from_reads", "simulated_chain"]
+__all__ = [
+    "ArmJob",
+    "ArmRun",
+    "check_bus",
+    "draw_arm",
+    "executed_from_reads",
+    "latency_timer_warning",
+    "prepare",
+    "simulated_chain",
+]
 
 log = logging.getLogger(__name__)
 
 Array = NDArray[np.float64]
 
 _names = itertools.count()
+
+RECORDER_DT = 0.001
+"""Seconds between the simulator recorder's samples."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,14 +72,13 @@ class ArmRun:
     - ``setpoints``: the planned pen-tip motion at the loop period (``t``, ``xy``, ``v``,
       ``pen``; with ``mm_per_unit`` and ``time_scale`` of the placement);
     - ``joints``: ``(N, 4)`` planned goals per tick: ``t`` (s), shoulder, elbow, pen (ticks);
-    - ``executed``: ``(M, 4)`` ``t, x, y, pen``: the simulator's pen-tip recorder (≤ 1 ms) when
+    - ``executed``: ``(M, 4)`` ``t, x, y, pen``: the simulator's pen-tip recorder (1 ms) when
       simulated, else the read-back present positions through FK; ``t`` is on the setpoints'
-      clock (0 = when the pen should be at the first setpoint);
-    - ``stats``: ``ticks_sent``, ``late_ticks``, ``max_lateness_ms``,
-      ``joint_tracking_error`` (``{"max": deg, "mean": deg}``, read-backs against the plan),
-      and ``rate_hz``, ``readbacks``, ``readback_every``, ``corrupt_replies``, ``resyncs``,
-      ``lateness_p50_ms``, ``lateness_p99_ms``, ``time_scale``, ``mm_per_unit``,
-      ``approach_s``, ``simulated``, ``port``.
+      clock (0 = when the pen should be at the first setpoint), pauses and resync gaps left out;
+    - ``stats``: the arm's own figures (see :func:`arm_figures`): ``ticks_sent``,
+      ``late_ticks``, ``max_lateness_ms``, ``lateness_p50_ms``, ``lateness_p99_ms``,
+      ``loop_rate_hz``, ``resyncs``, ``readbacks``, the read-back's misses, late and corrupt
+      replies, ``joint_tracking_error`` (``{"max": deg, "mean": deg}``), ``paused_s``...
     """
 
     setpoints: Setpoints
@@ -126,21 +154,53 @@ def tracking_error(reads: Array, program: ArmProgram, profile: ArmProfile) -> di
     return {"max": float(e.max()), "mean": float(e.mean())}
 
 
-def draw_arm(
-    tag: Tag,
-    profile: ArmProfile,
-    port: str | None = None,
-    progress: Callable[[int, int], None] | None = None,
-) -> ArmRun:
-    """Draw ``tag`` with the arm of ``profile`` on ``port`` (None: a simulated chain).
+def latency_timer_warning(port: str, sysfs: str | os.PathLike[str] = "/sys") -> str | None:
+    """A warning, with the fix, when ``port`` is a Linux USB serial adapter (``ttyUSBn``, also
+    through a symlink such as ``/dev/serial/by-id/…``) whose latency timer is above 1 ms; else
+    None. ``sysfs`` is where sysfs is mounted (tests give a fake one)."""
+    if "://" in port:
+        return None
+    name = os.path.basename(os.path.realpath(port))
+    timer = Path(sysfs) / "bus" / "usb-serial" / "devices" / name / "latency_timer"
+    try:
+        ms = int(timer.read_text(encoding="ascii").strip())
+    except (OSError, ValueError):
+        return None
+    if ms <= 1:
+        return None
+    return (
+        f"{port} is a USB serial adapter ({name}) with a {ms} ms latency timer: every read-back"
+        f" reply waits up to {ms} ms in it. Set it to 1 ms: echo 1 | sudo tee {timer} (until it"
+        ' is unplugged; for good, a udev rule: ACTION=="add", SUBSYSTEM=="usb-serial",'
+        ' DRIVERS=="ftdi_sio", ATTR{latency_timer}="1")'
+    )
 
-    The whole program is placed, retimed and checked before the port is opened
-    (PlacementError); then connect (DeviceError listing the IDs found, wrong models), move to
-    park, stream one goal row per tick, and return an :class:`ArmRun`. ``progress(done, total)``
-    is called about ten times a second. Device errors and KeyboardInterrupt stop the arm safely
-    (pen up) and are re-raised.
-    """
-    program = build_program(tag, profile)
+
+@dataclass
+class _Outcome:
+    """What one streaming attempt gave, whatever happened."""
+
+    program: ArmProgram
+    result: StreamResult | None = None
+    executed: Array = field(default_factory=lambda: np.zeros((0, 4)))
+    recorder: bool = False
+    approach_s: float = 0.0
+    error: BaseException | None = None
+    warnings: list[str] = field(default_factory=list)
+    where: str = "connect"
+
+
+def _stream(
+    program: ArmProgram,
+    profile: ArmProfile,
+    port: str | None,
+    progress: Callable[[int, int], None] | None,
+    control: RunControl | None,
+    sysfs: str | os.PathLike[str] = "/sys",
+) -> _Outcome:
+    """Connect, approach, stream: the executed trace and figures, and the error if one stopped it
+    (the arm already stopped safely)."""
+    outcome = _Outcome(program)
     name = None
     if port is None:
         from sim.dynamixel import attach_chain
@@ -149,31 +209,229 @@ def draw_arm(
         url = attach_chain(simulated_chain(profile), name)
     else:
         url = port
+        warning = latency_timer_warning(port, sysfs)
+        if warning:
+            log.warning("%s", warning)
+            outcome.warnings.append(warning)
     try:
         with ArmDriver(url, profile) as driver:
             try:
                 driver.connect()
+                outcome.where = "approach"
                 present = driver.read_present()
-                goals, duration = approach(present, profile)
-                _warn_outside_limits(present, profile)
-                driver.move_to(goals, duration)
-                result = driver.stream(program.goals, progress)
-            except BaseException:
+                goals, outcome.approach_s = approach(present, profile)
+                outcome.warnings += _outside_limits(present, profile)
+                driver.move_to(goals, outcome.approach_s)
+                outcome.where = "tick 0"
+                driver.stream(program.goals, progress, control)
+            except BaseException as e:
                 driver.safe_stop(error=True)
-                raise
+                outcome.error = e
+            outcome.result = getattr(driver, "result", None)
             chain = _recorder(driver, profile)
-            reads = np.array(result.reads, dtype=float).reshape(-1, 4)
-            if chain is not None:
-                executed = _recorded(chain, result, program)
-            else:
-                executed = executed_from_reads(reads, profile)
+            outcome.recorder = chain is not None
+            if outcome.result is not None:
+                outcome.where = f"tick {outcome.result.ticks_sent}"
+                if chain is not None:
+                    outcome.executed = _recorded(chain, outcome.result, program)
+                else:
+                    outcome.executed = executed_from_reads(outcome.result.reads, profile)
+    except (DeviceError, KeyboardInterrupt) as e:  # opening or closing the port
+        outcome.error = outcome.error or e
     finally:
         if name is not None:
             from sim.dynamixel import detach_chain
 
             detach_chain(name)
-    stats = _stats(result, reads, program, profile, duration, url, chain is not None)
-    return ArmRun(program.setpoints, program.joints, executed, stats, program)
+    return outcome
+
+
+def draw_arm(
+    tag: Tag,
+    profile: ArmProfile,
+    port: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    control: RunControl | None = None,
+) -> ArmRun:
+    """Draw ``tag`` with the arm of ``profile`` on ``port`` (None: a simulated chain).
+
+    The whole program is placed, retimed and checked before the port is opened
+    (PlacementError); then connect (DeviceError listing the IDs found, wrong models), move to
+    park, stream one goal row per tick, and return an :class:`ArmRun`. ``progress(done,
+    total)`` is called about ten times a second; ``control`` pauses and resumes. Device errors
+    and KeyboardInterrupt stop the arm safely (pen up) and are re-raised (for a run folder
+    that keeps what was executed, use :func:`prepare`).
+    """
+    check_bus(profile)
+    program = build_program(tag, profile)
+    outcome = _stream(program, profile, port, progress, control)
+    if outcome.error is not None:
+        raise outcome.error
+    stats = arm_figures(outcome, profile, port)
+    return ArmRun(program.setpoints, program.joints, outcome.executed, stats, program)
+
+
+@dataclass(eq=False)
+class ArmJob:
+    """A checked arm job (:func:`prepare`): nothing written, nothing sent yet."""
+
+    tag: Tag
+    profile: ArmProfile
+    program: ArmProgram
+    port: str | None
+    planned: MotionTable
+    sysfs: str | os.PathLike[str] = "/sys"
+    device: str = "dynamixel"
+
+    def run(
+        self,
+        out: Path,
+        *,
+        progress: Callable[[int, int], None] | None = None,
+        control: RunControl | None = None,
+    ) -> MachineRun:
+        """Write ``joints.csv`` into ``out``, connect, stream; what happened, also after a fault
+        or Ctrl-C (:attr:`MachineRun.error`, Ctrl-C as :class:`Interrupted` naming the last tick
+        executed)."""
+        program, profile = self.program, self.profile
+        _write_joints(program.joints, Path(out) / "joints.csv")
+        outcome = _stream(program, profile, self.port, progress, control, self.sysfs)
+        error = outcome.error
+        if isinstance(error, KeyboardInterrupt):
+            error = Interrupted("interrupted (Ctrl-C): the arm stopped, pen up", outcome.where)
+        elif error is not None and not isinstance(error, DeviceError):
+            raise error  # a bug: draw() writes a report saying so
+        sp = program.setpoints
+        down = [k for k in range(len(self.tag.plans)) if np.any(sp.plan == k)]
+        result = outcome.result
+        sent = result.ticks_sent if result is not None else 0
+        figures = arm_figures(outcome, profile, self.port)
+        executed_duration = 0.0
+        if result is not None and result.scheduler is not None:
+            executed_duration = max(0.0, result.end - result.start - result.lead - result.paused)
+        if outcome.recorder:
+            source = f"simulator recorder, {RECORDER_DT * 1e3:g} ms"
+        else:
+            source = f"read-back, {profile['motion.rate'] / profile.readback_every:g} Hz"
+        return MachineRun(
+            device=self.device,
+            motion=self.planned,
+            planned_runs=[(sp.t[sp.plan == k], sp.xy[sp.plan == k]) for k in down],
+            plans=down,
+            executed=outcome.executed,
+            executed_source=source,
+            sparse=False,
+            executed_runs=None,
+            unit="tick",
+            total=len(program),
+            sent=sent,
+            executed_steps=sent,
+            resume_from=None,
+            planned_duration=sp.duration,
+            executed_duration=executed_duration,
+            placement={"mm_per_unit": sp.mm_per_unit, "time_scale": sp.time_scale},
+            port=self.port or "simulator",
+            details=figures,
+            warnings=list(outcome.warnings),
+            error=error,
+        )
+
+
+def planned_motion(program: ArmProgram) -> MotionTable:
+    """The whole planned timeline (travel and pen moves included, pen 0/1) in mm."""
+    sp = program.setpoints
+    return MotionTable(sp.t, sp.xy, sp.v, np.hypot(*sp.v.T), sp.pen.astype(np.int8))
+
+
+def check_bus(profile: ArmProfile) -> None:
+    """Refuse (ProfileError) a bus too slow for the loop: a tick that sends its goals and a
+    read-back (the request and three replies, half duplex) must fit in one period."""
+    byte = 10.0 / profile["bus.baud"]
+    n = len(profile.servos)
+    write = (14 + 5 * n) * byte
+    read = (14 + n) * byte + n * (15 * byte + 1e-6 * profile["bus.return_delay_us"])
+    busy = write + read
+    if busy > profile.period:
+        raise ProfileError(
+            f"bus.baud: at {profile['bus.baud']} bps a tick's goals and read-back take"
+            f" {1e3 * busy:.1f} ms on the bus, more than the {1e3 * profile.period:g} ms period"
+            " of motion.rate: raise bus.baud (and the servos' Baud Rate) or lower motion.rate"
+        )
+
+
+def prepare(
+    tag: Tag,
+    *,
+    profile: str | Path | None = None,
+    overrides: tuple[str, ...] = (),
+    port: str | None = None,
+    sysfs: str | os.PathLike[str] = "/sys",
+    **options: Any,
+) -> ArmJob:
+    """The ``dynamixel`` back end of :func:`tagbot.draw.prepare`: load the profile, place,
+    retime and check the program (PlacementError), check the port's name (PortError), all before
+    anything is written or sent. ``sysfs`` is where to look for USB adapters' latency timers."""
+    if options:
+        raise InputError(f"{', '.join(sorted(options))}: not an option of the arm")
+    arm = load_profile(profile, overrides)
+    check_bus(arm)
+    program = build_program(tag, arm)
+    if port is not None:
+        check_port(port)
+    return ArmJob(tag, arm, program, port, planned_motion(program), sysfs)
+
+
+def arm_figures(outcome: _Outcome, profile: ArmProfile, port: str | None) -> dict[str, Any]:
+    """The arm's own figures for the report (``details``) and :attr:`ArmRun.stats`."""
+    program, result = outcome.program, outcome.result
+    figures: dict[str, Any] = {
+        "rate_hz": profile["motion.rate"],
+        "readback_every": profile.readback_every,
+        "time_scale": program.setpoints.time_scale,
+        "mm_per_unit": program.setpoints.mm_per_unit,
+        "approach_s": outcome.approach_s,
+        "simulated": outcome.recorder,
+        "port": port or "simulator",
+    }
+    if result is None or result.scheduler is None:
+        figures["ticks_sent"] = 0
+        return figures
+    s = result.scheduler
+    lateness = np.array(s.lateness) * 1e3 if s.lateness else np.zeros(1)
+    woke = np.array(s.woke)
+    loop_rate = math.nan
+    jitter99 = math.nan
+    if len(woke) > 1:
+        span = woke[-1] - woke[0] - result.paused
+        loop_rate = (len(woke) - 1) / span if span > 0 else math.nan
+        gaps = np.diff(woke)
+        if result.pauses:  # a pause is no jitter: leave out the longest gaps, one per pause
+            gaps = np.sort(gaps)[: -result.pauses] if len(gaps) > result.pauses else gaps[:0]
+        if len(gaps):
+            jitter99 = float(np.percentile(np.abs(gaps - s.period), 99) * 1e3)
+    reads = np.array(result.reads, dtype=float).reshape(-1, 4)
+    figures.update(
+        {
+            "ticks_sent": result.ticks_sent,
+            "loop_rate_hz": loop_rate,
+            "period_jitter_p99_ms": jitter99,
+            "lateness_p50_ms": float(np.percentile(lateness, 50)),
+            "lateness_p99_ms": float(np.percentile(lateness, 99)),
+            "max_lateness_ms": 1e3 * s.max_lateness,
+            "late_ticks": s.late_ticks,
+            "resyncs": s.resyncs,
+            "resync_delay_s": s.resync_delay,
+            "paused_s": result.paused,
+            "pauses": result.pauses,
+            "wall_duration_s": result.end - result.start,
+            "readbacks": len(result.read_clock),
+            "corrupt_replies": result.corrupt_replies,
+            "joint_tracking_error": tracking_error(reads, program, profile),
+        }
+    )
+    if result.readback is not None:
+        figures.update(result.readback.figures())
+    return figures
 
 
 def _recorder(driver: ArmDriver, profile: ArmProfile) -> Any:
@@ -183,105 +441,35 @@ def _recorder(driver: ArmDriver, profile: ArmProfile) -> Any:
     if chain is None or not callable(getattr(chain, "pen_trace", None)):
         return None
     if getattr(chain, "geometry", None) is None:
-        chain.set_geometry(geometry_of(profile))
+        try:
+            chain.set_geometry(geometry_of(profile))
+        except KeyError:  # not this arm's servos (a refused connect)
+            return None
     return chain
 
 
 def _recorded(chain: Any, result: StreamResult, program: ArmProgram) -> Array:
-    """The simulator's pen-tip trace on the setpoints' clock, cropped to the program."""
-    trace = np.asarray(chain.pen_trace(), dtype=float).reshape(-1, 4)
-    trace = trace.copy()
-    trace[:, 0] -= result.origin
+    """The simulator's pen-tip trace on the program's clock (pauses and resync gaps left out),
+    from the program's start to its end, or to the safe stop after a fault."""
+    trace = np.asarray(chain.pen_trace(RECORDER_DT), dtype=float).reshape(-1, 4).copy()
+    trace[:, 0] = result.program_time(trace[:, 0])
     end = program.joints[-1, 0]
-    keep = (trace[:, 0] >= -1e-9) & (trace[:, 0] <= end + 1e-9)
+    keep = np.isfinite(trace[:, 0]) & (trace[:, 0] >= -1e-9) & (trace[:, 0] <= end + 1e-9)
     return trace[keep]
 
 
-def _warn_outside_limits(present: NDArray[np.int64], profile: ArmProfile) -> None:
+def _outside_limits(present: NDArray[np.int64], profile: ArmProfile) -> list[str]:
+    warnings = []
     for i, joint in enumerate(profile.joints):
         a = float(ticks_to_angles(present[i], joint))
         if not joint.lower - 1e-9 <= a <= joint.upper + 1e-9:
-            log.warning(
-                "%s starts at %.1f° outside %s.min_deg..max_deg (%.0f..%.0f°): moving it back",
-                joint.name,
-                math.degrees(a),
-                joint.name,
-                math.degrees(joint.lower),
-                math.degrees(joint.upper),
+            warnings.append(
+                f"{joint.name} starts at {math.degrees(a):.1f}° outside {joint.name}.min_deg.."
+                f"max_deg ({math.degrees(joint.lower):.0f}..{math.degrees(joint.upper):.0f}°):"
+                " moving it back"
             )
-
-
-def _stats(
-    result: StreamResult,
-    reads: Array,
-    program: ArmProgram,
-    profile: ArmProfile,
-    approach_s: float,
-    port: str,
-    simulated: bool,
-) -> dict[str, Any]:
-    s = result.scheduler
-    assert s is not None
-    lateness = np.array(s.lateness) * 1e3 if s.lateness else np.zeros(1)
-    return {
-        "ticks_sent": result.ticks_sent,
-        "late_ticks": s.late_ticks,
-        "max_lateness_ms": 1e3 * s.max_lateness,
-        "joint_tracking_error": tracking_error(reads, program, profile),
-        "rate_hz": profile["motion.rate"],
-        "readbacks": len(reads),
-        "readback_every": profile.readback_every,
-        "corrupt_replies": result.corrupt_replies,
-        "resyncs": s.resyncs,
-        "lateness_p50_ms": float(np.percentile(lateness, 50)),
-        "lateness_p99_ms": float(np.percentile(lateness, 99)),
-        "time_scale": program.setpoints.time_scale,
-        "mm_per_unit": program.setpoints.mm_per_unit,
-        "approach_s": approach_s,
-        "simulated": simulated,
-        "port": port,
-    }
-
-
-def draw_backend(
-    tag: Tag,
-    out: Path,
-    *,
-    profile: str | Path | None = None,
-    overrides: tuple[str, ...] = (),
-    port: str | None = None,
-    progress: Callable[[int, int], None] | None = None,
-) -> MachineRun:
-    """The ``dynamixel`` entry of ``tagbot draw``: :func:`draw_arm`, plus ``joints.csv``.
-
-    A device fault or Ctrl-C (the arm already stopped safely) comes back in
-    :attr:`MachineRun.error` with the planned motion, for the run folder.
-    """
-    from tagbot.arm.profile import load_profile
-
-    arm = load_profile(profile, overrides)
-    error: BaseException | None = None
-    try:
-        run = draw_arm(tag, arm, port, progress)
-        program, executed, stats = run.program, run.executed, dict(run.stats)
-    except (DeviceError, KeyboardInterrupt) as e:
-        error = e
-        program, executed = build_program(tag, arm), np.zeros((0, 4))
-        stats = {"error": str(e) or type(e).__name__, "port": port or "simulator"}
-    assert program is not None
-    _write_joints(program.joints, out / "joints.csv")
-    sp = program.setpoints
-    down = [k for k in range(len(tag.plans)) if np.any(sp.plan == k)]
-    return MachineRun(
-        device="dynamixel",
-        motion=MotionTable(sp.t, sp.xy, sp.v, np.hypot(*sp.v.T), sp.pen.astype(np.int8)),
-        planned_runs=[(sp.t[sp.plan == k], sp.xy[sp.plan == k]) for k in down],
-        plans=down,
-        executed=executed,
-        placement={"mm_per_unit": sp.mm_per_unit, "time_scale": sp.time_scale},
-        report=stats,
-        error=error,
-    )
+            log.warning("%s", warnings[-1])
+    return warnings
 
 
 def _write_joints(joints: Array, path: Path) -> None:

@@ -1,29 +1,68 @@
 """Placement and retiming: a tag's motion in machine millimetres, slowed to the machine's limits.
 
 :func:`place` maps the tag into the bed with one similarity transform (uniform scale, optional
-rotation, alignment inside the margins, y mirrored on machines whose y points down), then picks
-ONE time scale ``s ≥ 1`` for the whole tag: the retimed motion is ``q(τ) = p(τ / s)``, so speeds
-divide by ``s`` and accelerations by ``s²`` while the path and the lognormal shape of the speed
-profile are kept. ``s`` is the smallest value meeting, along every pen-down motion:
+rotation, alignment inside the margins, y mirrored on machines whose y points down), then, for
+each pen-down run (one plan), chooses the part of the motion that is drawn, its time scale and
+its setpoints. Every choice follows from what Grbl 1.1 does with the program:
 
-- per-axis speed: ``|vx| / s ≤ x_max_feed / 60`` (same for y);
+**Trimmed ends** (``motion.trim``, default on). A lognormal stroke starts and ends
+asymptotically: on a 12–26× retimed A3 tag up to 30 % of the pen-down time was spent within
+one motor step of a run's ends, the pen resting on the paper. A run is drawn only from the
+instant its motion first leaves the box of ± one motor step (``1 / limits.x_steps_per_mm``,
+``1 / limits.y_steps_per_mm``) around its first point to the instant it last enters the same box
+around its last point (both found to 1e-9 of the tag's clock by bisection): what is left out
+moves less than one step on every axis, which the machine could not draw anyway.
+
+**Time scale** ``s ≥ 1``: the retimed motion is ``q(τ) = p(τ / s)``, so speeds divide by ``s``
+and accelerations by ``s²`` while the path and the lognormal shape of the speed profile are
+kept. With ``motion.time_scale = "run"`` (default) every run has its own ``s_k``, the smallest
+meeting the limits below along that run; with ``"uniform"`` one ``s`` (the largest ``s_k``)
+serves the whole tag. Runs are independent on the machine (each starts and ends at rest, with a
+pen change between), so a per-run scale changes no run's shape, only the job's length. Limits:
+
+- per-axis speed: ``|vx| / s ≤ x_max_feed / 60`` (same for y), from the analytic velocity;
 - per-axis acceleration: ``|ax| / s² ≤ x_acceleration`` (``a`` from differences of the analytic
   velocity at a fine step);
-- Grbl's look-ahead cap on short segments, ``v ≤ √(2·a·B·L)`` with ``B`` planner blocks and ``L``
-  the segment one setpoint step covers. Resampling the retimed motion at the fixed step ``dt``
-  makes ``L ≈ v·dt`` shrink with ``v``, so the cap becomes ``v ≤ 2·a·B·dt``: a plain speed limit
-  (150 mm/s for a = 500 mm/s², B = 15, dt = 10 ms). ``a`` is the acceleration Grbl allows along
-  the segment's direction ``u``: ``min(a_x / |u_x|, a_y / |u_y|)``.
-
-- Grbl's junction speed between consecutive setpoint moves (``$11`` junction deviation δ):
-  on a curve of curvature κ sampled at ``dt`` the direction turns by ``κ·v·dt``, so Grbl caps
-  ``v ≤ √(2·√(a·δ) / (κ·dt))`` roughly. Checked exactly (Grbl's formula, see
+- Grbl's look-ahead: the planner must be able to stop at the end of the blocks it holds
+  (``B = limits.planner_blocks``), so a block of speed ``v`` needs ``v ≤ √(2·a·ΣL)`` with ``ΣL``
+  the length of it and the next ``B − 1`` blocks (fewer at the run's end) and ``a`` the
+  acceleration Grbl allows along its direction ``u``: ``min(a_x / |u_x|, a_y / |u_y|)``. For
+  equal steps ``dt`` this is the old ``v ≤ 2·a·B·dt``;
+- Grbl's junction speed between consecutive moves (``$11`` junction deviation δ, see
   :func:`junction_speed`) on corners turning less than 45°; sharper ones are the tag's cusps,
-  where its own speed is near zero (a reversal is a full stop in Grbl whatever the timing).
+  where its own speed is near zero (a reversal is a full stop in Grbl whatever the timing);
+- host pauses (adaptive setpoints only): when the host stops sending, the machine still has the
+  ``B − 1`` blocks queued behind the executing one and the :data:`RX_LINES` setpoint lines that
+  surely fit Grbl's 128-byte receive buffer. ``s`` grows until any that many consecutive lines
+  of the run (all of them in a shorter run) last at least ``motion.min_buffer`` seconds (0.6 by
+  default: more than the 0.39–0.52 s pauses measured on a loaded host). Longer lines come from
+  the tolerance: at a fixed tolerance a line's duration grows in proportion to ``s``. Where
+  Grbl's slowest step bounds the lines instead, slowing cannot help and is not done.
 
-After resampling, the segments between setpoints are checked against the speed limits, the cap
-and the junction limit (their exact, 3-decimal lengths and directions); if one exceeds them,
-``s`` grows and the tag is resampled. ``Setpoints.limits`` tells which limit set ``s``.
+The limits are checked on the setpoints as sent (3 decimals); ``s`` grows until all hold.
+``Setpoints.limits`` / ``Run.limits`` tell which limit set it (``buffer`` for the last one).
+
+**Setpoints** (one ``G93 G1`` line each). ``motion.setpoints = "adaptive"`` (default): each line
+is as long as possible, between ``motion.dt`` and ``motion.max_dt`` seconds (in steps of
+``motion.dt / 4``), such that the linear interpolation in time between consecutive setpoints
+stays within ``motion.tolerance`` mm of the exact retimed trajectory at every instant (checked
+on a grid of ``motion.dt / 4``). That bounds the path error and the speed profile's error
+(position against time) alike; where the motion is slow or changes slowly the lines are long,
+so Grbl's 15 planner blocks hold more time of motion and a host pause starves it less.
+Where setpoints are left out because they move no motor step (below), a line spans several of
+these and the bound becomes the tolerance plus one motor step (the diagonal of the step box).
+``"fixed"``: one setpoint every ``motion.dt`` (the old behaviour).
+
+**Motor steps.** Grbl plans each target as ``lround(target · $100)`` steps and drops a block
+that moves no step (``PLAN_EMPTY_BLOCK``), so a setpoint on the same step position as the
+previous one is not kept (the next line takes its time). Grbl cannot move slower than its slowest
+step (8 × 65535 cycles at 16 MHz: ``limits.slowest_step`` per step of the dominant axis) nor
+below ``MINIMUM_FEED_RATE`` (``limits.min_feed``). With ``motion.slow_lines = "clamp"``
+(default) a line that should take longer is shortened to what Grbl can execute and the run's
+clock moves on without the surplus: the pen never rests (that surplus only exists where the
+motion is below 0.4 mm/s at 80 steps/mm). ``"dwell"`` keeps the exact timing and leaves it to
+the program to dwell for the surplus (the old behaviour; see :mod:`tagbot.plotter.program`).
+
 Positions outside the bed are refused with a :class:`PlacementError` naming the overflow,
 before any program exists.
 """
@@ -31,55 +70,100 @@ before any program exists.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from tagbot.errors import PlacementError
 from tagbot.model import Tag
-from tagbot.model.motion import sample_plan
+from tagbot.model.motion import evaluate_plan, sample_plan
 from tagbot.plotter.profile import Profile
 
-__all__ = ["PlacementError", "Run", "Setpoints", "limit_scale", "place"]
+__all__ = [
+    "RX_LINES",
+    "PlacementError",
+    "Run",
+    "Setpoints",
+    "buffered",
+    "interpolation_error",
+    "junction_speed",
+    "limit_scale",
+    "motor_steps",
+    "place",
+    "segment_excess",
+    "segment_speed_cap",
+    "slowest_durations",
+    "step_box",
+]
 
 Array = NDArray[np.float64]
 
 FINE_STEP = 0.001
 """Seconds (tag clock) between the samples used to measure speed, acceleration and extent."""
+SUBSTEPS = 4
+"""Adaptive setpoints: line durations are multiples of ``motion.dt / SUBSTEPS`` (the error grid)."""
+RX_LINES = 128 // 28
+"""Setpoint lines (``G1X…Y…F…``, up to 28 bytes) that surely fit Grbl's 128-byte receive
+buffer: what the machine holds beyond its planner when the host stops sending."""
 _TOLERANCE = 1e-9
+_DECIMALS = 3
 
 
 @dataclass(frozen=True, eq=False)
 class Run:
-    """One pen-down movement as setpoints: times (s, retimed clock), positions and velocities."""
+    """One pen-down run as setpoints: the lines the machine is sent, on the run's own clock."""
 
     plan: int
     t: Array
+    """Setpoint times, s, from the run's start (``t[0] = 0``: the run's first point)."""
     xy: Array
+    """Setpoint positions, mm (``xy[0]``: where the pen goes down)."""
     v: Array
+    """Analytic retimed velocity at each setpoint, mm/s."""
+    scale: float = 1.0
+    """This run's time scale ``s_k ≥ 1``."""
+    tag_t: Array = field(default_factory=lambda: np.zeros(0))
+    """The tag-clock instant of each setpoint (``xy[i] = p(tag_t[i])`` exactly)."""
+    limits: dict[str, float] = field(default_factory=dict)
+    """The ``s`` each limit alone asks of this run."""
+    span: tuple[float, float] = (0.0, 0.0)
+    """The tag-clock interval drawn (after trimming the ends within one step)."""
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if len(self.t) else 0.0
 
 
 @dataclass(frozen=True, eq=False)
 class Setpoints:
-    """The placed, retimed tag: one :class:`Run` per plan, in machine mm at step ``dt``."""
+    """The placed, retimed tag: one :class:`Run` per plan, in machine mm."""
 
     runs: tuple[Run, ...]
     dt: float
+    """``motion.dt``: the fixed step, or the shortest adaptive line."""
     scale: float
-    """The time scale ``s ≥ 1``: the machine takes ``s`` times as long as the tag's clock."""
+    """The largest time scale of the runs (with ``motion.time_scale = "uniform"``: every run's)."""
     size: float
     """mm per tag unit."""
     matrix: Array
     """``machine = matrix @ tag + offset``."""
     offset: Array
     limits: dict[str, float]
-    """The ``s`` each limit alone asks for: ``speed``, ``acceleration``, ``segment``."""
+    """The ``s`` each limit alone asks for (the largest over the runs): ``speed``,
+    ``acceleration``, ``segment`` (look-ahead), ``junction``."""
+    mode: str = "run"
+    """``motion.time_scale``: ``"run"`` or ``"uniform"``."""
+
+    @property
+    def run_scales(self) -> tuple[float, ...]:
+        """Each run's time scale ``s_k``, in run order."""
+        return tuple(r.scale for r in self.runs)
 
     @property
     def duration(self) -> float:
         """Pen-down drawing time on the machine, seconds (travel and pen moves excluded)."""
-        return float(sum(r.t[-1] - r.t[0] for r in self.runs))
+        return float(sum(r.duration for r in self.runs))
 
 
 def place(tag: Tag, profile: Profile) -> Setpoints:
@@ -87,44 +171,256 @@ def place(tag: Tag, profile: Profile) -> Setpoints:
     matrix, offset, size = _transform(tag, profile)
     fine = [sample_plan(tag, k, FINE_STEP) for k in range(len(tag.plans))]
     _check_bed(profile, [xy @ matrix.T + offset for _, xy, _ in fine])
-    limits = {"speed": 1.0, "acceleration": 1.0, "segment": 1.0}
-    for _, _, v in fine:
-        for name, value in limit_scale(v @ matrix.T, FINE_STEP, profile).items():
-            limits[name] = max(limits[name], value)
-    limits["junction"] = 1.0
-    scale = max(limits.values())
-    dt = profile.dt
-    for _ in range(100):
+    spans = [
+        _span(tag, k, t, xy @ matrix.T + offset, matrix, offset, profile)
+        for k, (t, xy, _) in enumerate(fine)
+    ]
+    first: list[dict[str, float]] = []
+    for (t, _, v), (on, off) in zip(fine, spans, strict=True):
+        keep = (t >= on - FINE_STEP) & (t <= off + FINE_STEP)
+        first.append(limit_scale(v[keep] @ matrix.T, FINE_STEP, profile))
+        first[-1]["junction"] = 1.0
+    uniform = profile["motion.time_scale"] == "uniform"
+    if uniform:
+        joint = {name: max(f[name] for f in first) for name in first[0]} if first else {}
+        runs = _retime(tag, range(len(tag.plans)), spans, joint, matrix, offset, profile)
+    else:
         runs = []
         for k in range(len(tag.plans)):
-            t, xy, v = sample_plan(tag, k, dt / scale)
-            runs.append(
-                Run(k, (t - tag.start) * scale, xy @ matrix.T + offset, v @ matrix.T / scale)
-            )
-        excess = max(_segment_excess(r.xy, dt, profile) for r in runs)
+            runs += _retime(tag, [k], spans, first[k], matrix, offset, profile)
+    _check_bed(profile, [r.xy for r in runs])
+    names = ("speed", "acceleration", "segment", "junction", "buffer")
+    limits = {n: max((r.limits.get(n, 1.0) for r in runs), default=1.0) for n in names}
+    scale = max((r.scale for r in runs), default=1.0)
+    mode = "uniform" if uniform else "run"
+    return Setpoints(tuple(runs), profile.dt, scale, size, matrix, offset, limits, mode)
+
+
+def step_box(profile: Profile) -> Array:
+    """One motor step per axis, mm: ``(1 / $100, 1 / $101)``."""
+    return np.array(
+        [1.0 / profile["limits.x_steps_per_mm"], 1.0 / profile["limits.y_steps_per_mm"]]
+    )
+
+
+def _span(
+    tag: Tag, k: int, t: Array, xy: Array, matrix: Array, offset: Array, profile: Profile
+) -> tuple[float, float]:
+    """The tag-clock interval of plan ``k`` outside one step of its first and last points."""
+    plan = tag.plans[k]
+    start, end = float(plan.start), float(plan.end(tag.size))
+    if not profile["motion.trim"] or len(t) < 2:
+        return start, end
+    box = step_box(profile)
+    p0, p1 = xy[0], xy[-1]
+    away = np.any(np.abs(xy - p0) >= box, axis=1)
+    near = np.all(np.abs(xy - p1) < box, axis=1)
+    if not away.any() or near.all():
+        return start, start  # a dot: nothing moves a step
+    i = int(np.argmax(away))  # first sample a step away from the start
+    j = len(t) - 1 - int(np.argmax(~near[::-1]))  # last sample a step away from the end
+
+    def position(instant: float) -> Array:
+        p, _ = evaluate_plan(plan, np.array([instant]), tag.size)
+        return p[0] @ matrix.T + offset
+
+    def bisect(lo: float, hi: float, inside_low: bool, centre: Array) -> float:
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            inside = bool(np.all(np.abs(position(mid) - centre) < box))
+            if inside == inside_low:
+                lo = mid
+            else:
+                hi = mid
+            if hi - lo < 1e-9:
+                break
+        return hi if inside_low else lo
+
+    on = bisect(float(t[i - 1]), float(t[i]), True, p0) if i > 0 else float(t[0])
+    off = bisect(float(t[j]), min(float(t[j + 1]), end), False, p1) if j + 1 < len(t) else end
+    off = min(max(off, on), end)
+    return on, off
+
+
+def _retime(
+    tag: Tag,
+    plans: range | list[int],
+    spans: list[tuple[float, float]],
+    limits: dict[str, float],
+    matrix: Array,
+    offset: Array,
+    profile: Profile,
+) -> list[Run]:
+    """Runs of ``plans`` sharing one time scale, grown until every limit holds on them."""
+    limits = dict(limits)
+    scale = max(limits.values(), default=1.0)
+    buffer = profile["motion.min_buffer"] if profile["motion.setpoints"] == "adaptive" else 0.0
+    blocks = profile["limits.planner_blocks"] - 1 + RX_LINES
+    held: tuple[float, list[Run], float] | None = None  # scale, runs, buffered before a growth
+    for _ in range(100):
+        runs = [_setpoints(tag, k, spans[k], scale, matrix, offset, profile) for k in plans]
+        excess = max((segment_excess(r.xy, r.t, profile) for r in runs), default=0.0)
         # The fine grid may miss a speed peak by a hair: check the analytic setpoint velocity.
         vmax = np.asarray(profile.max_speed)
         excess = max(excess, *(float(np.max(np.abs(r.v) / vmax, initial=0.0)) for r in runs))
-        corner = max(_junction_excess(r.xy, dt, profile) for r in runs)
-        if excess <= 1.0 + 1e-6 and corner <= 1.0 + 1e-6:
-            break
+        corner = max((_junction_excess(r.xy, r.t, profile) for r in runs), default=0.0)
         if excess > 1.0 + 1e-6:
             scale *= excess * (1.0 + 1e-3)
-            limits["segment"] = max(limits["segment"], scale)
-        else:
+            limits["segment"] = max(limits.get("segment", 1.0), scale)
+            continue
+        if corner > 1.0 + 1e-6:
             # The junction ratio falls as 1/s² on gentle corners, as 1/s on sharp ones.
             scale *= math.sqrt(corner) * (1.0 + 1e-3)
             limits["junction"] = scale
+            continue
+        held_s = min((buffered(r.t, blocks) for r in runs if len(r.t) > 1), default=math.inf)
+        if held_s >= buffer * (1.0 - 1e-6):
+            if held is not None:
+                limits["buffer"] = scale
+            break
+        if held is not None and held_s < held[2] * (1.0 + 0.1 * (scale / held[0] - 1.0)):
+            # Slowing down did not lengthen the lines (Grbl's slowest step bounds them there):
+            # keep the faster timing.
+            scale, runs = held[0], held[1]
+            if held[0] > max(v for k, v in limits.items() if k != "buffer"):
+                limits["buffer"] = held[0]
+            break
+        held = (scale, runs, held_s)
+        scale *= min(4.0, buffer / held_s) * (1.0 + 1e-3)
     else:  # pragma: no cover - the segments converge within a few rounds
         raise PlacementError("retiming: did not converge")
-    _check_bed(profile, [r.xy for r in runs])
-    return Setpoints(tuple(runs), dt, scale, size, matrix, offset, limits)
+    return [Run(r.plan, r.t, r.xy, r.v, scale, r.tag_t, dict(limits), r.span) for r in runs]
+
+
+def _setpoints(
+    tag: Tag,
+    k: int,
+    span: tuple[float, float],
+    scale: float,
+    matrix: Array,
+    offset: Array,
+    profile: Profile,
+) -> Run:
+    """Plan ``k`` between ``span`` at time scale ``scale``: its setpoints (module docstring)."""
+    plan = tag.plans[k]
+    on, off = span
+    dt = profile.dt
+    if off <= on:
+        tag_t = np.array([on])
+    elif profile["motion.setpoints"] == "fixed":
+        count = math.ceil((off - on) * scale / dt - 1e-9) + 1
+        tag_t = np.minimum(on + np.arange(count) * (dt / scale), off)
+    else:
+        tag_t = _adaptive_times(plan, tag.size, on, off, scale, matrix, offset, profile)
+    p, v = evaluate_plan(plan, tag_t, tag.size)
+    xy = p @ matrix.T + offset
+    v = v @ matrix.T / scale
+    keep = _moving(xy, profile)
+    tag_t, xy, v = tag_t[keep], xy[keep], v[keep]
+    t = (tag_t - tag_t[0]) * scale
+    if profile["motion.slow_lines"] == "clamp" and len(t) > 1:
+        durations = np.minimum(np.diff(t), slowest_durations(xy, profile))
+        t = np.concatenate([[0.0], np.cumsum(durations)])
+    return Run(k, t, xy, v, scale, tag_t, {}, span)
+
+
+def _moving(xy: Array, profile: Profile) -> NDArray[np.bool_]:
+    """Setpoints kept: the first, then each on another motor step than the last kept one."""
+    steps = motor_steps(xy, profile)
+    keep = np.zeros(len(xy), dtype=bool)
+    if len(xy):
+        keep[0] = True
+        last = steps[0]
+        for i in range(1, len(xy)):
+            if steps[i, 0] != last[0] or steps[i, 1] != last[1]:
+                keep[i] = True
+                last = steps[i]
+    return keep
+
+
+def buffered(t: Array, blocks: int) -> float:
+    """The least time of motion ``blocks`` consecutive lines of a run hold (all of them when the
+    run has fewer), s, for setpoint times ``t``."""
+    d = np.diff(t)
+    if not len(d):
+        return math.inf
+    window = min(blocks, len(d))
+    total = np.concatenate([[0.0], np.cumsum(d)])
+    return float(np.min(total[window:] - total[:-window]))
+
+
+def motor_steps(xy: Array, profile: Profile) -> NDArray[np.int64]:
+    """Grbl's step position for targets ``xy`` as sent (3 decimals): ``lround(x · $100)``."""
+    sent = np.round(np.asarray(xy, dtype=float), _DECIMALS)
+    scaled = sent * np.array([profile["limits.x_steps_per_mm"], profile["limits.y_steps_per_mm"]])
+    return (np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)).astype(np.int64)
+
+
+def slowest_durations(xy: Array, profile: Profile) -> Array:
+    """The longest each move between consecutive ``xy`` can take in Grbl, s: its slowest step
+    (``limits.slowest_step`` per step of the dominant axis) or ``limits.min_feed``."""
+    steps = motor_steps(xy, profile)
+    delta = np.abs(np.diff(steps, axis=0))
+    per_mm = np.array([profile["limits.x_steps_per_mm"], profile["limits.y_steps_per_mm"]])
+    moved = np.hypot(*(delta / per_mm).T)
+    events = delta.max(axis=1)
+    return np.minimum(
+        60.0 * moved / profile["limits.min_feed"], events * profile["limits.slowest_step"]
+    )
+
+
+def interpolation_error(xy: Array, first: int, last: int) -> float:
+    """The largest distance, mm, between samples ``first..last`` of a uniform time grid and the
+    straight line in time from sample ``first`` to ``last``."""
+    n = last - first
+    if n <= 1:
+        return 0.0
+    frac = np.arange(n + 1)[:, None] / n
+    line = xy[first] + frac * (xy[last] - xy[first])
+    d = xy[first : last + 1] - line
+    return float(np.sqrt(np.max(np.einsum("ij,ij->i", d, d))))
+
+
+def _adaptive_times(
+    plan, size: float, on: float, off: float, scale: float, matrix, offset, profile: Profile
+) -> Array:
+    """Setpoint instants (tag clock): each line as long as the tolerance and max_dt allow."""
+    dt, longest = profile.dt, profile["motion.max_dt"]
+    tolerance = profile["motion.tolerance"]
+    duration = (off - on) * scale
+    count = max(1, math.ceil(duration / (dt / SUBSTEPS) - 1e-9))
+    grid = np.linspace(on, off, count + 1)
+    h = duration / count
+    p, _ = evaluate_plan(plan, grid, size)
+    xy = p @ matrix.T + offset
+    shortest = max(1, math.ceil(dt / h - 1e-9))
+    most = max(shortest, math.floor(longest / h + 1e-9))
+    chosen = [0]
+    i = 0
+    while i < count:
+        lo, hi = min(shortest, count - i), min(most, count - i)
+        if interpolation_error(xy, i, i + hi) <= tolerance:
+            j = hi
+        else:
+            # Largest j in [lo, hi) whose line stays within the tolerance (lo at least).
+            good, bad = lo, hi
+            while bad - good > 1:
+                mid = (good + bad) // 2
+                if interpolation_error(xy, i, i + mid) <= tolerance:
+                    good = mid
+                else:
+                    bad = mid
+            j = good
+        i += j
+        chosen.append(i)
+    return grid[chosen]
 
 
 def limit_scale(v: Array, step: float, profile: Profile) -> dict[str, float]:
     """The time scale each limit needs for velocities ``v`` (mm/s, one run, samples ``step`` apart).
 
-    Returns ``{"speed": s1, "acceleration": s2, "segment": s3}``, each at least 1.
+    Returns ``{"speed": s1, "acceleration": s2, "segment": s3}``, each at least 1 (``segment``
+    for lines of ``motion.dt``, the shortest; the exact check is on the setpoints).
     """
     vmax = np.asarray(profile.max_speed)
     amax = np.asarray(profile.max_acceleration)
@@ -141,42 +437,63 @@ def limit_scale(v: Array, step: float, profile: Profile) -> dict[str, float]:
     }
 
 
-def segment_speed_cap(xy: Array, dt: float, profile: Profile) -> tuple[Array, Array]:
-    """Each segment's speed ``L/dt`` and Grbl's look-ahead cap ``√(2·a·B·L)`` for it, mm/s."""
+def segment_speed_cap(xy: Array, t: Array, profile: Profile) -> tuple[Array, Array]:
+    """Each segment's speed ``L/d`` and Grbl's look-ahead cap ``√(2·a·ΣL)`` for it, mm/s.
+
+    ``ΣL`` sums the segment and the next ``limits.planner_blocks − 1`` (fewer at the end);
+    ``t`` the setpoint times (s), or a number: a fixed step.
+    """
     d = np.diff(xy, axis=0)
     length = np.hypot(d[:, 0], d[:, 1])
+    durations = np.diff(t) if np.ndim(t) else np.full(len(length), float(t))
     a = _direction_acceleration(d, np.asarray(profile.max_acceleration))
-    return length / dt, np.sqrt(2.0 * a * profile["limits.planner_blocks"] * length)
+    blocks = profile["limits.planner_blocks"]
+    total = np.concatenate([[0.0], np.cumsum(length)])
+    ahead = total[np.minimum(np.arange(len(length)) + blocks, len(length))] - total[:-1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed = np.where(durations > 0, length / durations, 0.0)
+    return speed, np.sqrt(2.0 * a * ahead)
 
 
-def _segment_excess(xy: Array, dt: float, profile: Profile) -> float:
-    """How much faster than allowed the fastest segment is (≤ 1: none too fast)."""
+def segment_excess(xy: Array, t: Array, profile: Profile) -> float:
+    """How much the time scale must grow for every segment to respect the axis speeds and the
+    look-ahead cap (≤ 1: none too fast)."""
     if len(xy) < 2:
         return 0.0
-    speed, cap = segment_speed_cap(xy, dt, profile)
+    speed, cap = segment_speed_cap(xy, t, profile)
+    durations = np.diff(t)
+    worst = float(
+        np.max(np.abs(np.diff(xy, axis=0)) / durations[:, None] / np.asarray(profile.max_speed))
+    )
     moving = speed > 0
-    worst = float(np.max(np.abs(np.diff(xy, axis=0)) / dt / np.asarray(profile.max_speed)))
     if moving.any():
         # speed ∝ 1/s and cap ∝ 1/√s: the ratio falls as 1/√s, so s must grow by ratio².
         worst = max(worst, float(np.max(speed[moving] / cap[moving])) ** 2)
     return worst
 
 
-def junction_speed(xy: Array, profile: Profile) -> tuple[Array, Array, Array]:
+def junction_speed(
+    xy: Array, profile: Profile, t: Array | float = 1.0
+) -> tuple[Array, Array, Array]:
     """Grbl 1.1's junction speed limit between consecutive moves to ``xy`` (3-decimal rounded).
 
-    Returns ``(entry, limit, deflection)`` per junction: ``entry`` the shorter of the two
-    segments (mm; divide by dt for the speed Grbl would like to keep), ``limit`` Grbl's cap
-    ``√(a·δ·sin(θ/2) / (1 − sin(θ/2)))`` in mm/s (planner.c: ``junction_cos_theta``, the
-    acceleration along the junction vector, ``$11`` junction deviation δ; 0 for a reversal) and
-    the change of direction in radians. Zero-length moves are left out: Grbl's planner drops them.
+    Returns ``(entry, limit, deflection)`` per junction: ``entry`` the slower of the two moves'
+    speeds (mm/s, for moves lasting ``t``'s differences, or ``t`` each when a number), ``limit``
+    Grbl's cap ``√(a·δ·sin(θ/2) / (1 − sin(θ/2)))`` in mm/s (planner.c: ``junction_cos_theta``,
+    the acceleration along the junction vector, ``$11`` junction deviation δ; 0 for a reversal)
+    and the change of direction in radians. Zero-length moves are left out: Grbl's planner drops
+    them (their time goes to the next move).
     """
-    points = np.round(np.asarray(xy, dtype=float), 3)
+    points = np.round(np.asarray(xy, dtype=float), _DECIMALS)
+    times = np.asarray(t, dtype=float) if np.ndim(t) else np.arange(len(points)) * float(t)
     d = np.diff(points, axis=0)
     length = np.hypot(d[:, 0], d[:, 1])
+    ends = np.concatenate([[0], np.flatnonzero(length > 0) + 1])
+    durations = np.diff(times[ends])
     d, length = d[length > 0], length[length > 0]
     if len(d) < 2:
         return np.zeros(0), np.zeros(0), np.zeros(0)
+    speed = length / durations
     unit = d / length[:, None]
     previous, current = unit[:-1], unit[1:]
     cos_theta = -np.sum(previous * current, axis=1)
@@ -188,21 +505,21 @@ def junction_speed(xy: Array, profile: Profile) -> tuple[Array, Array, Array]:
     limit_sq = np.where(cos_theta < -0.999999, np.inf, limit_sq)
     limit_sq = np.where(cos_theta > 0.999999, 0.0, limit_sq)
     deflection = np.arccos(np.clip(-cos_theta, -1.0, 1.0))
-    return np.minimum(length[:-1], length[1:]), np.sqrt(limit_sq), deflection
+    return np.minimum(speed[:-1], speed[1:]), np.sqrt(limit_sq), deflection
 
 
-def _junction_excess(xy: Array, dt: float, profile: Profile) -> float:
+def _junction_excess(xy: Array, t: Array, profile: Profile) -> float:
     """How much faster than Grbl's junction limit the worst corner is entered (≤ 1: none)."""
-    entry, limit, deflection = junction_speed(xy, profile)
-    gentle = deflection < math.pi / 4
+    entry, limit, deflection = junction_speed(xy, profile, t)
     if not len(entry):
         return 0.0
-    # Only gentle corners (deflection < 45°): a smooth path sampled at dt, whose limit grows as
+    # Only gentle corners (deflection < 45°): a smooth path sampled finely, whose limit grows as
     # the motion slows. Sharper corners are cusps of the tag, where its speed is near zero anyway
     # and Grbl's full stop there cannot be retimed away (a reversal has a limit of 0).
+    gentle = deflection < math.pi / 4
     entry, limit = entry[gentle], limit[gentle]
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(entry > 0, entry / dt / limit, 0.0)
+        ratio = np.where(entry > 0, entry / limit, 0.0)
     return float(np.max(ratio, initial=0.0))
 
 
@@ -264,9 +581,9 @@ def _check_bed(profile: Profile, parts: list[Array]) -> None:
         (low[1] < y_min - slack, "y", low[1], "bed.y_min", y_min),
         (high[1] > y_max + slack, "y", high[1], "bed.y_max", y_max),
     )
-    for bad, axis, value, field, limit in checks:
+    for bad, axis, value, key, limit in checks:
         if bad:
             raise PlacementError(
-                f"placement: the drawing reaches {axis} = {value:.3f} mm, beyond {field} = "
+                f"placement: the drawing reaches {axis} = {value:.3f} mm, beyond {key} = "
                 f"{limit:g} mm by {abs(value - limit):.3f} mm (reduce place.scale or move it)"
             )

@@ -39,6 +39,9 @@ __all__ = [
 
 ALIGNS = ("center", "bottom-left", "bottom-right", "top-left", "top-right")
 PEN_TYPES = ("servo", "z")
+TIME_SCALES = ("run", "uniform")
+SETPOINT_MODES = ("adaptive", "fixed")
+SLOW_LINES = ("clamp", "dwell")
 
 SCHEMA: dict[str, dict[str, Any]] = {
     "bed": {
@@ -55,6 +58,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "y_max_feed": POSITIVE,
         "x_acceleration": POSITIVE,
         "y_acceleration": POSITIVE,
+        "z_max_feed": POSITIVE,
+        "z_acceleration": POSITIVE,
         "junction_deviation": POSITIVE,
         "x_steps_per_mm": POSITIVE,
         "min_feed": POSITIVE,
@@ -72,6 +77,13 @@ SCHEMA: dict[str, dict[str, Any]] = {
     },
     "motion": {
         "dt": POSITIVE,
+        "max_dt": POSITIVE,
+        "tolerance": POSITIVE,
+        "min_buffer": NON_NEGATIVE,
+        "setpoints": SETPOINT_MODES,
+        "time_scale": TIME_SCALES,
+        "trim": BOOL,
+        "slow_lines": SLOW_LINES,
         "travel_feed": POSITIVE,
         "park": BOOL,
         "park_x": NUMBER,
@@ -146,6 +158,8 @@ def _check(p: Profile) -> None:
         "must be < 0.255 s (Grbl $1 is 0-254 ms; 255 keeps the motors on: use 0)",
     )
     need(p.dt >= 0.001, ("motion.dt",), "must be >= 0.001 s (F = 60/dt needs <= 8 digits)")
+    need(p["motion.max_dt"] >= p.dt, ("motion.dt", "motion.max_dt"), "must be >= motion.dt")
+    need(p["motion.max_dt"] <= 2.0, ("motion.max_dt",), "must be <= 2 s")
     if p["motion.park"]:
         need(
             x_min <= p["motion.park_x"] <= x_max,
@@ -170,8 +184,10 @@ DEVICE_SETTINGS = {
     101: "limits.y_steps_per_mm",
     110: "limits.x_max_feed",
     111: "limits.y_max_feed",
+    112: "limits.z_max_feed",
     120: "limits.x_acceleration",
     121: "limits.y_acceleration",
+    122: "limits.z_acceleration",
     11: "limits.junction_deviation",
 }
 """The Grbl settings (``$$``) that ``limits.from_device`` takes from the machine."""

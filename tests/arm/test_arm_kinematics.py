@@ -104,3 +104,28 @@ def test_ticks_follow_the_convention() -> None:
     ticks = np.arange(0, 4096, 7)
     assert np.array_equal(angles_to_ticks(ticks_to_angles(ticks, shoulder), shoulder), ticks)
     assert ticks_to_angles(3072, shoulder) == 0.0
+
+
+def test_tip_resolution_is_one_tick_through_the_jacobian() -> None:
+    arm = Arm(150.0, 120.0, 3.0, 4.0, 1)
+    rng = np.random.default_rng(2)
+    q = np.column_stack([rng.uniform(-3, 3, 40), rng.uniform(0.1, 3.0, 40)])
+    tick = 2 * math.pi / 4096
+    rho = arm.tip_resolution(q)
+    h = 1e-6
+    for pose, r in zip(q, rho, strict=True):
+        # The Jacobian by differences of FK, its smallest singular value times one tick.
+        columns = [(arm.fk(pose + h * e) - arm.fk(pose - h * e)) / (2 * h) for e in np.eye(2)]
+        sigma = np.linalg.svd(np.column_stack(columns), compute_uv=False)
+        assert r == pytest.approx(tick * sigma[-1], rel=1e-6)
+        # A pen move shorter than that, in any direction, is under one tick on both joints.
+        angle = rng.uniform(0, 2 * math.pi, 64)
+        moves = 0.999 * r * np.column_stack([np.cos(angle), np.sin(angle)])
+        back = arm.ik(arm.fk(pose) + moves)
+        assert np.max(np.abs(back - pose)) < tick
+        # ... and some move a hair longer needs more than a tick (the bound is tight).
+        longer = arm.ik(arm.fk(pose) + 1.01 * moves)
+        assert np.max(np.hypot(*(longer - pose).T)) > tick
+    assert arm.tip_resolution([0.3, 1.0], step=2 * tick) == pytest.approx(
+        2 * arm.tip_resolution([0.3, 1.0])
+    )

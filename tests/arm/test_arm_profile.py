@@ -20,6 +20,8 @@ def test_packaged_defaults() -> None:
     assert profile.names == {1: "shoulder", 2: "elbow", 3: "pen"}
     assert profile.profile_ms == 20 and profile.lead == pytest.approx(0.02)
     assert profile.readback_every == 1
+    assert profile["motion.time_scale"] == "run" and profile["motion.trim_ticks"] == 1.0
+    assert profile["motion.max_deviation"] == 0.15
     shoulder, elbow = profile.joints
     assert shoulder.model_number == 1020 and elbow.lower == pytest.approx(math.radians(10))
     assert "default" in packaged_profiles()
@@ -70,6 +72,12 @@ def test_layering_order(tmp_path) -> None:
         ("", ["bus.return_delay_us=3"], "--set: bus.return_delay_us: must be an even number of µs"),
         ("", ["bus.readback_rate=200"], "--set: bus.readback_rate: must be <= motion.rate"),
         ("", ["pen.up=2048"], "--set: pen.up: must differ from pen.down"),
+        (
+            "",
+            ["motion.time_scale=fast"],
+            "--set: motion.time_scale: must be one of run, uniform, got 'fast'",
+        ),
+        ("", ["motion.trim_ticks=-1"], "--set: motion.trim_ticks: must be >= 0, got -1"),
         (
             "",
             ["servo.acceleration_fraction=0.6"],

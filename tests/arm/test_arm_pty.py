@@ -42,9 +42,10 @@ def test_streams_over_a_pseudo_terminal(served) -> None:
     assert run.stats["port"] == path
     for column, id in enumerate((1, 2, 3)):
         assert sim.values(id, GOAL_POSITION)[1:] == run.program.goals[:, column].tolist()
-    # Executed trace: present positions read back at 100 Hz through FK.
+    # Executed trace: present positions read back at 100 Hz through FK (those inside a resync's
+    # gap, if the host stalled, are left out of the program's timeline).
     ex = run.executed
-    assert ex.shape[1] == 4 and len(ex) == run.stats["readbacks"] > 0.9 * n
+    assert ex.shape[1] == 4 and 0.9 * n < len(ex) <= run.stats["readbacks"]
     assert ex[:, 3].max() == 1.0
     tracking = run.stats["joint_tracking_error"]
     assert tracking["mean"] < 1.0  # degrees; real time on a shared machine: generous
@@ -63,7 +64,9 @@ def test_a_silent_servo_over_the_pty_is_a_timeout_and_a_safe_stop(served) -> Non
     with pytest.raises(DeviceTimeout) as raised:
         draw_arm(small_tag(), profile, path, progress)
     tick = int(raised.value.where.split()[1])
-    assert 21 <= tick <= 32 and "servo 1 (shoulder) did not answer" in str(raised.value)
+    # Silenced after tick 21: more than bus.max_missed = 5 read-backs (one a tick) missed, or,
+    # if the host is so loaded that the others' replies are late too, 0.25 s without a reply.
+    assert 27 <= tick <= 21 + 28 and "servo 1 (shoulder) did not answer" in str(raised.value)
     # The last packets are on their way through the pty: give the server a moment.
     deadline = time.monotonic() + 2.0
     while time.monotonic() < deadline and (sim.servo(1).torque or sim.servo(2).torque):
@@ -72,7 +75,7 @@ def test_a_silent_servo_over_the_pty_is_a_timeout_and_a_safe_stop(served) -> Non
         assert sim.servo(3).get("goal_position") == profile["pen.up"]
         assert not sim.servo(1).torque and not sim.servo(2).torque
         shoulder = sim.values(1, GOAL_POSITION)[1:]
-    assert shoulder == program.goals[: tick + 1, 0].tolist()
+    assert shoulder == program.goals[:tick, 0].tolist()
 
 
 def test_the_unmodified_port_handler_opens_the_cli_pty(monkeypatch) -> None:
@@ -107,3 +110,28 @@ def test_the_unmodified_port_handler_opens_the_cli_pty(monkeypatch) -> None:
     assert served["1"] == (1020, sdk.COMM_SUCCESS) and served["2"] == (1020, sdk.COMM_SUCCESS)
     assert served["4"] == (1060, sdk.COMM_SUCCESS) and served["3"][1] == sdk.COMM_RX_TIMEOUT
     assert "stopped" in result.stderr
+
+
+def test_the_cli_pty_can_delay_and_lose_replies(monkeypatch) -> None:
+    import sim.dynamixel
+
+    served: dict[str, object] = {}
+    real_serve = sim.dynamixel.serve_pty
+
+    def serve(chain):
+        served["chain"] = chain
+        return real_serve(chain)
+
+    def interrupt() -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(sim.dynamixel, "serve_pty", serve)
+    monkeypatch.setattr(arm_cli, "_wait_for_interrupt", interrupt)
+    args = ["--reply-latency", "0.05", "--reply-jitter", "0.01", "--drop", "0.02", "--seed", "4"]
+    result = CliRunner().invoke(arm_cli.sim_arm_command, args)
+    assert result.exit_code == 0, result.output
+    chain = served["chain"]
+    assert (chain.reply_latency, chain.reply_jitter, chain.reply_drop) == (0.05, 0.01, 0.02)
+    assert "(replies 50+10 ms late, 2 % lost)" in result.stderr
+    bad = CliRunner().invoke(arm_cli.sim_arm_command, ["--drop", "2"])
+    assert bad.exit_code == 2 and "--drop" in bad.output

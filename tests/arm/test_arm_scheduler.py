@@ -98,3 +98,21 @@ def test_monotonic_clock_never_wakes_early() -> None:
         late.append(time.perf_counter() - deadline)
     assert min(late) >= 0.0
     assert np.median(late) < 0.002  # generous: shared CI machines
+
+
+def test_program_time_leaves_out_resync_gaps_and_pauses() -> None:
+    clock = FakeClock(0.0)
+    scheduler = Scheduler(clock, 0.01)
+    scheduler.start(1.0)
+    for k in range(5):
+        scheduler.wait(k)
+    clock.work(0.05)  # tick 5 wakes 40 ms late: a resync
+    scheduler.wait(5)
+    assert scheduler.resyncs == 1 and scheduler.resync_delay == pytest.approx(0.04)
+    # A pause before tick 8, from clock 1.13 until 3.0.
+    scheduler.reanchor(8, 3.0, held=1.13)
+    assert scheduler.deadline(8) == 3.0 and scheduler.deadline(9) == pytest.approx(3.01)
+    clock_times = np.array([0.9, 1.02, 1.045, 1.08, 1.095, 1.12, 1.14, 2.0, 3.0, 3.015])
+    t = scheduler.program_time(clock_times, lag=0.005)
+    expected = [-0.105, 0.015, 0.04, np.nan, 0.05, 0.075, np.nan, np.nan, np.nan, 0.09]
+    assert np.allclose(t, expected, equal_nan=True)

@@ -22,6 +22,7 @@ from tagbot.errors import (
     DeviceTimeout,
     PlacementError,
 )
+from tagbot.metrics import compare_execution
 
 from .conftest import GOAL_POSITION, TORQUE_ENABLE, Recorded, goals_path, small_tag
 from .conftest import two_plan_tag as two_plans
@@ -52,8 +53,14 @@ def test_draw_arm_without_a_port_uses_the_simulator(profile) -> None:
     ex = run.executed
     assert np.all(np.diff(ex[:, 0]) <= 0.001 + 1e-9) and ex[0, 0] >= 0 and ex[-1, 0] <= n * 0.01
     assert ex[:, 3].max() == 1.0 and ex[0, 3] == 0.0 and ex[-1, 3] == 0.0
+    # At the same instant the servos' 20 ms lag shows (fast strokes: each run is slowed only as
+    # much as it needs); along the path the pen stays on the plan.
     dev = _deviation(run)
-    assert dev.mean() < 0.2 and dev.max() < 0.5
+    assert dev.mean() < 0.25 and dev.max() < 1.0
+    sp = run.setpoints
+    planned = [(sp.t[sp.plan == k], sp.xy[sp.plan == k]) for k in np.unique(sp.plan[sp.plan >= 0])]
+    comparison = compare_execution(planned, ex)
+    assert comparison.deviation_max < 0.3 and comparison.speed_snr_db > 25
     # Pen-down time matches the plan within a pen move.
     planned_down = run.setpoints.pen.sum() * 0.01
     assert abs(ex[:, 3].sum() * 0.001 - planned_down) < 2 * profile["pen.move_time"]
@@ -129,13 +136,14 @@ def _inject_at(tick: int, fault: Callable[[], None]) -> Callable[[int, int], Non
 
 
 def _after_stop(sim: Recorded, profile, program, last_tick: int) -> None:
-    """Pen up and held, arm torque off, and nothing of the program after ``last_tick``."""
+    """Pen up and held, arm torque off, and nothing of the program after ``last_tick`` (the
+    last tick sent, counting from 1)."""
     assert sim.servo(3).get("goal_position") == profile["pen.up"]
     assert sim.servo(3).torque
     assert not sim.servo(1).torque and not sim.servo(2).torque
     for column, id in enumerate((1, 2)):
         received = sim.values(id, GOAL_POSITION)[1:]  # after the approach
-        assert received == program.goals[: last_tick + 1, column].tolist()
+        assert received == program.goals[:last_tick, column].tolist()
     assert sim.values(3, GOAL_POSITION)[-1] == profile["pen.up"]
     assert sim.values(1, TORQUE_ENABLE)[-1] == 0 and sim.values(2, TORQUE_ENABLE)[-1] == 0
 
@@ -146,22 +154,23 @@ def _after_stop(sim: Recorded, profile, program, last_tick: int) -> None:
         (
             lambda chain: chain.silence(2),
             DeviceTimeout,
-            "tick 51: servo 2 (elbow) did not answer SYNC_READ of present positions",
+            "tick 57: servo 2 (elbow) did not answer SYNC_READ of present positions 6 times in"
+            " a row (more than bus.max_missed = 5) while the others did",
         ),
         (
             lambda chain: chain.set_hardware_error(2, 0x20),
             DeviceFault,
-            "tick 51: servo 2 (elbow): hardware error: overload (Hardware Error Status 0x20)",
+            "tick 52: servo 2 (elbow): hardware error: overload (Hardware Error Status 0x20)",
         ),
         (
             lambda chain: chain.set_hardware_error(1, 0x04),
             DeviceFault,
-            "tick 51: servo 1 (shoulder): hardware error: overheating",
+            "tick 52: servo 1 (shoulder): hardware error: overheating",
         ),
         (
             lambda chain: chain.corrupt_next(3, 10),
             DeviceError,
-            "tick 53: 3 corrupt read-backs in a row (more than bus.max_corrupt = 2)",
+            "tick 54: 3 corrupt read-backs in a row (more than bus.max_corrupt = 2)",
         ),
     ],
 )
@@ -189,7 +198,7 @@ def test_ctrl_c_lifts_the_pen_and_reraises(profile, sim: Recorded) -> None:
 
     with pytest.raises(KeyboardInterrupt):
         draw_arm(two_plans(), profile, sim.url, _inject_at(70, interrupt))
-    _after_stop(sim, profile, program, 70)
+    _after_stop(sim, profile, program, 71)
 
 
 def test_wrong_model_is_refused_at_connect(profile, sim: Recorded) -> None:

@@ -1,4 +1,5 @@
-"""Placement (aspect, margins, y direction) and uniform retiming to the machine's limits."""
+"""Placement (aspect, margins, y direction), trimmed run ends, per-run and uniform retiming to
+the machine's limits, adaptive setpoints within their tolerance."""
 
 from __future__ import annotations
 
@@ -8,8 +9,18 @@ import numpy as np
 import pytest
 
 import tagbot
-from tagbot.plotter import load_profile, place
-from tagbot.plotter.place import FINE_STEP, limit_scale, segment_speed_cap
+from tagbot.model.motion import evaluate_plan
+from tagbot.plotter import build_program, load_profile, place
+from tagbot.plotter.place import (
+    FINE_STEP,
+    RX_LINES,
+    buffered,
+    limit_scale,
+    segment_speed_cap,
+    slowest_durations,
+    step_box,
+)
+from tagbot.plotter.program import resting_share
 
 from .conftest import straight_tag, two_plan_tag
 
@@ -42,16 +53,16 @@ def test_fit_keeps_aspect_and_margins():
 
 
 def test_y_down_mirrors(tiny_file):
-    up = place(two_plan_tag(), load_profile(tiny_file, ["place.align=top-left"]))
-    down = place(
-        two_plan_tag(), load_profile(tiny_file, ["place.align=top-left", "bed.y_down=true"])
-    )
+    exact = ("place.align=top-left", "motion.trim=false")
+    up = place(two_plan_tag(), load_profile(tiny_file, exact))
+    down = place(two_plan_tag(), load_profile(tiny_file, [*exact, "bed.y_down=true"]))
     for a, b in zip(up.runs, down.runs, strict=True):
         assert np.allclose(b.xy[:, 0], a.xy[:, 0])
         assert np.allclose(b.xy[:, 1], 50.0 - a.xy[:, 1])
         assert np.allclose(b.v[:, 1], -a.v[:, 1])
     # Top-left on a y-down machine is near machine y = margin.
-    assert min(r.xy[:, 1].min() for r in down.runs) == pytest.approx(5.0, abs=1e-6)
+    # (within a motor step: setpoints on the step the last one reached are not sent)
+    assert min(r.xy[:, 1].min() for r in down.runs) == pytest.approx(5.0, abs=0.01)
 
 
 def test_rotation_and_explicit_scale(tiny_file):
@@ -60,14 +71,17 @@ def test_rotation_and_explicit_scale(tiny_file):
     run = placed.runs[0]
     assert placed.size == 2.0
     assert np.ptp(run.xy[:, 0]) == pytest.approx(0.0, abs=1e-9)
-    assert np.ptp(run.xy[:, 1]) == pytest.approx(20.0, abs=1e-3)
+    assert np.ptp(run.xy[:, 1]) == pytest.approx(
+        20.0 - 2 * 0.01, abs=1e-3
+    )  # trimmed: a step each end
     assert run.xy[-1, 1] > run.xy[0, 1]  # +x of the tag became +y
 
 
-def test_scale_is_one_when_slow_enough(tiny):
-    placed = place(straight_tag(), tiny)
-    assert placed.scale == 1.0
-    assert placed.runs[0].t[1] - placed.runs[0].t[0] == pytest.approx(tiny.dt)
+def test_scale_is_one_when_slow_enough(tiny_file):
+    profile = load_profile(tiny_file, ["motion.min_buffer=0", "motion.setpoints=fixed"])
+    placed = place(straight_tag(), profile)
+    assert placed.scale == 1.0 and placed.run_scales == (1.0,)
+    assert placed.runs[0].t[1] - placed.runs[0].t[0] == pytest.approx(profile.dt)
 
 
 @pytest.mark.parametrize(
@@ -79,7 +93,7 @@ def test_scale_is_one_when_slow_enough(tiny):
     ],
 )
 def test_retimed_motion_within_limits(tiny_file, overrides):
-    profile = load_profile(tiny_file, overrides)
+    profile = load_profile(tiny_file, ["motion.min_buffer=0", *overrides])
     tag = two_plan_tag()
     placed = place(tag, profile)
     assert placed.scale > 1.0
@@ -89,21 +103,30 @@ def test_retimed_motion_within_limits(tiny_file, overrides):
     vmax = np.array(profile.max_speed)
     amax = np.array(profile.max_acceleration)
     for run in placed.runs:
-        # Analytic velocity after retiming, and its differences at a fine retimed step.
+        # Analytic velocity after retiming, and each line's speed.
         assert np.all(np.abs(run.v) <= vmax * (1 + 1e-9))
-        assert np.all(np.abs(np.diff(run.xy, axis=0)) / placed.dt <= vmax * (1 + 1e-6))
-        speed, cap = segment_speed_cap(run.xy, placed.dt, profile)
+        d = np.diff(run.t)
+        assert np.all(np.abs(np.diff(run.xy, axis=0)) / d[:, None] <= vmax * (1 + 1e-6))
+        # Grbl's look-ahead: each line's speed reachable to a stop within the next 15 lines.
+        length = np.hypot(*np.diff(run.xy, axis=0).T)
+        ahead = np.array([length[i : i + 15].sum() for i in range(len(length))])
+        speed, cap = segment_speed_cap(run.xy, run.t, profile)
+        assert np.allclose(speed, length / d)
+        a_min = min(profile.max_acceleration)
+        assert np.all(speed <= np.sqrt(2 * a_min * np.sqrt(2) * ahead) * (1 + 1e-6))
         assert np.all(speed <= cap * (1 + 1e-6))
     # Acceleration measured independently at a finer step of the retimed clock.
     for k, plan in enumerate(tag.plans):
         t = np.arange(plan.start, plan.end(tag.size), FINE_STEP / 4)
         _, v = tagbot.model.motion.evaluate_plan(plan, t, tag.size)
-        v = v @ placed.matrix.T / placed.scale
-        acc = np.diff(v, axis=0) / (FINE_STEP / 4 * placed.scale)
+        scale = placed.runs[k].scale
+        v = v @ placed.matrix.T / scale
+        acc = np.diff(v, axis=0) / (FINE_STEP / 4 * scale)
         assert np.all(np.abs(acc) <= amax * 1.02), k
-    # Retiming keeps the shape: each run still ends where it did, at a scaled clock.
+    # Retiming keeps the shape: each run still ends where it did (within the motor step on
+    # which its last setpoints land), at a scaled clock.
     unscaled = place(tag, load_profile(tiny_file))
-    assert np.allclose(placed.runs[0].xy[-1], unscaled.runs[0].xy[-1], atol=1e-3)
+    assert np.allclose(placed.runs[0].xy[-1], unscaled.runs[0].xy[-1], atol=0.0101)
 
 
 def test_limit_scale_formulas(tiny):
@@ -128,12 +151,172 @@ def test_junction_limit_on_curves(tiny_file):
         phi2=[-0.6, -0.5],
     )
     tag = Tag(plans=(curve,))
-    profile = load_profile(tiny_file, ["limits.junction_deviation=0.0005"])
+    profile = load_profile(tiny_file, ["limits.junction_deviation=0.0005", "motion.min_buffer=0"])
     placed = place(tag, profile)
     assert placed.limits["junction"] > 1.0
     assert placed.scale == pytest.approx(max(placed.limits.values()))
-    entry, limit, deflection = junction_speed(placed.runs[0].xy, profile)
+    run = placed.runs[0]
+    entry, limit, deflection = junction_speed(run.xy, profile, run.t)
     gentle = deflection < np.pi / 4
-    assert np.all(entry[gentle] / placed.dt <= limit[gentle] * (1 + 1e-6))
+    assert np.all(entry[gentle] <= limit[gentle] * (1 + 1e-6))
+    # Entry speeds independently: the slower of each pair of (non-empty) lines.
+    sent = np.round(run.xy, 3)
+    moving = np.hypot(*np.diff(sent, axis=0).T) > 0
+    speeds = (np.hypot(*np.diff(sent, axis=0).T) / np.diff(run.t))[moving]
+    assert np.allclose(entry, np.minimum(speeds[:-1], speeds[1:]))
     # A looser machine does not need the junction slow-down.
-    assert place(tag, load_profile(tiny_file)).limits["junction"] == 1.0
+    loose = load_profile(tiny_file, ["motion.min_buffer=0"])
+    assert place(tag, loose).limits["junction"] == 1.0
+
+
+def _exact(tag, placed, run, instants):
+    p, _ = evaluate_plan(tag.plans[run.plan], instants, tag.size)
+    return p @ placed.matrix.T + placed.offset
+
+
+@pytest.mark.parametrize("name", ["two", "cae"])
+def test_runs_start_and_end_one_step_from_their_ends(tiny_file, name):
+    tag = two_plan_tag() if name == "two" else tagbot.load_plan(EXAMPLES / "cae.json")
+    profile = load_profile(tiny_file if name == "two" else None)
+    placed = place(tag, profile)
+    box = step_box(profile)
+    for run in placed.runs:
+        plan = tag.plans[run.plan]
+        start, end = plan.start, plan.end(tag.size)
+        on, off = run.span
+        assert start < on < off < end
+        first, last = _exact(tag, placed, run, np.array([start, end]))
+        # Drawn from where the motion leaves the ±1-step box around its first point...
+        assert np.all(np.abs(run.xy[0] - first) <= box * (1 + 1e-6))
+        assert np.max(np.abs(run.xy[0] - first) / box) > 0.999
+        before = _exact(tag, placed, run, np.linspace(start, on, 200)[:-1])
+        assert np.all(np.all(np.abs(before - first) < box, axis=1))
+        # ... to where it last enters the box around its last point; nothing after is drawn.
+        at_off = _exact(tag, placed, run, np.array([off]))[0]
+        assert np.max(np.abs(at_off - last) / box) == pytest.approx(1.0, abs=0.02)
+        after = _exact(tag, placed, run, np.linspace(off, end, 200)[1:])
+        assert np.all(np.all(np.abs(after - last) < box, axis=1))
+        assert run.tag_t[0] == on and run.tag_t[-1] <= off
+    untrimmed = place(
+        tag, load_profile(tiny_file if name == "two" else None, ["motion.trim=false"])
+    )
+    for run in untrimmed.runs:
+        assert run.span == (tag.plans[run.plan].start, tag.plans[run.plan].end(tag.size))
+
+
+def test_resting_share_is_measured_and_removed():
+    tag = tagbot.load_plan(EXAMPLES / "cae.json")
+    new = load_profile()
+    old = load_profile(
+        None,
+        [
+            "motion.time_scale=uniform",
+            "motion.setpoints=fixed",
+            "motion.trim=false",
+            "motion.slow_lines=dwell",
+        ],
+    )
+    assert resting_share(build_program(place(tag, new), new), new) <= 0.02
+    assert resting_share(build_program(place(tag, old), old), old) > 0.05
+
+
+def _needs(tag, placed, run, profile):
+    """The scale the axis speed and acceleration limits ask of the run, measured independently
+    (a quarter of the placement's fine step, over the drawn span)."""
+    step = FINE_STEP / 4
+    t = np.arange(run.span[0], run.span[1], step)
+    _, v = evaluate_plan(tag.plans[run.plan], t, tag.size)
+    v = v @ placed.matrix.T
+    speed = np.max(np.abs(v) / np.asarray(profile.max_speed))
+    acc = np.sqrt(np.max(np.abs(np.diff(v, axis=0) / step) / np.asarray(profile.max_acceleration)))
+    return float(speed), float(acc)
+
+
+def test_per_run_scale_each_run_slowed_only_as_it_needs(tiny_file):
+    tag = tagbot.load_plan(EXAMPLES / "cae.json")
+    run_mode = load_profile(None, ["motion.min_buffer=0"])
+    uniform = load_profile(None, ["motion.min_buffer=0", "motion.time_scale=uniform"])
+    per_run, joint = place(tag, run_mode), place(tag, uniform)
+    assert per_run.mode == "run" and joint.mode == "uniform"
+    assert len(set(per_run.run_scales)) == len(per_run.runs) > 1  # each its own
+    assert set(joint.run_scales) == {joint.scale}
+    assert max(per_run.run_scales) == pytest.approx(joint.scale, rel=0.01)
+    assert per_run.duration < joint.duration
+    vmax = np.asarray(run_mode.max_speed)
+    for a, b in zip(per_run.runs, joint.runs, strict=True):
+        assert 1.0 <= a.scale <= b.scale * 1.01
+        assert np.all(np.abs(a.v) <= vmax * (1 + 1e-9))
+        # The run's own limits hold, and the one that set its scale is reached (within 2 %).
+        speed, acc = _needs(tag, per_run, a, run_mode)
+        assert a.scale >= max(1.0, speed / (1 + 1e-4), acc / 1.02)
+        binding = max(a.limits, key=a.limits.get)
+        if binding in ("speed", "acceleration"):
+            assert a.scale <= max(speed, acc) * 1.02, binding
+        # The shape is kept: the setpoints are the tag's own positions at a scaled clock.
+        assert np.allclose(a.xy, _exact(tag, per_run, a, a.tag_t))
+        d, dtag = np.diff(a.t), np.diff(a.tag_t) * a.scale
+        unclamped = d < slowest_durations(a.xy, run_mode) - 1e-9
+        assert np.allclose(d[unclamped], dtag[unclamped])
+    # Speed-bound runs: their fastest axis speed is the machine's, within 2 %.
+    peaks = [np.max(np.abs(r.v) / vmax) for r in per_run.runs]
+    assert max(peaks) > 0.98
+
+
+def test_adaptive_setpoints_within_the_tolerance(tiny_file):
+    """Straight lines in time between setpoints stay within motion.tolerance of the exact motion
+    at every instant (1e4 steps/mm: no setpoint merged on a motor step)."""
+    tag = tagbot.load_plan(EXAMPLES / "letter-b.json")
+    fine_steps = ["limits.x_steps_per_mm=10000", "limits.y_steps_per_mm=10000"]
+    lines = {}
+    for tolerance in (0.005, 0.02):
+        profile = load_profile(None, [*fine_steps, f"motion.tolerance={tolerance}"])
+        placed = place(tag, profile)
+        run = placed.runs[0]
+        d = np.diff(run.t)
+        assert np.all(d[:-1] >= profile.dt * (1 - 1e-9))
+        assert np.all(d <= profile["motion.max_dt"] * (1 + 1e-9))
+        instants = np.linspace(run.tag_t[0], run.tag_t[-1], 200_000)
+        exact = _exact(tag, placed, run, instants)
+        line = np.column_stack(
+            [
+                np.interp(instants, run.tag_t, run.xy[:, 0]),
+                np.interp(instants, run.tag_t, run.xy[:, 1]),
+            ]
+        )
+        error = np.hypot(*(exact - line).T)
+        assert error.max() <= tolerance * 1.02
+        assert error.max() > tolerance * 0.8  # the lines are as long as the tolerance allows
+        lines[tolerance] = len(run.t)
+    assert lines[0.02] < 0.7 * lines[0.005]
+
+
+def test_buffered_motion_bound(tiny_file):
+    tag = tagbot.load_plan(EXAMPLES / "cae.json")
+    blocks = 15 - 1 + RX_LINES
+    profile = load_profile()
+    placed = place(tag, profile)
+    for run in placed.runs:
+        d = np.diff(run.t)
+        window = min(blocks, len(d))
+        sums = np.convolve(d, np.ones(window), mode="valid")
+        assert sums.min() >= profile["motion.min_buffer"] * (1 - 1e-6)
+        assert buffered(run.t, blocks) == pytest.approx(sums.min())
+    assert placed.limits["buffer"] == pytest.approx(placed.scale)
+    free = place(tag, load_profile(None, ["motion.min_buffer=0"]))
+    assert free.duration < placed.duration
+    assert min(buffered(r.t, blocks) for r in free.runs) < profile["motion.min_buffer"]
+
+
+def test_lines_never_slower_than_grbl_steps(tiny_file):
+    profile = load_profile(tiny_file, ["place.scale=0.2"])
+    placed = place(straight_tag(), profile)
+    run = placed.runs[0]
+    steps = np.round(np.round(run.xy, 3) * 100).astype(int)
+    per_line = np.max(np.abs(np.diff(steps, axis=0)), axis=1)
+    assert np.all(per_line >= 1)  # every setpoint moves the motor
+    assert np.all(np.diff(run.t) <= per_line * profile["limits.slowest_step"] * (1 + 1e-9))
+    fixed = place(
+        straight_tag(), load_profile(tiny_file, ["place.scale=0.2", "motion.setpoints=fixed"])
+    )
+    d = np.diff(fixed.runs[0].t)
+    assert np.all(d <= profile.dt * (1 + 1e-9))

@@ -16,6 +16,13 @@ def test_packaged_defaults():
     assert profile["limits.planner_blocks"] == 15
     assert profile["limits.from_device"] is False
     assert profile["pen.type"] == "servo"
+    assert profile["motion.time_scale"] == "run"
+    assert profile["motion.setpoints"] == "adaptive"
+    assert profile["motion.trim"] is True
+    assert profile["motion.slow_lines"] == "clamp"
+    assert profile["motion.tolerance"] == 0.01
+    assert profile["motion.max_dt"] == 0.25
+    assert profile["motion.min_buffer"] == 0.6
     assert profile.sources["bed.x_max"] == "default.toml"
     assert set(packaged_profiles()) >= {"default", "zpen"}
     for section, keys in SCHEMA.items():
@@ -64,6 +71,15 @@ def test_packaged_zpen():
         ("x = [", [], "{f}: not TOML"),
         ("", ["motion.dt=0.0005"], "--set: motion.dt: must be >= 0.001 s"),
         ("[motion]\ndt = 2\n", [], "{f}: motion.dt: must be <= 1 s"),
+        ("", ["motion.max_dt=0.005"], "--set: motion.max_dt: must be >= motion.dt"),
+        ("", ["motion.max_dt=3"], "--set: motion.max_dt: must be <= 2 s"),
+        (
+            "",
+            ["motion.time_scale=global"],
+            "--set: motion.time_scale: must be one of run, uniform, got 'global'",
+        ),
+        ("", ["motion.tolerance=0"], "--set: motion.tolerance: must be > 0, got 0"),
+        ("", ["motion.min_buffer=-1"], "--set: motion.min_buffer: must be >= 0, got -1"),
         ("[pen]\ntype = 'z'\nup = 0\ndown = 1\n", [], "{f}: pen.up: must be > pen.down"),
     ],
 )

@@ -46,6 +46,10 @@ machines = st.fixed_dictionaries(
         "limits.x_acceleration": st.floats(50, 2000),
         "limits.y_acceleration": st.floats(50, 2000),
         "motion.dt": st.sampled_from([0.005, 0.01, 0.02]),
+        "motion.time_scale": st.sampled_from(["run", "uniform"]),
+        "motion.setpoints": st.sampled_from(["adaptive", "fixed"]),
+        "motion.slow_lines": st.sampled_from(["clamp", "dwell"]),
+        "motion.tolerance": st.sampled_from([0.005, 0.01, 0.05]),
         "bed.y_down": st.booleans(),
         "place.rotation": st.floats(-180, 180),
     }
@@ -53,6 +57,8 @@ machines = st.fixed_dictionaries(
 
 
 def _toml(value):
+    if isinstance(value, str):
+        return f'"{value}"'
     return ("true" if value else "false") if isinstance(value, bool) else repr(value)
 
 
@@ -62,14 +68,32 @@ def test_placed_program_respects_the_machine(tag, machine):
     overrides = [f"{k}={_toml(v)}" for k, v in machine.items()]
     profile = load_profile(None, ["bed.x_max=200", "bed.y_max=150", *overrides])
     placed = place(tag, profile)
-    assert placed.scale >= 1.0
+    assert placed.scale >= 1.0 and min(placed.run_scales) >= 1.0
+    if machine["motion.time_scale"] == "uniform":
+        assert set(placed.run_scales) == {placed.scale}
     vmax = np.array(profile.max_speed)
     for run in placed.runs:
         assert np.all(np.abs(run.v) <= vmax * (1 + 1e-6))
-        speed, cap = segment_speed_cap(run.xy, placed.dt, profile)
+        speed, cap = segment_speed_cap(run.xy, run.t, profile)
         assert np.all(speed <= cap * (1 + 1e-6))
-        assert np.all(np.abs(np.diff(run.xy, axis=0)) / placed.dt <= vmax * (1 + 1e-6))
+        d = np.diff(run.t)
+        assert np.all(d > 0)
+        assert np.all(np.abs(np.diff(run.xy, axis=0)) / d[:, None] <= vmax * (1 + 1e-6))
     program = build_program(placed, profile)
+    n = len(program.lines)
+    assert program.line_xy.shape == (n, 2) and len(program.line_end) == n
+    assert np.all(program.line_end >= program.line_start)
+    assert np.all(program.line_start[1:] == program.line_end[:-1])
+    assert program.duration >= program.drawing_time > 0
+    assert program.run_scales == placed.run_scales
+    within = False
+    for line in program.lines:
+        if line.startswith("G4P"):
+            p = float(line[3:])
+            assert p >= 0.05 and abs(p / 0.05 - round(p / 0.05)) < 1e-9, line  # Grbl's 50 ms
+            if machine["motion.slow_lines"] == "clamp":
+                assert not within, "a dwell inside a run"
+        within = (within or line == "G93\n") and line != "G94\n"
     state = ParserState()
     for line in program.lines:
         assert len(line) <= MAX_LINE
