@@ -329,12 +329,30 @@ class ArmJob:
             resume_from=None,
             planned_duration=sp.duration,
             executed_duration=executed_duration,
-            placement={"mm_per_unit": sp.mm_per_unit, "time_scale": sp.time_scale},
+            placement=placement_of(sp),
             port=self.port or "simulator",
             details=figures,
             warnings=list(outcome.warnings),
             error=error,
         )
+
+
+def placement_of(sp: Setpoints) -> dict[str, Any]:
+    """mm per unit, the largest time scale, and each run's clock (``start + scale·(τ −
+    tag_start)``), as the plotter reports them."""
+    runs = []
+    for k, (scale, window) in enumerate(zip(sp.run_scales, sp.run_windows, strict=True)):
+        drawn = np.flatnonzero(sp.plan == k)
+        if len(drawn):
+            runs.append(
+                {
+                    "plan": k,
+                    "scale": float(scale),
+                    "tag_start": float(window[0]),
+                    "start": float(sp.t[drawn[0]]),
+                }
+            )
+    return {"runs": runs, "mm_per_unit": sp.mm_per_unit, "time_scale": sp.time_scale}
 
 
 def planned_motion(program: ArmProgram) -> MotionTable:

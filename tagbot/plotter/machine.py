@@ -50,8 +50,19 @@ TIMELINE_STEP = 0.01
 """s between the samples of motion.csv's planned timeline (setpoints are exact in it)."""
 
 
-def placement_of(setpoints: Setpoints) -> dict[str, Any]:
+def placement_of(setpoints: Setpoints, program: Program) -> dict[str, Any]:
+    """Tag to machine: the transform, and each run's clock (``start + scale·(τ − tag_start)``)."""
+    runs = [
+        {
+            "plan": run.plan,
+            "scale": float(run.scale),
+            "tag_start": float(run.span[0]),
+            "start": float(planned[0][0]),
+        }
+        for run, planned in zip(setpoints.runs, program.planned_runs, strict=True)
+    ]
     return {
+        "runs": runs,
         "mm_per_unit": setpoints.size,
         "time_scale": setpoints.scale,
         "run_scales": [float(s) for s in getattr(setpoints, "run_scales", ())],
@@ -200,7 +211,7 @@ class PlotterJob:
             resume_from=done + 1 if error is not None and 0 < done < len(lines) else None,
             planned_duration=program.duration,
             executed_duration=stream.duration if stream is not None else 0.0,
-            placement=placement_of(setpoints),
+            placement=placement_of(setpoints, program),
             port="simulator" if device is not None else url,
             details=_details(program, profile, stream, device),
             error=error,

@@ -18,8 +18,11 @@ device's clock), ``report.json`` with ``placement.mm_per_unit`` and ``placement.
 (machine speed = tag speed × mm_per_unit / time_scale, machine time = tag time × time_scale) and
 ``runs`` (``plan``, ``planned_start``, ``executed_start`` per pen-down run). The executed pen-down
 runs are matched to those in order (as :func:`tagbot.metrics.compare_execution` does) and shifted
-by ``planned_start − executed_start`` onto the planned clock. Stroke ``j`` of plan ``p`` is drawn
-at machine time ``planned_start(p) + time_scale · (t − plans[p].start)``. The executed speed is
+by ``planned_start − executed_start`` onto the planned clock. Each run has its own time scale:
+``placement.runs`` gives, per run, ``scale``, ``tag_start`` (the tag-clock instant of its first
+point) and ``start`` (the job-clock instant of that point), and stroke ``j`` of plan ``p`` is
+drawn at machine time ``start + scale · (t − tag_start)`` (older reports without it:
+``planned_start(p) + time_scale · (t − plans[p].start)``). The executed speed is
 the central difference of the executed positions over a window of ``max(10 ms, 2 × the median
 sample interval)``, on a grid of half that window (:func:`executed_speed`).
 """
@@ -108,7 +111,7 @@ def _stroke_curves(
     tag: Tag,
     t: Array,
     offsets: Sequence[float] | None = None,
-    time_scale: float = 1.0,
+    time_scale: float | Sequence[float] = 1.0,
     speed_scale: float = 1.0,
 ) -> list[Curve]:
     """Each stroke's ``D·Λ``, on the grid ``t`` (mapped to the tag's clock by
@@ -117,7 +120,8 @@ def _stroke_curves(
     curves = []
     for p, plan in enumerate(tag.plans):
         offset = 0.0 if offsets is None else offsets[p]
-        tau = (t - offset) / time_scale
+        scale = time_scale if isinstance(time_scale, int | float) else time_scale[p]
+        tau = (t - offset) / scale
         length = plan.geometry.length
         for j in range(plan.n_strokes):
             # Roughly where Λ is above 1e-3 of its peak (a lognormal in ln(t − t0)).
@@ -128,7 +132,7 @@ def _stroke_curves(
             if keep.sum() < 2:
                 continue
             y = length[j] * lognormal(tau[keep], plan.onsets[j], plan.mu[j], plan.sigma[j])
-            curves.append(Curve(t[keep], y * speed_scale / time_scale))
+            curves.append(Curve(t[keep], y * speed_scale / scale))
     return curves
 
 
@@ -225,6 +229,8 @@ class RunFolder:
     mm_per_unit: float | None
     time_scale: float | None
     runs: list[dict[str, float]]
+    timing: dict[int, tuple[float, float, float]] = field(default_factory=dict)
+    """Per plan: ``(scale, tag_start, start)`` from ``placement.runs``."""
 
 
 def _read_executed(path: Path) -> Executed:
@@ -251,7 +257,12 @@ def _read_executed(path: Path) -> Executed:
     return Executed(t=data[:, 0], xy=data[:, 1:3], pen=(data[:, 3] != 0).astype(np.int8))
 
 
-def _read_report(path: Path) -> tuple[float | None, float | None, list[dict[str, float]]]:
+RunTiming = dict[int, tuple[float, float, float]]
+"""Per plan ``(scale, tag_start, start)``: machine time is ``start + scale * (tau - tag_start)``."""
+Runs = list[dict[str, float]]
+
+
+def _read_report(path: Path) -> tuple[float | None, float | None, Runs, RunTiming]:
     try:
         report = json.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, UnicodeDecodeError, ValueError) as e:
@@ -281,7 +292,20 @@ def _read_report(path: Path) -> tuple[float | None, float | None, list[dict[str,
             raise InputError(
                 f"{path}: runs[{k}]: expected plan, planned_start and executed_start"
             ) from None
-    return values[0], values[1], runs
+    timing: RunTiming = {}
+    entries = placement.get("runs") if isinstance(placement, dict) else None
+    for k, entry in enumerate(entries or []):
+        try:
+            values_k = tuple(float(entry[key]) for key in ("scale", "tag_start", "start"))
+            plan = int(entry["plan"])
+        except (KeyError, TypeError, ValueError):
+            raise InputError(
+                f"{path}: placement.runs[{k}]: expected plan, scale, tag_start and start"
+            ) from None
+        if not all(math.isfinite(v) for v in values_k) or values_k[0] <= 0:
+            raise InputError(f"{path}: placement.runs[{k}]: scale must be > 0, times finite")
+        timing[plan] = values_k  # type: ignore[assignment]
+    return values[0], values[1], runs, timing
 
 
 def load_run(run_dir: str | os.PathLike[str]) -> RunFolder:
@@ -301,9 +325,10 @@ def load_run(run_dir: str | os.PathLike[str]) -> RunFolder:
     )
     mm_per_unit = time_scale = None
     runs: list[dict[str, float]] = []
+    timing: dict[int, tuple[float, float, float]] = {}
     if (folder / "report.json").is_file():
-        mm_per_unit, time_scale, runs = _read_report(folder / "report.json")
-    return RunFolder(folder, tag, motion, executed, mm_per_unit, time_scale, runs)
+        mm_per_unit, time_scale, runs, timing = _read_report(folder / "report.json")
+    return RunFolder(folder, tag, motion, executed, mm_per_unit, time_scale, runs, timing)
 
 
 def run_speed_curves(run: RunFolder) -> SpeedCurves:
@@ -321,7 +346,12 @@ def run_speed_curves(run: RunFolder) -> SpeedCurves:
     edges = np.flatnonzero(np.diff(down))
     planned_starts = [float(t[a]) for a in edges[::2]]
     strokes: list[Curve] = []
-    if run.tag is not None and run.time_scale and run.mm_per_unit:
+    plans = range(len(run.tag.plans)) if run.tag is not None else range(0)
+    if run.tag is not None and run.mm_per_unit and all(p in run.timing for p in plans):
+        scales = [run.timing[p][0] for p in plans]
+        offsets = [run.timing[p][2] - run.timing[p][0] * run.timing[p][1] for p in plans]
+        strokes = _stroke_curves(run.tag, t, offsets, scales, run.mm_per_unit)
+    elif run.tag is not None and run.time_scale and run.mm_per_unit:
         starts = {int(r["plan"]): float(r["planned_start"]) for r in run.runs}
         offsets = []
         for p, plan in enumerate(run.tag.plans):

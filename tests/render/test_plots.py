@@ -170,3 +170,21 @@ def test_bad_run_folders(tmp_path: Path, run_dir: Path) -> None:
         load_run(run_dir)
     with pytest.raises(RenderError, match="a plot is a"):
         plot(run_dir, tmp_path / "plot.jpg")
+
+
+@pytest.mark.parametrize("device", ["grbl", "dynamixel"])
+def test_strokes_follow_each_runs_own_time_scale(tmp_path: Path, cae: Tag, device: str) -> None:
+    from tagbot.draw import draw
+
+    draw(cae, tmp_path / device, device=device, pictures=False)
+    run = load_run(tmp_path / device)
+    scales = sorted(s for s, _, _ in run.timing.values())
+    assert len(run.timing) == len(cae.plans) and scales[-1] > 1.05 * scales[0]  # runs differ
+    curves = run_speed_curves(run)
+    total = np.zeros_like(curves.speed.t)
+    for c in curves.strokes:
+        total[np.searchsorted(curves.speed.t, c.t)] += c.y
+    planned = np.nan_to_num(curves.speed.y)
+    # With the right clock per run, the planned speed stays under the strokes' envelope (a wrong
+    # scale or start moves the lognormals off the speed's peaks).
+    assert np.all(planned <= total + 0.03 * planned.max())
