@@ -318,8 +318,9 @@ class GrblExecutor:
         if self.state == RUN:
             self._prep_buffer()
             self._wake_up()
-        elif self.state == HOLD:
+        elif self.state == HOLD and not self.hold_complete:
             self._prep_buffer()  # a hold still decelerating may carry on into the new block
+        # A completed hold prepares nothing (Grbl's END_MOTION): the block waits for the resume.
         elif self.auto_start:
             self._auto_cycle_start()
         return True

@@ -552,3 +552,16 @@ def test_feed_hold_stops_where_the_real_firmware_stopped() -> None:
     assert ex.resume()
     ex.run_until(4.034 - 0.030)
     assert ex.position_mm[0] == pytest.approx(8.948, abs=0.02)
+
+
+def test_a_block_queued_during_a_hold_from_idle_waits_for_the_resume() -> None:
+    """A pause while idle (between pen moves) must not swallow the next line's motion."""
+    ex = GrblExecutor(PLOTTER, auto_start=False)
+    ex.feed_hold()
+    assert ex.state == HOLD and ex.hold_complete
+    assert ex.submit(feed(0.0, 0.5, f=830.0)) and ex.queued_blocks == 1
+    ex.advance(1.0)
+    assert ex.position_mm == (0.0, 0.0, 0.0)  # held: nothing moves
+    assert ex.resume()
+    ex.advance(2.0)
+    assert ex.idle and ex.position_mm[:2] == pytest.approx((0.0, 0.5), abs=1 / 160)
