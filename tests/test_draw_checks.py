@@ -97,3 +97,22 @@ def test_ctrl_c_names_the_last_executed_line_and_keeps_the_run_folder(tmp_path, 
     assert report["resume_from"] == done + 1 and report["completed"] is False
     for name in ("plan.json", "motion.csv", "program.gcode", "executed.csv"):
         assert (out / name).is_file(), name
+
+
+def test_a_resumed_job_reports_against_what_was_left_to_draw(tmp_path):
+    profile = load_profile()
+    device = _CtrlC(300, {**device_settings(profile), 10: 3}, pen_servo=(30, 50))
+    url = attach_device(device, "checks_resume")
+    code = main(["draw", str(LETTER_B), "--port", url, "--out", str(tmp_path / "a"), "-q"])
+    assert code == 130
+    resume = json.loads((tmp_path / "a" / "report.json").read_text())["resume_from"]
+    args = ["--resume-from", str(resume), "--position-known", "--no-pictures", "-q"]
+    url = attach_device(device, "checks_resume_again")  # the same machine, opened again
+    code = main(["draw", str(LETTER_B), "--port", url, "--out", str(tmp_path / "b"), *args])
+    assert code == 0
+    report = json.loads((tmp_path / "b" / "report.json").read_text())
+    assert report["completed"] and report["executed"] == report["total"]
+    assert report["details"]["first_line"] == resume
+    # Compared with the part of the run that was left, not with the whole drawing.
+    assert report["path_deviation_max_mm"] < 0.05 and report["speed_snr_db"] > 25
+    assert report["pen_down_runs"] == {"planned": 1, "executed": 1}

@@ -189,12 +189,13 @@ class PlotterJob:
             link.close()
         stream = streamer.last_report if streamer is not None else None
         executed, runs = _executed(stream, device, program, first)
+        planned_runs, plans, runs = _from_line(program, first, runs)
         done = stream.lines_executed if stream is not None else first
         return MachineRun(
             device="grbl",
             motion=program.timeline(TIMELINE_STEP),
-            planned_runs=program.planned_runs,
-            plans=list(program.run_plans),
+            planned_runs=planned_runs,
+            plans=plans,
             executed=executed,
             executed_runs=runs,
             executed_source=(
@@ -216,6 +217,29 @@ class PlotterJob:
             details=_details(program, profile, stream, device),
             error=error,
         )
+
+
+def _from_line(
+    program: Program, first: int, runs: np.ndarray | None
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[int], np.ndarray | None]:
+    """The planned runs (and their plans) of a job resumed at line ``first``: what is left of
+    each from that line's start on; ``runs`` (executed samples' run indices) renumbered."""
+    planned, plans = list(program.planned_runs), list(program.run_plans)
+    if first == 0:
+        return planned, plans, runs
+    start = float(program.line_start[first])
+    kept: list[tuple[np.ndarray, np.ndarray]] = []
+    kept_plans: list[int] = []
+    index = {}
+    for k, (t, xy) in enumerate(planned):
+        rest = t >= start - 1e-9
+        if rest.sum() >= 2:
+            index[k] = len(kept)
+            kept.append((t[rest], xy[rest]))
+            kept_plans.append(plans[k])
+    if runs is not None:
+        runs = np.array([index.get(int(r), -1) for r in runs], dtype=int)
+    return kept, kept_plans, runs
 
 
 def _where(stream: StreamReport | None, total: int) -> str:
