@@ -140,9 +140,14 @@ def fit(traces: Sequence[Any], model: Model = "gamma", **options: Any) -> Tag:
         raise PlanError("traces: empty (nothing to fit)")
     points = np.concatenate(polylines)
     size = float(np.hypot(*np.ptp(points, axis=0)))
-    if size == 0.0:
-        size = 1.0  # only dots, all at one place: any scale will do
+    if not size > _NO_SIZE:
+        size = 1.0  # only dots, all at one place (or closer than a plan tells apart): any scale
     return sequence(fit_plans(polylines, size, model, opts), opts.lift, model)
+
+
+_NO_SIZE = 1e-90
+"""A tag smaller than this across is a dot: plans cannot hold targets that close (their chords
+must exceed 1e-100)."""
 
 
 def fit_trace(xy: ArrayLike, size: float, model: Model, opts: FitOptions) -> Plan:

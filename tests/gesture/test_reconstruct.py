@@ -206,3 +206,9 @@ def test_split_options_are_checked():
         fit([np.array([[0.0, 0.0], [1.0, 1.0]])], splits=-1)
     with pytest.raises(PlanError, match="split_error"):
         fit([np.array([[0.0, 0.0], [1.0, 1.0]])], split_error=-0.1)
+
+
+@pytest.mark.parametrize("model", ["gamma", "sigma"])
+def test_points_closer_than_a_plan_can_hold_fit_as_a_dot(model):
+    tag = fit([np.array([(0.0, 0.0), (0.0, 1.2e-202)])], model=model)  # found by hypothesis
+    assert np.hypot(*tag.sample(0.01).xy[-1]) <= 0.01
