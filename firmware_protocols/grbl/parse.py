@@ -83,8 +83,20 @@ def read_float(text: str, pos: int = 0) -> tuple[float, int] | None:
     the rest, counting leading zeros: ``123456789`` reads 123456780 and ``1.23456789`` reads
     1.2345678. None means no digit was found (Grbl's error 2). The value here is the exact decimal
     as a Python float; the AVR then stores it in 32 bits (about 7 significant digits), which is
-    not modelled.
+    not modelled here (the simulator does it from :func:`scan_number`).
     """
+    scanned = scan_number(text, pos)
+    if scanned is None:
+        return None
+    negative, mantissa, exponent, end = scanned
+    value = float(f"{mantissa}e{exponent}")
+    return (-value if negative else value), end
+
+
+def scan_number(text: str, pos: int = 0) -> tuple[bool, int, int, int] | None:
+    """The digits of a number at ``text[pos:]`` as Grbl's ``read_float`` collects them:
+    ``(negative, mantissa, exponent, end)`` with value ``±mantissa·10^exponent`` (the first 8
+    digits kept), or None when there is no digit."""
     end = len(text)
     i = pos
     negative = False
@@ -112,8 +124,7 @@ def read_float(text: str, pos: int = 0) -> tuple[float, int] | None:
         i += 1
     if not ndigit:
         return None
-    value = float(f"{mantissa}e{exponent}")
-    return (-value if negative else value), i
+    return negative, mantissa, exponent, i
 
 
 @dataclass(frozen=True)

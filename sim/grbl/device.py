@@ -127,6 +127,7 @@ from firmware_protocols.grbl.codes import (
     MSG_UNLOCKED,
     RX_BUFFER_SIZE,
 )
+from firmware_protocols.grbl.parse import scan_number
 from sim.grbl.executor import HOLD, RUN, GrblExecutor
 from sim.grbl.planner import PLANNER_CAPACITY, Dwell, GrblSettings, MotionBlock, PlanBlock
 
@@ -174,40 +175,19 @@ RX_CAPACITY = RX_BUFFER_SIZE - 1
 ALARM_REPORT_DELAY = 0.5
 """``report_alarm_message``'s ``delay_ms(500)`` after printing ``ALARM:N``."""
 
-_MAX_INT_DIGITS = 8
-
 
 def avr_read_float(text: str, pos: int = 0) -> tuple[float, int] | None:
     """Grbl's ``read_float`` as the firmware computes it, in 32-bit floats: ``(value, end)``.
 
-    The digits (at most 8 kept) make an integer, turned into a float and scaled by ``0.01``
-    and ``0.1`` steps (or ``10``), each product rounded to float32; so ``P0.15`` is
-    0.15000000596… and ``N9999999.5`` is 9999999. None when there is no digit.
+    The digits (at most 8 kept, :func:`~firmware_protocols.grbl.parse.scan_number`) make an
+    integer, turned into a float and scaled by ``0.01`` and ``0.1`` steps (or ``10``), each
+    product rounded to float32; so ``P0.15`` is 0.15000000596… and ``N9999999.5`` is 9999999.
+    None when there is no digit.
     """
-    i, end = pos, len(text)
-    negative = False
-    if i < end and text[i] in "+-":
-        negative = text[i] == "-"
-        i += 1
-    intval = exp = ndigit = 0
-    decimal = False
-    while i < end:
-        char = text[i]
-        if "0" <= char <= "9":
-            ndigit += 1
-            if ndigit <= _MAX_INT_DIGITS:
-                if decimal:
-                    exp -= 1
-                intval = intval * 10 + ord(char) - 48
-            elif not decimal:
-                exp += 1
-        elif char == "." and not decimal:
-            decimal = True
-        else:
-            break
-        i += 1
-    if not ndigit:
+    scanned = scan_number(text, pos)
+    if scanned is None:
         return None
+    negative, intval, exp, end = scanned
     f32 = np.float32
     value = f32(intval)
     if value != 0:
@@ -219,7 +199,7 @@ def avr_read_float(text: str, pos: int = 0) -> tuple[float, int] | None:
         while exp > 0:
             value = f32(float(value) * 10.0)
             exp -= 1
-    return (-float(value) if negative else float(value)), i
+    return (-float(value) if negative else float(value)), end
 
 
 def avr_words(text: str) -> dict[str, float]:
