@@ -46,9 +46,10 @@ def gcode_command(
     """Place and retime a tag on a Grbl pen plotter and write the G-code program.
 
     INPUT is a plan file, or a trace file (GML, SVG, points) that is fitted first. The tag is
-    fitted into the bed, slowed down uniformly to the machine's limits (never sped up), and
-    sampled every motion.dt seconds into inverse-time (G93) moves. Nothing is written when the
-    tag would leave the bed.
+    fitted into the bed, each pen-down run slowed down to the machine's limits (never sped up;
+    motion.time_scale=uniform slows the whole tag by one factor), and written as inverse-time
+    (G93) moves whose durations adapt to the motion (motion.dt to motion.max_dt, within
+    motion.tolerance mm). Nothing is written when the tag would leave the bed.
     """
     from tagbot.plotter.place import place
     from tagbot.plotter.profile import load_profile
