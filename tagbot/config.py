@@ -135,13 +135,18 @@ def _read_packaged(package: str, name: str) -> tuple[str, dict[str, Any]]:
 
 
 def _read_file(package: str, path: Path) -> tuple[str, dict[str, Any]]:
+    from tagbot.errors import InputError
+    from tagbot.inputs import read_input
+
     label = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
+    if not path.exists():
         names = ", ".join(packaged_names(package))
-        raise ProfileError(f"{label}: no such profile file (packaged profiles: {names})") from None
-    except (OSError, UnicodeDecodeError) as e:
+        raise ProfileError(f"{label}: no such profile file (packaged profiles: {names})")
+    try:
+        text = read_input(path).decode("utf-8")  # bounded, regular files only
+    except InputError as e:
+        raise ProfileError(str(e)) from e
+    except UnicodeDecodeError as e:
         raise ProfileError(f"{label}: cannot read ({e})") from e
     try:
         return label, tomllib.loads(text)

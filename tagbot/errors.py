@@ -25,6 +25,10 @@ class InputError(TagbotError, ValueError):
     """An input file (trace, motion, profile) is unreadable or invalid."""
 
 
+class OutputError(TagbotError, ValueError):
+    """An output path cannot be written (missing folder, not writable, an existing folder)."""
+
+
 class ProfileError(TagbotError, ValueError):
     """A machine profile is unreadable or invalid; the message names the file and the field."""
 

@@ -18,7 +18,14 @@ from tagbot.model.plan import Tag
 Array = NDArray[np.float64]
 
 DENSITY = 4000
-"""Polylines are densified to at least this many points per bounding-box diagonal."""
+"""Polylines are sampled at least this many points per bounding-box diagonal..."""
+
+MAX_SAMPLES = 200_000
+"""... and at most this many points per drawing (long scribbles get a coarser spacing)."""
+
+
+GRID_PER_POINT = 4
+"""A recording is resampled at most this many times per recorded point (velocity SNR)."""
 
 
 @dataclass(frozen=True)
@@ -26,7 +33,7 @@ class ShapeError:
     """Closest-point distances between two sets of polylines, as fractions of the input's size."""
 
     mean: float
-    """Mean over both directions (input → reconstruction and back)."""
+    """Mean over both directions (input → reconstruction and back), by arc length."""
     max: float
     """The largest distance either way (Hausdorff distance)."""
     size: float
@@ -46,11 +53,43 @@ def densify(polyline: ArrayLike, spacing: float) -> Array:
     return np.vstack([start + delta * offset[:, None], xy[-1:]])
 
 
+class _Polylines:
+    """Polylines sampled at ``spacing``, with the segments that lead to and from each sample."""
+
+    def __init__(self, polylines: list[Array], spacing: float) -> None:
+        pieces = [densify(p, spacing) for p in polylines]
+        self.points = np.concatenate(pieces)
+        ends = np.cumsum([len(p) for p in pieces])
+        # The previous and next sample of each sample, itself at a polyline's ends.
+        index = np.arange(len(self.points))
+        self.before = index - 1
+        self.after = index + 1
+        self.before[ends[:-1]] = ends[:-1]
+        self.before[0] = 0
+        self.after[ends - 1] = ends - 1
+        self.tree = cKDTree(self.points)
+
+    def distance(self, query: Array) -> Array:
+        """Each query point's exact distance to the polylines near its closest sample."""
+        near, i = self.tree.query(query)
+        best = near
+        for j in (self.before[i], self.after[i]):
+            a, b = self.points[i], self.points[j]
+            ab = b - a
+            length2 = np.einsum("ij,ij->i", ab, ab)
+            u = np.einsum("ij,ij->i", query - a, ab) / np.where(length2 > 0, length2, 1.0)
+            foot = a + np.clip(u, 0.0, 1.0)[:, None] * ab
+            best = np.minimum(best, np.hypot(*(query - foot).T))
+        return best
+
+
 def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) -> ShapeError:
     """Mean and max closest-point distance between two drawings, over the reference's size.
 
-    Both are lists of polylines ``(N, 2)``; each is densified to :data:`DENSITY` points per
-    diagonal, so distances are exact to within 1/(2·DENSITY) of the size.
+    Both are lists of polylines ``(N, 2)``, sampled :data:`DENSITY` points per diagonal (at most
+    :data:`MAX_SAMPLES` per drawing); each sample's distance is to the other drawing's segments
+    next to its closest sample, so the figures are exact up to the sampling of the mean. Cost
+    O(n log n) in the samples.
     """
     ref = [np.asarray(p, dtype=float) for p in reference if len(p)]
     cand = [np.asarray(p, dtype=float) for p in candidate if len(p)]
@@ -59,11 +98,13 @@ def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) 
     points = np.concatenate(ref)
     size = float(np.hypot(*np.ptp(points, axis=0))) or 1.0
     spacing = size / DENSITY
-    a = np.concatenate([densify(p, spacing) for p in ref])
-    b = np.concatenate([densify(p, spacing) for p in cand])
-    a_to_b, _ = cKDTree(b).query(a)
-    b_to_a, _ = cKDTree(a).query(b)
-    mean = (a_to_b.sum() + b_to_a.sum()) / (len(a) + len(b))
+    for drawing in (ref, cand):
+        length = sum(float(np.hypot(*np.diff(p, axis=0).T).sum()) for p in drawing)
+        spacing = max(spacing, length / MAX_SAMPLES)
+    a, b = _Polylines(ref, spacing), _Polylines(cand, spacing)
+    a_to_b = b.distance(a.points)
+    b_to_a = a.distance(b.points)
+    mean = (a_to_b.sum() + b_to_a.sum()) / (len(a_to_b) + len(b_to_a))
     return ShapeError(
         mean=float(mean) / size, max=float(max(a_to_b.max(), b_to_a.max())) / size, size=size
     )
@@ -96,43 +137,65 @@ def velocity_snr(
     The recording (times ``t``, points ``xy``) is resampled every ``dt`` seconds and its velocity
     taken by central differences; the model velocity ``model_v`` (at ``model_t``) is mapped to the
     recording's clock by ``t = offset + scale·(t_model − model_t[0])`` (velocities divide by
-    ``scale``). Returns
-    ``(snr_db, scale, offset)`` for the scale and offset maximising
-    ``10·log10(Σ|v|² / Σ|v − v̂|²)``.
+    ``scale``). Returns ``(snr_db, scale, offset)`` for the scale and offset maximising
+    ``10·log10(Σ|v|² / Σ|v − v̂|²)``: for each of 41 scales from ¼ to 4 times the span ratio,
+    every offset on the ``dt`` grid at once (a cross-correlation by FFT), then a local search
+    around the best pair. Cost O(n log n) in the samples.
     """
     model_t, model_v = np.asarray(model_t, dtype=float), np.asarray(model_v, dtype=float)
-    model_t = model_t - model_t[0]  # the mapping's offset is from the model's first sample
     if len(model_t) < 2:
         raise ValueError("velocity_snr: the model needs at least 2 samples")
+    model_t = model_t - model_t[0]  # the mapping's offset is from the model's first sample
     grid, v = recorded_velocity(t, xy, dt)
-    energy = float(np.sum(v * v))
-    model_span = model_t[-1] - model_t[0]
+    dt = float(grid[1] - grid[0])
+    rec = v[:, 0] + 1j * v[:, 1]
+    model = model_v[:, 0] + 1j * model_v[:, 1]
+    energy = float(np.sum(rec.real**2 + rec.imag**2))
+    model_span = float(model_t[-1])
+    span = float(grid[-1] - grid[0])
 
     def snr(scale: float, offset: float) -> float:
         tm = (grid - offset) / scale
-        vm = np.column_stack(
-            [np.interp(tm, model_t, model_v[:, i], left=0.0, right=0.0) for i in (0, 1)]
+        vm = np.interp(tm, model_t, model.real, 0.0, 0.0) + 1j * np.interp(
+            tm, model_t, model.imag, 0.0, 0.0
         )
-        err = v - vm / scale
-        return 10.0 * np.log10(energy / max(float(np.sum(err * err)), 1e-300))
+        err = rec - vm / scale
+        return 10.0 * np.log10(energy / max(float(np.sum(err.real**2 + err.imag**2)), 1e-300))
 
-    best = (-np.inf, 1.0, 0.0)
-    span = grid[-1] - grid[0]
+    best = (-np.inf, 1.0, float(grid[0]))
+    n = len(rec)
     for scale in np.geomspace(0.25, 4.0, 41) * (span / model_span if model_span > 0 else 1.0):
-        slack = span - scale * model_span
-        for offset in grid[0] + np.linspace(min(0.0, slack), max(0.0, slack), 21):
-            value = snr(scale, offset)
-            if value > best[0]:
-                best = (value, scale, offset)
-    # Refine around the best coarse pair.
-    _, scale, offset = best
-    for width in (0.1, 0.02, 0.004):
-        for s in scale * np.linspace(1 - width, 1 + width, 9):
-            for o in offset + span * np.linspace(-width, width, 9):
-                value = snr(s, o)
-                if value > best[0]:
-                    best = (value, s, o)
+        # The model on the recording's grid spacing, offsets m·dt from the grid's start:
+        # the model's sample k lands on recording sample k + m.
+        k = int(model_span * scale / dt) + 1
+        w = (
+            np.interp(np.arange(k) * dt / scale, model_t, model.real)
+            + 1j * np.interp(np.arange(k) * dt / scale, model_t, model.imag)
+        ) / scale
+        slack = (span - scale * model_span) / dt
+        lo, hi = int(np.floor(min(0.0, slack))), int(np.ceil(max(0.0, slack)))
+        size = 1 << int(np.ceil(np.log2(n + k + 1)))
+        # cross[m] = Σ_j rec[j]·conj(w[j − m]) for m in [lo, hi] (negative m wrap around).
+        cross = np.fft.ifft(np.fft.fft(rec, size) * np.conj(np.fft.fft(w, size)))
+        m = np.arange(lo, hi + 1)
+        # Σ |w[j − m]|² over the overlap 0 ≤ j < n, 0 ≤ j − m < k.
+        cum = np.concatenate([[0.0], np.cumsum(w.real**2 + w.imag**2)])
+        first, last = np.clip(-m, 0, k), np.clip(n - m, 0, k)
+        overlap = cum[np.maximum(last, first)] - cum[first]
+        err = energy - 2.0 * cross[m % size].real + overlap
+        i = int(np.argmin(err))
+        value = 10.0 * np.log10(energy / max(float(err[i]), 1e-300))
+        if value > best[0]:
+            best = (value, float(scale), float(grid[0] + m[i] * dt))
+    # Polish the best pair on a shrinking pattern (scale relative, offset in seconds).
+    best = (snr(best[1], best[2]), best[1], best[2])
+    for width in (0.1, 0.03, 0.01, 0.003, 0.001):
         _, scale, offset = best
+        for s in scale * (1 + width * np.linspace(-1, 1, 7)):
+            for o in offset + np.linspace(-1, 1, 7) * width * max(span, dt):
+                value = snr(float(s), float(o))
+                if value > best[0]:
+                    best = (value, float(s), float(o))
     return best
 
 
@@ -148,6 +211,8 @@ class FitReport:
     """Strokes per 180° of the input's turning (the paper adds one per 180°)."""
     velocity_snr_db: float | None
     """Velocity SNR against the recorded timing (None when the input has none)."""
+    clock: str | None = None
+    """How the input's clock unit was read (``Trace.clock``), None when no reader decided it."""
 
     def summary(self) -> str:
         """One line for people."""
@@ -198,20 +263,26 @@ def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitRepo
         shape=shape,
         strokes_per_half_turn=tag.n_strokes / turning if turning > 0 else float("nan"),
         velocity_snr_db=snr,
+        clock=next((c for c in (getattr(tr, "clock", None) for tr in traces) if c), None),
     )
 
 
 def recorded_velocity(t: ArrayLike, xy: ArrayLike, dt: float = 0.01) -> tuple[Array, Array]:
-    """A recording resampled every ``dt`` seconds and its velocity by central differences.
+    """A recording resampled on a regular grid and its velocity by central differences.
 
-    Repeated time stamps are dropped (the first of each kept).
+    The grid's step is ``dt`` seconds, or coarser for a sparse recording: at most
+    :data:`GRID_PER_POINT` grid samples per recorded point, so the cost follows the points, not
+    the clock's span. Repeated time stamps are dropped (the first of each kept).
     """
     t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
     keep = np.concatenate([[True], np.diff(t) > 0])
     t, xy = t[keep], xy[keep]
+    if len(t) >= 3:
+        dt = max(dt, float(t[-1] - t[0]) / (GRID_PER_POINT * len(t)))
     if len(t) < 3 or t[-1] - t[0] < 3 * dt:
         raise ValueError("velocity: the recording needs at least 3 samples over 3·dt")
-    grid = np.arange(t[0], t[-1], dt)
+    grid = t[0] + dt * np.arange(int((t[-1] - t[0]) / dt) + 1)
+    grid = grid[grid <= t[-1]]
     rec = np.column_stack([np.interp(grid, t, xy[:, 0]), np.interp(grid, t, xy[:, 1])])
     return grid, np.gradient(rec, dt, axis=0)
 

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from tagbot.errors import PlanError, PlanFileError
+from tagbot.errors import OutputError, PlanError, PlanFileError
 from tagbot.io.planfile import load_plan, save_plan, tag_from_dict, tag_to_dict
 from tagbot.model.plan import Plan, Tag
 
@@ -214,7 +214,7 @@ def test_failed_save_keeps_old_file_and_removes_temp(
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(os, "replace", broken_replace)
-    with pytest.raises(OSError, match="No space left"):
+    with pytest.raises(OutputError, match=r"tag\.json: cannot write \(No space left"):
         save_plan(tag_from_dict(doc()), path)
     assert sorted(os.listdir(tmp_path)) == ["tag.json"]
     assert path.read_text(encoding="utf-8") == "old"

@@ -8,6 +8,7 @@ import json
 import math
 import os
 import re
+import stat
 from collections.abc import Iterator
 from dataclasses import dataclass
 from xml.etree.ElementTree import ParseError
@@ -36,21 +37,41 @@ _NUMBER = re.compile(r"[+-]?(?:\d+(?:[.,]\d*)?|[.,]\d+)(?:[eE][+-]?\d+)?")
 def read_input(path: str | os.PathLike[str]) -> bytes:
     """Read a whole input file, refusing one larger than :data:`MAX_INPUT_BYTES`.
 
-    The size is checked with ``fstat`` before reading and again while reading (for pipes and
-    special files whose size ``fstat`` does not know).
+    Only regular files are read: a FIFO, socket or device is refused at once (opened without
+    blocking, so a FIFO nobody writes to cannot hang the reader). The size is checked with
+    ``fstat`` before reading and again while reading.
     """
     name = os.fsdecode(path)
     try:
-        with open(path, "rb") as f:
-            size = os.fstat(f.fileno()).st_size
-            if size > MAX_INPUT_BYTES:
-                raise InputError(f"{name}: {_too_big(size)}")
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+    except OSError as e:
+        raise InputError(f"{name}: cannot read ({e.strerror or e})") from e
+    try:
+        with os.fdopen(fd, "rb") as f:
+            info = os.fstat(f.fileno())
+            if not stat.S_ISREG(info.st_mode):
+                raise InputError(f"{name}: not a regular file ({_kind(info.st_mode)})")
+            if info.st_size > MAX_INPUT_BYTES:
+                raise InputError(f"{name}: {_too_big(info.st_size)}")
             data = f.read(MAX_INPUT_BYTES + 1)
     except OSError as e:
         raise InputError(f"{name}: cannot read ({e.strerror or e})") from e
     if len(data) > MAX_INPUT_BYTES:
         raise InputError(f"{name}: {_too_big(None)}")
     return data
+
+
+def _kind(mode: int) -> str:
+    for test, kind in (
+        (stat.S_ISDIR, "a folder"),
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+    ):
+        if test(mode):
+            return kind
+    return "not a file"
 
 
 def check_size(data: bytes, name: str) -> None:
@@ -323,9 +344,9 @@ def _json_to_node(name: str, value: object) -> Node:
     return root
 
 
-def make_trace(name: str, xy: np.ndarray, t: np.ndarray | None) -> Trace:
+def make_trace(name: str, xy: np.ndarray, t: np.ndarray | None, clock: str | None = None) -> Trace:
     """A :class:`Trace`, its validation errors prefixed with the file's name."""
     try:
-        return Trace(xy, t)
+        return Trace(xy, t, clock)
     except InputError as e:  # pragma: no cover - readers check their values first
         raise InputError(f"{name}: {e}") from e

@@ -108,11 +108,10 @@ def read_motion_csv(source: str | os.PathLike[str] | TextIO) -> MotionTable:
     """Read a motion CSV written by :func:`write_motion_csv`; problems raise InputError."""
     if isinstance(source, str | os.PathLike):
         name = os.fsdecode(source)
+        from tagbot.inputs import read_input
+
         try:
-            with open(source, encoding="utf-8", newline="") as f:
-                text = f.read()
-        except OSError as e:
-            raise InputError(f"{name}: cannot read ({e.strerror or e})") from e
+            text = read_input(source).decode("utf-8")  # bounded, regular files only
         except UnicodeDecodeError as e:
             raise InputError(f"{name}: not UTF-8 text (byte {e.start})") from e
     else:

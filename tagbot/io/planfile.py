@@ -14,18 +14,16 @@ with ``repr`` so a saved tag loads back bit-exactly.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
-import secrets
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from tagbot.errors import PlanFileError
+from tagbot.io.output import write_atomic
 from tagbot.model.plan import Plan, Tag
 
 __all__ = ["FORMAT", "VERSION", "load_plan", "save_plan", "tag_from_dict", "tag_to_dict"]
@@ -36,7 +34,6 @@ FORMAT = "tagbot-plan"
 VERSION = 1
 """The only plan file version this tagbot reads and writes."""
 
-_CREATE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
 
 _STROKE_FIELDS = {
     "gamma": ("dt", "mu", "sigma", "phi1", "phi2"),
@@ -50,11 +47,13 @@ _STROKE_FIELDS = {
 def load_plan(path: str | os.PathLike[str]) -> Tag:
     """Read a plan file and return its :class:`Tag`; every problem raises PlanFileError."""
     name = os.fsdecode(path)
+    from tagbot.errors import InputError
+    from tagbot.inputs import read_input
+
     try:
-        with open(path, "rb") as f:
-            raw = f.read()
-    except OSError as e:
-        raise PlanFileError(f"{name}: cannot read ({e.strerror or e})") from e
+        raw = read_input(path)  # bounded, regular files only
+    except InputError as e:
+        raise PlanFileError(str(e)) from (e.__cause__ or e)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
@@ -97,7 +96,7 @@ def tag_from_dict(d: Any) -> Tag:
     try:
         return Tag(plans, model=model, units=units)
     except ValueError as e:
-        raise PlanFileError(str(e)) from e
+        raise PlanFileError(str(e)) from (e.__cause__ or e)
 
 
 def _plan_from_dict(p: Any, path: str, model: str) -> Plan:
@@ -264,31 +263,7 @@ def tag_to_dict(tag: Tag) -> dict[str, Any]:
 
 def save_plan(tag: Tag, path: str | os.PathLike[str]) -> None:
     """Write ``tag`` to ``path`` as a plan file, atomically (temp file + ``os.replace``)."""
-    text = _dumps(tag_to_dict(tag)) + "\n"
-    target = Path(path)
-    _atomic_write_text(target, text)
-
-
-def _atomic_write_text(target: Path, text: str) -> None:
-    """Write ``text`` to a fresh temp file next to ``target``, then rename it over ``target``."""
-    data = text.encode("utf-8")
-    while True:
-        tmp = target.with_name(f".{target.name}.{secrets.token_hex(4)}.tmp")
-        try:
-            fd = os.open(tmp, _CREATE_FLAGS, 0o666)  # permissions as for open(): 0o666 & ~umask
-        except FileExistsError:
-            continue
-        break
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
+    write_atomic(path, (_dumps(tag_to_dict(tag)) + "\n").encode("utf-8"))
 
 
 def _dumps(v: Any, indent: str = "") -> str:

@@ -163,10 +163,9 @@ class Program:
 
     def write(self, path: str | Path) -> None:
         """Write the program to ``path`` (ASCII, ``\\n`` line ends), via a temporary file."""
-        target = Path(path)
-        temporary = target.with_name(target.name + ".tmp")
-        temporary.write_text(self.text, encoding="ascii", newline="\n")
-        temporary.replace(target)
+        from tagbot.io.output import write_atomic
+
+        write_atomic(path, self.text.encode("ascii"))
 
     def summary(self) -> str:
         return (
