@@ -146,8 +146,25 @@ def sample(plan: str, dt: float, output: str) -> None:
     )
 
 
+def corpus_options(f: F) -> F:
+    """``--jobs`` and ``--scheduler`` of commands that take many inputs."""
+    f = click.option(
+        "--scheduler",
+        metavar="ADDRESS",
+        default=None,
+        help="Run the files on this dask.distributed scheduler (needs tagbot[dask]).",
+    )(f)
+    return click.option(
+        "--jobs",
+        "-j",
+        type=click.IntRange(min=1),
+        default=None,
+        help="Worker processes for many inputs [default: the CPU count].",
+    )(f)
+
+
 @cli.command(name="fit")
-@click.argument("source", metavar="INPUT", type=click.Path(dir_okay=False))
+@click.argument("sources", metavar="INPUT...", nargs=-1, required=True)
 @click.option(
     "--model",
     type=click.Choice(["gamma", "sigma"]),
@@ -161,34 +178,132 @@ def sample(plan: str, dt: float, output: str) -> None:
     show_default=True,
     help="Polish the paper's reconstruction by least squares.",
 )
-@_output_file("PLAN.json", "the plan")
-def fit_command(source: str, model: str, refine: bool, output: str) -> None:
-    """Reconstruct a plan from a trace file (GML, #000000book JSON, SVG, CSV or JSON points).
+@click.option(
+    "--report/--no-report",
+    default=True,
+    show_default=True,
+    help="Measure the fit (shape error, velocity SNR); --no-report skips the metrics.",
+)
+@click.option(
+    "-o",
+    "--output",
+    metavar="PLAN.json|DIR",
+    default=None,
+    help="One input: the plan file ('-' or none: stdout). Many inputs: the folder for the plans "
+    "and summary.csv (created if needed).",
+)
+@click.option("--force", is_flag=True, help="Many inputs: replace plans already in the folder.")
+@corpus_options
+def fit_command(
+    sources: tuple[str, ...],
+    model: str,
+    refine: bool,
+    report: bool,
+    output: str | None,
+    force: bool,
+    jobs: int | None,
+    scheduler: str | None,
+) -> None:
+    """Reconstruct plans from trace files (GML, #000000book JSON, SVG, CSV or JSON points).
 
-    The format is told from the content. Prints the traces, strokes, shape error (and velocity
-    SNR when the input has timing) and the fit time on stderr.
+    The format is told from the content. One INPUT: prints the traces, strokes, shape error (and
+    velocity SNR when the input has timing) and the command's wall time on stderr. Many (several
+    files, folders searched for trace files, or quoted globs like 'tags/**/*.gml'): each is fitted
+    in a worker process into DIR, with a progress bar, and DIR/summary.csv gets one row per file
+    (figures or error); the exit status is 1 when any file failed.
     """
     import time
 
-    from tagbot.gesture import fit
-    from tagbot.inputs import load_traces
-    from tagbot.io.planfile import save_plan, tag_to_dict
-    from tagbot.metrics import fit_report
+    from tagbot.corpus import FileJob, fit_file, is_corpus
 
-    traces = load_traces(source)
     started = time.perf_counter()
-    tag = fit(traces, model=model, refine=refine)
-    elapsed = time.perf_counter() - started
+    options = {"model": model, "report": report, "fit": {"refine": refine}}
+    if is_corpus(sources):
+        ctx = click.get_current_context()
+        ctx.exit(_run_corpus(fit_file, sources, output, ".json", options, force, jobs, scheduler))
+    source = sources[0]
+    if output is None:
+        output = "-"
+    from tagbot.io.output import check_output_file
+
+    check_output_file(output)
+    from tagbot.corpus import fit_one
+
+    row: dict[str, Any] = {}
+    tag = fit_one(FileJob(source, None if output == "-" else output, options), row)
     if output == "-":
         import json
 
+        from tagbot.io.planfile import tag_to_dict
+
         click.echo(json.dumps(tag_to_dict(tag), indent=1))
-    else:
-        save_plan(tag, output)
-    report = fit_report(traces, tag)
-    click.echo(f"{source}: {report.summary()}; fit {elapsed:.2f} s", err=True)
+    elapsed = time.perf_counter() - started
+    figures = row.get("summary", f"{row['traces']} traces -> {row['strokes']} strokes")
+    clock = f"; clock {row['clock']}" if row["clock"] not in ("untimed", "s") else ""
+    click.echo(
+        f"{source}: {figures}{clock}; {elapsed:.2f} s (load {row['load_s']:.2f}, "
+        f"fit {row['fit_s']:.2f}" + (f", report {row['report_s']:.2f})" if report else ")"),
+        err=True,
+    )
     if output != "-":
         click.echo(f"wrote {output}", err=True)
+
+
+def _run_corpus(
+    work: Callable[..., dict[str, Any]],
+    sources: Sequence[str],
+    output: str | None,
+    suffix: str,
+    options: dict[str, Any],
+    force: bool,
+    jobs: int | None,
+    scheduler: str | None,
+    quiet: bool = False,
+) -> int:
+    """Run ``work`` over many inputs into the folder ``output``; the exit status."""
+    from pathlib import Path
+
+    from tagbot.corpus import FileJob, expand_inputs, map_files, output_paths, write_summary
+    from tagbot.errors import OutputError
+    from tagbot.io.output import check_output_folder
+
+    if output is None or output == "-":
+        raise click.UsageError("many inputs need -o DIR, the folder for the results")
+    check_output_folder(output)
+    files = expand_inputs(sources)
+    outputs = output_paths(files, output, suffix)
+    summary = Path(output) / "summary.csv"
+    if not force:
+        existing = [p for p in [*outputs, str(summary)] if Path(p).exists()]
+        if existing:
+            more = f" and {len(existing) - 1} more" if len(existing) > 1 else ""
+            raise OutputError(f"{existing[0]}: exists{more} (--force replaces them)")
+    Path(output).mkdir(parents=True, exist_ok=True)
+    workers = jobs or os.cpu_count() or 1
+    batch = [FileJob(s, o, options) for s, o in zip(files, outputs, strict=True)]
+    rows = []
+    bar = _progress_bar("file", quiet)
+    bar.reset(total=len(batch))
+    failed = 0
+    try:
+        for row in map_files(work, batch, workers=workers, scheduler=scheduler):
+            rows.append(row)
+            if row["status"] != "ok":
+                failed += 1
+                bar.write(f"{PROG}: error: {row['error']}", file=sys.stderr)
+            bar.set_postfix_str(f"{failed} failed" if failed else "", refresh=False)
+            bar.update(1)
+    finally:
+        bar.close()
+        if rows:
+            write_summary(rows, summary)
+    where = f"via {scheduler}" if scheduler else f"{min(workers, len(batch))} worker(s)"
+    click.echo(
+        f"{len(rows) - failed} of {len(batch)} file(s) done, {failed} failed ({where}); "
+        f"summary in {summary}",
+        err=True,
+    )
+    return EXIT_ERROR if failed else EXIT_OK
 
 
 @cli.command()
@@ -208,26 +323,59 @@ def fit_command(source: str, model: str, refine: bool, output: str) -> None:
     required=True,
     help="Folder for the varied plans (created if needed).",
 )
-def vary(plan: str, count: int, seed: int | None, output: str) -> None:
+@click.option("--force", is_flag=True, help="Replace plans of the same names in the folder.")
+@click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
+def vary(plan: str, count: int, seed: int | None, output: str, force: bool, quiet: bool) -> None:
     """Write COUNT plausible variations of a plan (paper §7): targets, proportions, rhythm and
-    curvature varied at random, reproducibly for a seed."""
+    curvature varied at random, reproducibly for a seed.
+
+    The plans are written one by one as they are made (memory stays bounded), named
+    PLAN-0001.json and so on; existing plans of these names are kept unless --force.
+    """
+    import re
     from pathlib import Path
 
-    from tagbot.gesture import new_seed
-    from tagbot.gesture import vary as vary_tag
+    from tagbot.errors import OutputError
+    from tagbot.gesture import iter_vary, new_seed
+    from tagbot.io.output import check_output_folder
     from tagbot.io.planfile import load_plan, save_plan
 
+    if count > MAX_VARIATIONS:
+        raise click.BadParameter(
+            f"{count} is more than {MAX_VARIATIONS} (the most one run writes)", param_hint="--count"
+        )
+    check_output_folder(output)
     tag = load_plan(plan)
+    folder = Path(output)
+    stem = Path(plan).name.removesuffix(".json").removesuffix(".plan")
+    width = len(str(count))
+    if folder.is_dir() and not force:
+        mine = re.compile(rf"{re.escape(stem)}-(\d{{{width}}})\.json")
+        taken = sorted(
+            name
+            for name in os.listdir(folder)
+            if (m := mine.fullmatch(name)) and 1 <= int(m[1]) <= count
+        )
+        if taken:
+            more = f" and {len(taken) - 1} more" if len(taken) > 1 else ""
+            raise OutputError(f"{folder / taken[0]}: exists{more} (--force replaces them)")
     if seed is None:
         seed = new_seed()
         click.echo(f"seed {seed} (pass --seed {seed} to repeat)", err=True)
-    folder = Path(output)
     folder.mkdir(parents=True, exist_ok=True)
-    stem = Path(plan).name.removesuffix(".json").removesuffix(".plan")
-    width = len(str(count))
-    for i, instance in enumerate(vary_tag(tag, count, seed), start=1):
-        save_plan(instance, folder / f"{stem}-{i:0{width}d}.json")
+    bar = _progress_bar("plan", quiet or count < 100)
+    bar.reset(total=count)
+    try:
+        for i, instance in enumerate(iter_vary(tag, count, seed), start=1):
+            save_plan(instance, folder / f"{stem}-{i:0{width}d}.json")
+            bar.update(1)
+    finally:
+        bar.close()
     click.echo(f"wrote {count} plan{'s' * (count != 1)} to {folder}", err=True)
+
+
+MAX_VARIATIONS = 1_000_000
+"""Most plans ``tagbot vary`` writes in one run."""
 
 
 cli.add_command(gcode_command)

@@ -238,17 +238,18 @@ def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitRepo
     Traces are objects with ``xy`` and optional ``t`` (as :func:`tagbot.load_traces` returns).
     """
     polylines = [np.asarray(getattr(tr, "xy", tr), dtype=float) for tr in traces]
-    motion = tag.sample(dt)
-    shape = shape_error(polylines, pen_down_paths(motion))
+    # Each plan sampled on its own: a pen lift shorter than dt cannot make the report fail.
+    motions = [Tag((plan,), tag.model, tag.units).sample(dt) for plan in tag.plans]
+    shape = shape_error(polylines, [p for m in motions for p in pen_down_paths(m)])
     turning = turning_of(polylines)
     snr = None
     timed = [tr for tr in traces if getattr(tr, "t", None) is not None]
     if timed and len(timed) == len(traces) == len(tag.plans):
         signal = noise = 0.0
-        for trace, (_, rows) in zip(traces, motion.runs(), strict=True):
+        for trace, motion in zip(traces, motions, strict=True):
             t, xy = np.asarray(trace.t), np.asarray(trace.xy)
             try:
-                db, _, _ = velocity_snr(t, xy, motion.t[rows], motion.v[rows])
+                db, _, _ = velocity_snr(t, xy, motion.t, motion.v)
             except ValueError:  # too short to compare
                 continue
             _, v = recorded_velocity(t, xy)

@@ -9,6 +9,7 @@ default amplitudes keep a tag readable; the pen lifts keep their durations.
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterator
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -44,13 +45,21 @@ def new_seed() -> int:
 
 def vary(tag: Tag, count: int, seed: int, variation: Variation | None = None) -> list[Tag]:
     """``count`` instances of ``tag``; the same seed gives the same instances."""
+    return list(iter_vary(tag, count, seed, variation))
+
+
+def iter_vary(tag: Tag, count: int, seed: int, variation: Variation | None = None) -> Iterator[Tag]:
+    """:func:`vary`'s instances one at a time, in bounded memory whatever ``count``."""
     if int(count) != count or count < 1:
         raise PlanError(f"count: must be a whole number >= 1, got {count!r}")
     if int(seed) != seed or seed < 0:
         raise PlanError(f"seed: must be a whole number >= 0, got {seed!r}")
     variation = variation or Variation()
-    streams = np.random.SeedSequence(int(seed)).spawn(int(count))
-    return [_instance(tag, np.random.default_rng(s), variation) for s in streams]
+    root = np.random.SeedSequence(int(seed))
+    for _ in range(int(count)):
+        # spawn(1) n times gives the same children as spawn(n): instance i never depends on count.
+        (stream,) = root.spawn(1)
+        yield _instance(tag, np.random.default_rng(stream), variation)
 
 
 def _instance(tag: Tag, rng: np.random.Generator, v: Variation) -> Tag:
