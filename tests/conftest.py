@@ -9,6 +9,13 @@ from collections.abc import Iterator
 
 import pytest
 
+# Compiled kernels check their arguments in the whole suite (see tagbot.kernel_check): a kernel
+# reached with a non-finite or absurd value fails the test that reached it.
+os.environ.setdefault("TAGBOT_CHECK_KERNELS", "1")
+import tagbot.kernel_check  # noqa: E402
+
+tagbot.kernel_check.install()
+
 THREAD_GRACE_SECONDS = 2.0
 """How long a test's threads get to finish after the test before it fails for leaking them."""
 

@@ -79,6 +79,8 @@ def smooth(xy: Array, width: float) -> Array:
     xy = _points(xy)
     if width <= 0 or len(xy) < 3:
         return xy.copy()
+    # Wider than the curve averages it all the same: the weights stay as long as the curve.
+    width = min(float(width), float(len(xy)))
     pad = min(len(xy) - 1, math.ceil(4 * width))
     return kernels.smooth(xy, _gaussian_weights(float(width)), pad)
 
@@ -317,5 +319,5 @@ def sharpnesses(xy: Array, a: Indices, z: Indices, b: Indices) -> Array:
     if not z.size:
         return np.zeros(z.shape)
     # The inscribed angle at z from numpy's arccos (the kernels' C library rounds differently).
-    gamma = np.arccos(kernels.sharpness_cosines(xy, a, z, b))
+    gamma = np.arccos(np.clip(kernels.sharpness_cosines(xy, a, z, b), -1.0, 1.0))
     return kernels.sharpnesses(xy, a, z, b, gamma)

@@ -345,7 +345,14 @@ def _json_to_node(name: str, value: object) -> Node:
 
 
 def make_trace(name: str, xy: np.ndarray, t: np.ndarray | None, clock: str | None = None) -> Trace:
-    """A :class:`Trace`, its validation errors prefixed with the file's name."""
+    """A :class:`Trace`, its validation errors prefixed with the file's name; coordinates (in mm,
+    after any conversion) must stay within :data:`MAX_MAGNITUDE`."""
+    far = np.flatnonzero(~(np.abs(np.asarray(xy, dtype=float)) <= MAX_MAGNITUDE).all(axis=1))
+    if far.size:
+        raise InputError(
+            f"{name}: point {int(far[0])} of a trace is beyond ±{MAX_MAGNITUDE:g} mm (or not"
+            " finite) once converted"
+        )
     try:
         return Trace(xy, t, clock)
     except InputError as e:  # pragma: no cover - readers check their values first

@@ -45,6 +45,19 @@ END_TOLERANCE = 1e-6
 MIN_CHORD = 1e-9
 """Consecutive targets closer than this fraction of the plan's extent are refused."""
 
+MAX_COORDINATE = 1e15
+"""Largest target coordinate magnitude (the inputs' bound too): differences stay exact enough."""
+MU_RANGE = (-12.0, 6.0)
+"""Log-delays accepted, log seconds: a stroke peaks between about 6 µs and 7 minutes in."""
+MAX_SIGMA = 3.0
+"""Largest log-response time: wider lognormals have tails of hours for any μ."""
+MAX_DELAY = 3600.0
+"""Longest onset delay ``dt`` and pen lift, seconds."""
+MAX_DURATION = 4 * 3600.0
+"""Longest tag, seconds from its first plan's start to its end (a tag is not a day's work)."""
+MAX_START = 1e9
+"""Largest plan start magnitude, seconds."""
+
 DEFAULT_MU = float(np.log(0.2))
 """The paper's log-delay, shared by all strokes (§5)."""
 DEFAULT_SIGMA = float(np.log(1.4))
@@ -96,6 +109,11 @@ class Plan:
         if not np.isfinite(targets).all():
             bad = int(np.flatnonzero(~np.all(np.isfinite(targets), axis=1))[0])
             raise PlanError(f"targets[{bad}]: must be finite, got {targets[bad].tolist()}")
+        if np.abs(targets).max() > MAX_COORDINATE:
+            bad = int(np.flatnonzero(np.abs(targets).max(axis=1) > MAX_COORDINATE)[0])
+            raise PlanError(
+                f"targets[{bad}]: beyond ±{MAX_COORDINATE:g}, got {targets[bad].tolist()}"
+            )
         step = np.diff(targets, axis=0)
         chord = np.hypot(step[:, 0], step[:, 1])
         extent = float(np.hypot(*np.ptp(targets, axis=0)))
@@ -113,12 +131,31 @@ class Plan:
         if fields["dt"].min() < 0:
             j = int(np.flatnonzero(fields["dt"] < 0)[0])
             raise PlanError(f"strokes[{j}].dt: must be >= 0, got {float(fields['dt'][j])!r}")
+        if fields["dt"].max() > MAX_DELAY:
+            j = int(np.flatnonzero(fields["dt"] > MAX_DELAY)[0])
+            raise PlanError(
+                f"strokes[{j}].dt: must be <= {MAX_DELAY:g} s, got {float(fields['dt'][j])!r}"
+            )
         if fields["sigma"].min() <= 0:
             j = int(np.flatnonzero(fields["sigma"] <= 0)[0])
             raise PlanError(f"strokes[{j}].sigma: must be > 0, got {float(fields['sigma'][j])!r}")
+        if fields["sigma"].max() > MAX_SIGMA:
+            j = int(np.flatnonzero(fields["sigma"] > MAX_SIGMA)[0])
+            raise PlanError(
+                f"strokes[{j}].sigma: must be <= {MAX_SIGMA:g}, got {float(fields['sigma'][j])!r}"
+            )
+        lo, hi = MU_RANGE
+        outside = np.flatnonzero((fields["mu"] < lo) | (fields["mu"] > hi))
+        if outside.size:
+            j = int(outside[0])
+            raise PlanError(
+                f"strokes[{j}].mu: must be in [{lo:g}, {hi:g}], got {float(fields['mu'][j])!r}"
+            )
         start = float(self.start)
-        if not np.isfinite(start):
-            raise PlanError(f"start: must be finite, got {self.start!r}")
+        if not (np.isfinite(start) and abs(start) <= MAX_START):
+            raise PlanError(
+                f"start: must be finite and within ±{MAX_START:g} s, got {self.start!r}"
+            )
         targets.flags.writeable = False
         object.__setattr__(self, "targets", targets)
         object.__setattr__(self, "start", start)
@@ -279,6 +316,11 @@ class Tag:
                     f" phi2={float(plan.phi2[j])!r}"
                 )
         object.__setattr__(self, "plans", plans)
+        if plans[-1].end(self.size) - plans[0].start > MAX_DURATION:
+            raise PlanError(
+                f"plans: the tag lasts {plans[-1].end(self.size) - plans[0].start:.6g} s, more"
+                f" than {MAX_DURATION:g} s"
+            )
         for k in range(1, len(plans)):
             previous_end = plans[k - 1].end(self.size)
             if plans[k].start < previous_end:
