@@ -18,6 +18,7 @@ are untouched (the proxies sit only where Python calls in). The test suite runs 
 from __future__ import annotations
 
 import functools
+import importlib
 import inspect
 import os
 import sys
@@ -106,8 +107,8 @@ class _Checked:
 def install() -> int:
     """Put checking proxies in front of every kernels module that a loaded tagbot module calls
     through; returns how many references were replaced. Idempotent."""
-    import tagbot.gesture  # noqa: F401  (the modules that call kernels)
-    import tagbot.model  # noqa: F401
+    for package in ("tagbot.gesture", "tagbot.model"):  # the modules that call kernels
+        importlib.import_module(package)
 
     replaced = 0
     for module in list(sys.modules.values()):
@@ -115,10 +116,13 @@ def install() -> int:
         if not name.startswith("tagbot.") or name.endswith("kernels"):
             continue
         for attr, value in list(vars(module).items()):
-            if isinstance(value, ModuleType) and value.__name__.endswith("kernels"):
-                if value.__name__.startswith("tagbot."):
-                    setattr(module, attr, _Checked(value))
-                    replaced += 1
+            if (
+                isinstance(value, ModuleType)
+                and value.__name__.startswith("tagbot.")
+                and value.__name__.endswith("kernels")
+            ):
+                setattr(module, attr, _Checked(value))
+                replaced += 1
     return replaced
 
 

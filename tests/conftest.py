@@ -12,7 +12,7 @@ import pytest
 # Compiled kernels check their arguments in the whole suite (see tagbot.kernel_check): a kernel
 # reached with a non-finite or absurd value fails the test that reached it.
 os.environ.setdefault("TAGBOT_CHECK_KERNELS", "1")
-import tagbot.kernel_check  # noqa: E402
+import tagbot.kernel_check
 
 tagbot.kernel_check.install()
 
