@@ -16,9 +16,11 @@ from typing import Any, TypeVar
 import click
 
 from tagbot.arm.cli import sim_arm_command
+from tagbot.corpus_cli import corpus_options, progress_bar, run_corpus
 from tagbot.errors import Interrupted, TagbotError
 from tagbot.plotter.cli import gcode_command, profile_options, sim_grbl_command
 from tagbot.render.cli import plot_command, render_command
+from tagbot.studio.cli import studio_command
 
 __all__ = ["cli", "main"]
 
@@ -146,23 +148,6 @@ def sample(plan: str, dt: float, output: str) -> None:
     )
 
 
-def corpus_options(f: F) -> F:
-    """``--jobs`` and ``--scheduler`` of commands that take many inputs."""
-    f = click.option(
-        "--scheduler",
-        metavar="ADDRESS",
-        default=None,
-        help="Run the files on this dask.distributed scheduler (needs tagbot[dask]).",
-    )(f)
-    return click.option(
-        "--jobs",
-        "-j",
-        type=click.IntRange(min=1),
-        default=None,
-        help="Worker processes for many inputs [default: the CPU count].",
-    )(f)
-
-
 @cli.command(name="fit")
 @click.argument("sources", metavar="INPUT...", nargs=-1, required=True)
 @click.option(
@@ -220,7 +205,7 @@ def fit_command(
     options = {"model": model, "report": report, "fit": {"refine": refine}}
     if is_corpus(sources):
         ctx = click.get_current_context()
-        ctx.exit(_run_corpus(fit_file, sources, output, ".json", options, force, jobs, scheduler))
+        ctx.exit(run_corpus(fit_file, sources, output, ".json", options, force, jobs, scheduler))
     source = sources[0]
     if output is None:
         output = "-"
@@ -247,63 +232,6 @@ def fit_command(
     )
     if output != "-":
         click.echo(f"wrote {output}", err=True)
-
-
-def _run_corpus(
-    work: Callable[..., dict[str, Any]],
-    sources: Sequence[str],
-    output: str | None,
-    suffix: str,
-    options: dict[str, Any],
-    force: bool,
-    jobs: int | None,
-    scheduler: str | None,
-    quiet: bool = False,
-) -> int:
-    """Run ``work`` over many inputs into the folder ``output``; the exit status."""
-    from pathlib import Path
-
-    from tagbot.corpus import FileJob, expand_inputs, map_files, output_paths, write_summary
-    from tagbot.errors import OutputError
-    from tagbot.io.output import check_output_folder
-
-    if output is None or output == "-":
-        raise click.UsageError("many inputs need -o DIR, the folder for the results")
-    check_output_folder(output)
-    files = expand_inputs(sources)
-    outputs = output_paths(files, output, suffix)
-    summary = Path(output) / "summary.csv"
-    if not force:
-        existing = [p for p in [*outputs, str(summary)] if Path(p).exists()]
-        if existing:
-            more = f" and {len(existing) - 1} more" if len(existing) > 1 else ""
-            raise OutputError(f"{existing[0]}: exists{more} (--force replaces them)")
-    Path(output).mkdir(parents=True, exist_ok=True)
-    workers = jobs or os.cpu_count() or 1
-    batch = [FileJob(s, o, options) for s, o in zip(files, outputs, strict=True)]
-    rows = []
-    bar = _progress_bar("file", quiet)
-    bar.reset(total=len(batch))
-    failed = 0
-    try:
-        for row in map_files(work, batch, workers=workers, scheduler=scheduler):
-            rows.append(row)
-            if row["status"] != "ok":
-                failed += 1
-                bar.write(f"{PROG}: error: {row['error']}", file=sys.stderr)
-            bar.set_postfix_str(f"{failed} failed" if failed else "", refresh=False)
-            bar.update(1)
-    finally:
-        bar.close()
-        if rows:
-            write_summary(rows, summary)
-    where = f"via {scheduler}" if scheduler else f"{min(workers, len(batch))} worker(s)"
-    click.echo(
-        f"{len(rows) - failed} of {len(batch)} file(s) done, {failed} failed ({where}); "
-        f"summary in {summary}",
-        err=True,
-    )
-    return EXIT_ERROR if failed else EXIT_OK
 
 
 @cli.command()
@@ -363,7 +291,7 @@ def vary(plan: str, count: int, seed: int | None, output: str, force: bool, quie
         seed = new_seed()
         click.echo(f"seed {seed} (pass --seed {seed} to repeat)", err=True)
     folder.mkdir(parents=True, exist_ok=True)
-    bar = _progress_bar("plan", quiet or count < 100)
+    bar = progress_bar("plan", quiet or count < 100)
     bar.reset(total=count)
     try:
         for i, instance in enumerate(iter_vary(tag, count, seed), start=1):
@@ -381,6 +309,7 @@ MAX_VARIATIONS = 1_000_000
 cli.add_command(gcode_command)
 cli.add_command(render_command)
 cli.add_command(plot_command)
+cli.add_command(studio_command)
 
 
 @cli.command(name="draw")
@@ -496,7 +425,7 @@ def draw_command(
         hint = "; space pauses, Ctrl-C stops" if keys.available else "; Ctrl-C stops"
         click.echo(f"drawing {source} on {device} ({where}) into {out}{hint}", err=True)
     unit = "tick" if device == "dynamixel" else "line"
-    with _progress_bar(unit, quiet) as bar, keys:
+    with progress_bar(unit, quiet) as bar, keys:
         keys.report = bar.write
 
         def progress(done: int, total: int) -> None:
@@ -519,23 +448,6 @@ def draw_command(
             raise
     if not quiet:
         click.echo(_draw_summary(result.report, out), err=True)
-
-
-def _progress_bar(unit: str, quiet: bool) -> Any:
-    """A progress bar on stderr with rate and ETA (quiet when not a terminal or --quiet)."""
-    from tqdm import tqdm
-
-    class Bar(tqdm):  # type: ignore[type-arg]
-        monitor_interval = 0  # updates come from the machine's loop: no monitor thread
-
-    return Bar(
-        total=0,
-        unit=unit,
-        file=sys.stderr,
-        disable=True if quiet else None,
-        dynamic_ncols=True,
-        leave=False,
-    )
 
 
 class _PauseKeys:

@@ -38,6 +38,8 @@ __all__ = [
     "is_corpus",
     "map_files",
     "output_paths",
+    "render_file",
+    "render_one",
     "write_summary",
 ]
 
@@ -160,6 +162,34 @@ def fit_one(job: FileJob, row: dict[str, Any]) -> Tag:
     return tag
 
 
+def render_file(job: FileJob) -> dict[str, Any]:
+    """Render one plan or trace file (fitted first) into its picture; the row it ends with.
+
+    Options: ``model``, and :func:`tagbot.render.render`'s keywords under ``render``.
+    """
+    return _guarded(render_one, job)
+
+
+def render_one(job: FileJob, row: dict[str, Any]) -> None:
+    """:func:`render_file`'s work, raising on a bad file."""
+    from tagbot.render.api import render
+    from tagbot.source import load_source
+
+    started = time.perf_counter()
+    tag, traces = load_source(job.source, job.options.get("model"))
+    loaded = time.perf_counter()
+    assert job.output is not None
+    result = render(tag, job.output, **job.options.get("render", {}))
+    row.update(
+        traces=len(traces) if traces is not None else "",
+        strokes=tag.n_strokes,
+        duration_s=round(tag.end - tag.start, 4),
+        load_s=round(loaded - started, 4),
+        render_s=round(time.perf_counter() - loaded, 4),
+        picture=result.summary(),
+    )
+
+
 def _clock_of(traces: Sequence[Any]) -> str:
     clocks = {getattr(t, "clock", None) for t in traces if getattr(t, "t", None) is not None}
     clocks.discard(None)
@@ -260,17 +290,15 @@ def _map_dask(
             f"--scheduler needs Dask: pip install 'tagbot[dask]' ({e.name} is missing)"
         ) from e
     try:
-        client = Client(scheduler, timeout=10, set_as_default=False)
+        client = Client(scheduler, timeout=10)
     except (OSError, TimeoutError) as e:
         raise InputError(f"--scheduler {scheduler}: cannot connect ({e})") from e
-    try:
+    with client:
         parts = max(1, min(len(jobs), 64 * max(1, len(client.nthreads()))))
         bag = db.from_sequence(jobs, npartitions=parts).map(work)
         futures = client.compute(bag.to_delayed())
         for future in as_completed(futures):
             yield from future.result()
-    finally:
-        client.close()
 
 
 # --------------------------------------------------------------------------- summary
@@ -292,6 +320,8 @@ SUMMARY_FIELDS = (
     "load_s",
     "fit_s",
     "report_s",
+    "render_s",
+    "picture",
 )
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 
+from tagbot.errors import PlanError
 from tagbot.inputs import Trace
 from tagbot.model.plan import Tag
 
@@ -28,7 +29,10 @@ def load_source(path: str, model: str | None = None) -> tuple[Tag, list[Trace] |
     except (ValueError, UnicodeDecodeError):
         document = None
     if isinstance(document, dict) and document.get("format") == "tagbot-plan":
-        return tag_from_dict(document), None
+        try:
+            return tag_from_dict(document), None
+        except PlanError as e:
+            raise type(e)(f"{path}: {e}") from e
     traces = read_traces_bytes(data, path)
     return fit(traces, model=model or "gamma"), traces
 

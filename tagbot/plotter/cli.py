@@ -55,9 +55,11 @@ def gcode_command(
     from tagbot.plotter.profile import load_profile
     from tagbot.plotter.program import build_program
 
-    machine = load_profile(profile, overrides)
+    from tagbot.io.output import check_output_file
     from tagbot.source import load_tag
 
+    machine = load_profile(profile, overrides)
+    check_output_file(output)
     tag = load_tag(source)
     program = build_program(place(tag, machine), machine)
     program.write(output)
