@@ -19,7 +19,9 @@ Datasets (the development half of the project's data; see its README):
 
 Per file: traces, points, strokes, strokes per 180° of the input's turning, mean and max shape
 error (% of the bounding-box diagonal), fit time, fit time over one sampling of the fitted tag at
-10 ms (each timed as the best of 3 runs), velocity SNR (dB, after the best uniform time scaling
+10 ms, the report's time (shape error and velocity SNR, :func:`tagbot.metrics.fit_report`) over
+the fit's (goal ≤ 0.2), the whole command's work (load + fit + report; each timed as the best of
+3 runs), velocity SNR (dB, after the best uniform time scaling
 and offset). Summaries give median, p90 and worst. A fit that fails is reported as a failure,
 never dropped. Each worker process fits one small tag before timing anything, so that loading
 the compiled kernels (numba) is not counted as fit time.
@@ -61,6 +63,8 @@ class Row:
     fit_s: float = math.nan
     fit_over_sampling: float = math.nan
     snr_db: float = math.nan
+    report_share: float = math.nan
+    command_s: float = math.nan
     error: str = ""
 
 
@@ -161,8 +165,10 @@ def run_case(case: tuple[str, str, object], model: str, refine: bool) -> Row:
     dataset, name, payload = case
     row = Row(dataset, name)
     try:
+        load_s = 0.0
         if dataset == "gml":
             path, timed = payload
+            load_s = min(_timed(lambda: load_traces(path)) for _ in range(3))
             traces = load_traces(path)
             if not timed:  # velocity SNR only where index.csv vouches for the timing
                 traces = [Trace(tr.xy) for tr in traces]
@@ -175,6 +181,9 @@ def run_case(case: tuple[str, str, object], model: str, refine: bool) -> Row:
         row.fit_s = min(_timed(lambda: fit(traces, model=model, refine=refine)) for _ in range(3))
         sampling = min(_timed(lambda: tag.sample(0.01)) for _ in range(3))
         report = fit_report(traces, tag)
+        report_s = min(_timed(lambda: fit_report(traces, tag)) for _ in range(3))
+        row.report_share = report_s / row.fit_s
+        row.command_s = load_s + row.fit_s + report_s
         row.traces, row.points, row.strokes = report.traces, report.points, report.strokes
         row.strokes_per_180 = report.strokes_per_half_turn
         row.mean_pct, row.max_pct = 100 * report.shape.mean, 100 * report.shape.max
@@ -282,6 +291,8 @@ def main() -> None:
         ("fit_s", "fit time s"),
         ("fit_over_sampling", "fit / one sampling"),
         ("snr_db", "velocity SNR dB"),
+        ("report_share", "report time / fit time"),
+        ("command_s", "load + fit + report s"),
     ]
     datasets = ("gml", "unipen", "mocap", "synthetic")
     for dataset in [d for d in datasets if any(r.dataset == d for r in rows)]:

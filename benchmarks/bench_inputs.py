@@ -2,7 +2,7 @@
 
 Run from the repository root::
 
-    python benchmarks/bench_inputs.py [DIR] [--png OUT_DIR]
+    python benchmarks/bench_inputs.py [DIR] [--png OUT_DIR] [--fuzz N] [--corpus]
 
 ``DIR`` defaults to ``../shared/data/gml/dev`` (the real captures kept beside the repository; they
 are not part of it and the tests never read them). For each file it prints the number of traces
@@ -10,6 +10,11 @@ and points, the drawing's size in millimetres, the timing (duration, or "untimed
 time. ``--png`` also draws each file's traces into ``OUT_DIR/<file>.png`` (needs matplotlib, which
 is not a tagbot dependency) to check orientation and aspect by eye. Exits with status 1 if any
 file fails to load.
+
+``--fuzz N`` then mutates each file N times (absurd numbers, repeated or dropped spans, cuts: the
+suite's fuzz test's mutations) and reads, fits and reports each copy, printing the worst wall time
+per case and what ended in an error. ``--corpus`` times ``tagbot fit DIR -o TMP --jobs J`` for
+J = 1 and 2 (whole command, worker start-up included) and prints the speed-up.
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("dir", nargs="?", type=Path, default=DEFAULT_DIR)
     parser.add_argument("--png", type=Path, help="draw each file's traces into this folder")
+    parser.add_argument("--fuzz", type=int, default=0, help="mutated copies per file to fit")
+    parser.add_argument("--corpus", action="store_true", help="time corpus mode, 1 and 2 jobs")
     args = parser.parse_args()
     files = sorted(p for p in args.dir.iterdir() if p.suffix in (".gml", ".json", ".svg"))
     if not files:
@@ -57,7 +64,72 @@ def main() -> int:
         if args.png:
             draw(traces, args.png / f"{path.name}.png", path.name)
     print(f"{len(files) - failed} of {len(files)} files loaded")
+    if args.fuzz:
+        fuzz(files, args.fuzz)
+    if args.corpus:
+        corpus(args.dir)
     return 1 if failed else 0
+
+
+def fuzz(files: list[Path], count: int) -> None:
+    """Read, fit and report ``count`` mutated copies of each file; print the worst times."""
+    import random
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from test_fuzz_fit import mutate
+
+    from tagbot.errors import TagbotError
+    from tagbot.gesture import fit
+    from tagbot.inputs import read_traces_bytes
+    from tagbot.metrics import fit_report
+
+    rng = random.Random(0)
+    ops = ["number", "number", "spread", "repeat", "drop", "cut"]
+    times, outcomes = [], {"fitted": 0, "error": 0}
+    for path in files:
+        data = path.read_bytes()
+        for _ in range(count):
+            edits = [
+                (rng.choice(ops), rng.randrange(1 << 20), rng.randrange(256))
+                for _ in range(rng.randint(1, 6))
+            ]
+            case = mutate(data, edits)
+            start = time.perf_counter()
+            try:
+                traces = read_traces_bytes(case, path.name)
+                fit_report(traces, fit(traces))
+                outcomes["fitted"] += 1
+            except TagbotError:
+                outcomes["error"] += 1
+            times.append((time.perf_counter() - start, path.name))
+    times.sort(reverse=True)
+    seconds = np.array([t for t, _ in times])
+    print(
+        f"fuzz: {len(times)} cases ({outcomes['fitted']} fitted, {outcomes['error']} clear"
+        f" errors); wall time median {np.median(seconds):.3f} s, p99"
+        f" {np.percentile(seconds, 99):.2f} s, worst {seconds[0]:.2f} s ({times[0][1]})"
+    )
+
+
+def corpus(folder: Path) -> None:
+    """Time the whole ``tagbot fit`` corpus command with 1 and 2 worker processes."""
+    import subprocess
+    import tempfile
+
+    seconds = {}
+    for jobs in (1, 2):
+        with tempfile.TemporaryDirectory() as out:
+            start = time.perf_counter()
+            subprocess.run(
+                [sys.executable, "-m", "tagbot", "fit", str(folder), "-o", out, "-j", str(jobs)],
+                check=False,
+                capture_output=True,
+            )
+            seconds[jobs] = time.perf_counter() - start
+    print(
+        f"corpus: tagbot fit {folder.name}/ --jobs 1 {seconds[1]:.1f} s, --jobs 2"
+        f" {seconds[2]:.1f} s, speed-up {seconds[1] / seconds[2]:.2f}x"
+    )
 
 
 def draw(traces, out: Path, title: str) -> None:

@@ -15,10 +15,20 @@ Usage::
 device (PlacementError before the first packet).
 """
 
-from tagbot.arm.kinematics import Arm
-from tagbot.arm.place import ArmProgram, Placement, Setpoints, build_program, check_program, place
-from tagbot.arm.profile import ArmProfile, ProfileError, load_profile, packaged_profiles
-from tagbot.arm.run import ArmJob, ArmRun, draw_arm, latency_timer_warning, prepare
+from tagbot._lazy import lazy_exports
+
+_EXPORTS = {
+    **dict.fromkeys(["Arm"], ".kinematics"),
+    **dict.fromkeys(
+        ["ArmProgram", "Placement", "Setpoints", "build_program", "check_program", "place"],
+        ".place",
+    ),
+    **dict.fromkeys(
+        ["ArmProfile", "ProfileError", "load_profile", "packaged_profiles"], ".profile"
+    ),
+    **dict.fromkeys(["ArmJob", "ArmRun", "draw_arm", "latency_timer_warning", "prepare"], ".run"),
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __all__ = [
     "Arm",

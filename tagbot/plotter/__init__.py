@@ -9,9 +9,14 @@ Usage::
     program.write("tag.gcode")
 """
 
-from tagbot.plotter.place import Setpoints, place
-from tagbot.plotter.profile import Profile, ProfileError, load_profile
-from tagbot.plotter.program import Program, build_program
+from tagbot._lazy import lazy_exports
+
+_EXPORTS = {
+    **dict.fromkeys(["Setpoints", "place"], ".place"),
+    **dict.fromkeys(["Profile", "ProfileError", "load_profile"], ".profile"),
+    **dict.fromkeys(["Program", "build_program"], ".program"),
+}
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __all__ = [
     "Profile",
