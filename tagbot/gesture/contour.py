@@ -217,6 +217,9 @@ def segment_angles(chord: ArrayLike, area: ArrayLike) -> Array:
     the sliver of 1e-9).
     """
     chord, area = np.broadcast_arrays(np.asarray(chord, dtype=float), np.asarray(area, dtype=float))
+    # NaN is not positive (θ = 0), +inf the largest area (the whole circle): finite for the kernel.
+    big = np.finfo(float).max
+    chord, area = (np.nan_to_num(x, nan=0.0, posinf=big, neginf=-big) for x in (chord, area))
     start, cubics = _segment_table()
     theta = kernels.segment_angles(
         _points(chord).ravel(), _points(area).ravel(), start, _TABLE_STEP, cubics
@@ -320,4 +323,6 @@ def sharpnesses(xy: Array, a: Indices, z: Indices, b: Indices) -> Array:
         return np.zeros(z.shape)
     # The inscribed angle at z from numpy's arccos (the kernels' C library rounds differently).
     gamma = np.arccos(np.clip(kernels.sharpness_cosines(xy, a, z, b), -1.0, 1.0))
-    return kernels.sharpnesses(xy, a, z, b, gamma)
+    # NaN where a side has no length: the sharpness is 0 there whatever the angle, so π stands in
+    # (kernels only ever see finite values).
+    return kernels.sharpnesses(xy, a, z, b, np.nan_to_num(gamma, nan=np.pi))
