@@ -164,6 +164,14 @@ def sample(plan: str, dt: float, output: str) -> None:
     help="Polish the paper's reconstruction by least squares.",
 )
 @click.option(
+    "--timing",
+    type=click.Choice(["auto", "ignore", "match"]),
+    default="auto",
+    show_default=True,
+    help="match: follow the recorded speed (timed inputs); ignore: the shape only, at the paper's "
+    "rhythm; auto: match when the input has usable timestamps.",
+)
+@click.option(
     "--report/--no-report",
     default=True,
     show_default=True,
@@ -183,6 +191,7 @@ def fit_command(
     sources: tuple[str, ...],
     model: str,
     refine: bool,
+    timing: str,
     report: bool,
     output: str | None,
     force: bool,
@@ -202,7 +211,7 @@ def fit_command(
     from tagbot.corpus import FileJob, fit_file, is_corpus
 
     started = time.perf_counter()
-    options = {"model": model, "report": report, "fit": {"refine": refine}}
+    options = {"model": model, "report": report, "fit": {"refine": refine, "timing": timing}}
     if is_corpus(sources):
         ctx = click.get_current_context()
         ctx.exit(run_corpus(fit_file, sources, output, ".json", options, force, jobs, scheduler))

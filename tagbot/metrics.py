@@ -18,10 +18,16 @@ from tagbot.model.plan import Tag
 Array = NDArray[np.float64]
 
 DENSITY = 4000
-"""Polylines are sampled at least this many points per bounding-box diagonal..."""
+"""The maximum (Hausdorff) distance is found to within 1/(2·DENSITY) of the size..."""
+
+MEAN_DENSITY = 500
+"""... and the mean from samples this many per bounding-box diagonal..."""
 
 MAX_SAMPLES = 200_000
-"""... and at most this many points per drawing (long scribbles get a coarser spacing)."""
+"""... at most this many per drawing (long scribbles get a coarser spacing)."""
+
+_NEIGHBOURS = 3
+"""Closest samples whose segments are measured exactly, per query point."""
 
 
 GRID_PER_POINT = 4
@@ -70,26 +76,50 @@ class _Polylines:
         self.tree = cKDTree(self.points)
 
     def distance(self, query: Array) -> Array:
-        """Each query point's exact distance to the polylines near its closest sample."""
-        near, i = self.tree.query(query)
-        best = near
-        for j in (self.before[i], self.after[i]):
-            a, b = self.points[i], self.points[j]
-            ab = b - a
-            length2 = np.einsum("ij,ij->i", ab, ab)
-            u = np.einsum("ij,ij->i", query - a, ab) / np.where(length2 > 0, length2, 1.0)
-            foot = a + np.clip(u, 0.0, 1.0)[:, None] * ab
-            best = np.minimum(best, np.hypot(*(query - foot).T))
+        """Each query point's distance to the polylines: exact to the segments next to its
+        closest few samples (the polylines' own segments, cut at the samples)."""
+        k = min(_NEIGHBOURS, len(self.points))
+        _, near = self.tree.query(query, k=k)
+        near = near.reshape(len(query), k)
+        best = np.full(len(query), np.inf)
+        for i in near.T:
+            for j in (self.before[i], self.after[i]):
+                a, b = self.points[i], self.points[j]
+                ab = b - a
+                length2 = np.einsum("ij,ij->i", ab, ab)
+                u = np.einsum("ij,ij->i", query - a, ab) / np.where(length2 > 0, length2, 1.0)
+                foot = a + np.clip(u, 0.0, 1.0)[:, None] * ab
+                best = np.minimum(best, np.hypot(*(query - foot).T))
         return best
+
+    def farthest(self, other: _Polylines, coarse: Array, fine: float) -> float:
+        """The largest distance from these polylines (not only their samples) to ``other``,
+        within ``fine``: the sample intervals that could hold it are resampled at ``fine``."""
+        top = float(coarse.max())
+        i = np.flatnonzero(self.after != np.arange(len(self.points)))
+        gap = np.hypot(*(self.points[self.after[i]] - self.points[i]).T)
+        # Along an interval the distance changes no faster than the arc length.
+        maybe = i[np.maximum(coarse[i], coarse[self.after[i]]) + 0.5 * gap > top + 0.5 * fine]
+        if not maybe.size:
+            return top
+        lengths = gap[np.searchsorted(i, maybe)]
+        fine = max(fine, float(lengths.sum()) / MAX_SAMPLES)  # bounded, like the samples
+        pieces = np.maximum(1, np.ceil(lengths / fine).astype(np.intp))
+        start = np.repeat(self.points[maybe], pieces, axis=0)
+        step = np.repeat(
+            (self.points[self.after[maybe]] - self.points[maybe]) / pieces[:, None], pieces, axis=0
+        )
+        offset = np.arange(int(pieces.sum())) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+        return max(top, float(other.distance(start + step * offset[:, None]).max()))
 
 
 def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) -> ShapeError:
     """Mean and max closest-point distance between two drawings, over the reference's size.
 
-    Both are lists of polylines ``(N, 2)``, sampled :data:`DENSITY` points per diagonal (at most
-    :data:`MAX_SAMPLES` per drawing); each sample's distance is to the other drawing's segments
-    next to its closest sample, so the figures are exact up to the sampling of the mean. Cost
-    O(n log n) in the samples.
+    Both are lists of polylines ``(N, 2)``. Each is sampled :data:`MEAN_DENSITY` points per
+    diagonal (at most :data:`MAX_SAMPLES` per drawing) and each sample measured exactly against
+    the other drawing's segments: the mean is over these samples (by arc length); the max is
+    refined where it could be, to within 1/(2·:data:`DENSITY`) of the size. Cost O(n log n).
     """
     ref = [np.asarray(p, dtype=float) for p in reference if len(p)]
     cand = [np.asarray(p, dtype=float) for p in candidate if len(p)]
@@ -97,7 +127,7 @@ def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) 
         raise ValueError("shape_error: both drawings need at least one point")
     points = np.concatenate(ref)
     size = float(np.hypot(*np.ptp(points, axis=0))) or 1.0
-    spacing = size / DENSITY
+    spacing = size / MEAN_DENSITY
     for drawing in (ref, cand):
         length = sum(float(np.hypot(*np.diff(p, axis=0).T).sum()) for p in drawing)
         spacing = max(spacing, length / MAX_SAMPLES)
@@ -105,9 +135,9 @@ def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) 
     a_to_b = b.distance(a.points)
     b_to_a = a.distance(b.points)
     mean = (a_to_b.sum() + b_to_a.sum()) / (len(a_to_b) + len(b_to_a))
-    return ShapeError(
-        mean=float(mean) / size, max=float(max(a_to_b.max(), b_to_a.max())) / size, size=size
-    )
+    fine = size / DENSITY
+    largest = max(a.farthest(b, a_to_b, fine), b.farthest(a, b_to_a, fine))
+    return ShapeError(mean=float(mean) / size, max=largest / size, size=size)
 
 
 def pen_down_paths(motion: Motion) -> list[Array]:
@@ -154,49 +184,66 @@ def velocity_snr(
     model_span = float(model_t[-1])
     span = float(grid[-1] - grid[0])
 
-    def snr(scale: float, offset: float) -> float:
-        tm = (grid - offset) / scale
-        vm = np.interp(tm, model_t, model.real, 0.0, 0.0) + 1j * np.interp(
-            tm, model_t, model.imag, 0.0, 0.0
+    def errors(scales: Array, offsets: Array) -> Array:
+        """Σ|v − v̂|² for each (scale, offset) pair, all pairs at once."""
+        tm = (grid[None, :] - offsets[:, None]) / scales[:, None]
+        vm = np.interp(tm.ravel(), model_t, model.real, 0.0, 0.0) + 1j * np.interp(
+            tm.ravel(), model_t, model.imag, 0.0, 0.0
         )
-        err = rec - vm / scale
-        return 10.0 * np.log10(energy / max(float(np.sum(err.real**2 + err.imag**2)), 1e-300))
+        err = rec[None, :] - vm.reshape(tm.shape) / scales[:, None]
+        return np.sum(err.real**2 + err.imag**2, axis=1)
 
-    best = (-np.inf, 1.0, float(grid[0]))
     n = len(rec)
-    for scale in np.geomspace(0.25, 4.0, 41) * (span / model_span if model_span > 0 else 1.0):
-        # The model on the recording's grid spacing, offsets m·dt from the grid's start:
-        # the model's sample k lands on recording sample k + m.
-        k = int(model_span * scale / dt) + 1
-        w = (
-            np.interp(np.arange(k) * dt / scale, model_t, model.real)
-            + 1j * np.interp(np.arange(k) * dt / scale, model_t, model.imag)
-        ) / scale
-        slack = (span - scale * model_span) / dt
-        lo, hi = int(np.floor(min(0.0, slack))), int(np.ceil(max(0.0, slack)))
-        size = 1 << int(np.ceil(np.log2(n + k + 1)))
-        # cross[m] = Σ_j rec[j]·conj(w[j − m]) for m in [lo, hi] (negative m wrap around).
-        cross = np.fft.ifft(np.fft.fft(rec, size) * np.conj(np.fft.fft(w, size)))
-        m = np.arange(lo, hi + 1)
-        # Σ |w[j − m]|² over the overlap 0 ≤ j < n, 0 ≤ j − m < k.
-        cum = np.concatenate([[0.0], np.cumsum(w.real**2 + w.imag**2)])
-        first, last = np.clip(-m, 0, k), np.clip(n - m, 0, k)
-        overlap = cum[np.maximum(last, first)] - cum[first]
-        err = energy - 2.0 * cross[m % size].real + overlap
-        i = int(np.argmin(err))
-        value = 10.0 * np.log10(energy / max(float(err[i]), 1e-300))
-        if value > best[0]:
-            best = (value, float(scale), float(grid[0] + m[i] * dt))
-    # Polish the best pair on a shrinking pattern (scale relative, offset in seconds).
-    best = (snr(best[1], best[2]), best[1], best[2])
+    ratio = span / model_span if model_span > 0 else 1.0
+    scales = np.geomspace(0.25, 4.0, 41) * ratio
+    # The model on the recording's grid spacing for every scale at once: scale i's sample k is
+    # at model time k·dt/scale_i, and an offset of m grid steps puts it on recording sample k + m.
+    lengths = (model_span * scales / dt).astype(np.intp) + 1
+    k = int(lengths.max())
+    times = np.arange(k)[None, :] * dt / scales[:, None]
+    inside = np.arange(k)[None, :] < lengths[:, None]
+    w = np.where(
+        inside,
+        (
+            np.interp(times.ravel(), model_t, model.real)
+            + 1j * np.interp(times.ravel(), model_t, model.imag)
+        ).reshape(times.shape)
+        / scales[:, None],
+        0.0,
+    )
+    size = 1 << int(np.ceil(np.log2(n + k + 1)))
+    # cross[i, m] = Σ_j rec[j]·conj(w[i, j − m]) (negative m wrap around the padded length).
+    cross = np.fft.ifft(np.fft.fft(rec, size)[None, :] * np.conj(np.fft.fft(w, size, axis=1)))
+    slack = (span - scales * model_span) / dt
+    lo = int(np.floor(min(0.0, float(slack.min()))))
+    hi = int(np.ceil(max(0.0, float(slack.max()))))
+    m = np.arange(lo, hi + 1)
+    # Σ |w[i, j − m]|² over the overlap 0 ≤ j < n, 0 ≤ j − m < lengths[i].
+    cum = np.concatenate([np.zeros((len(scales), 1)), np.cumsum(np.abs(w) ** 2, axis=1)], axis=1)
+    first = np.clip(-m[None, :], 0, lengths[:, None])
+    last = np.clip(n - m[None, :], 0, lengths[:, None])
+    rows = np.arange(len(scales))[:, None]
+    overlap = cum[rows, np.maximum(last, first)] - cum[rows, first]
+    err = energy - 2.0 * cross[:, m % size].real + overlap
+    # Each scale's offsets stay within its own slack (the model inside the recording's span, or
+    # the recording inside the model's).
+    own = (m[None, :] >= np.floor(np.minimum(0.0, slack))[:, None]) & (
+        m[None, :] <= np.ceil(np.maximum(0.0, slack))[:, None]
+    )
+    err = np.where(own, err, np.inf)
+    i, j = np.unravel_index(int(np.argmin(err)), err.shape)
+    scale, offset = float(scales[i]), float(grid[0] + m[j] * dt)
+    # Polish on a shrinking pattern (scale relative, offset in seconds), 7×7 pairs at a time.
+    best = float(errors(np.array([scale]), np.array([offset]))[0])
+    steps = np.linspace(-1.0, 1.0, 7)
     for width in (0.1, 0.03, 0.01, 0.003, 0.001):
-        _, scale, offset = best
-        for s in scale * (1 + width * np.linspace(-1, 1, 7)):
-            for o in offset + np.linspace(-1, 1, 7) * width * max(span, dt):
-                value = snr(float(s), float(o))
-                if value > best[0]:
-                    best = (value, float(s), float(o))
-    return best
+        s_try = np.repeat(scale * (1 + width * steps), 7)
+        o_try = np.tile(offset + steps * width * max(span, dt), 7)
+        e = errors(s_try, o_try)
+        pick = int(np.argmin(e))
+        if e[pick] < best:
+            best, scale, offset = float(e[pick]), float(s_try[pick]), float(o_try[pick])
+    return 10.0 * np.log10(energy / max(best, 1e-300)), scale, offset
 
 
 @dataclass(frozen=True)
@@ -542,3 +589,130 @@ def compare_reports(
         planned_runs=len(planned),
         executed_runs=len(alignments),
     )
+
+
+# --------------------------------------------------------------------------- per stroke
+
+
+@dataclass(frozen=True)
+class StrokeFigures:
+    """How one stroke of a fitted tag compares with the recording where it dominates."""
+
+    plan: int
+    stroke: int
+    shape_error: float | None
+    """Mean distance from the recorded points it dominates to the fitted path, as a fraction of
+    the tag's size (None if it dominates none)."""
+    velocity_snr_db: float | None
+    """Velocity SNR over the recorded instants it dominates, under its trace's time mapping
+    (None without timing, or if it dominates none)."""
+
+
+def clock_velocity_snr(
+    t: ArrayLike, xy: ArrayLike, model_t: ArrayLike, model_v: ArrayLike
+) -> float:
+    """Velocity SNR in dB of a model sharing the recording's clock (scale 1, offset 0): a lower
+    bound of :func:`velocity_snr`'s best mapping, exact for timed fits."""
+    grid, v = recorded_velocity(t, xy)
+    model_t, model_v = np.asarray(model_t, dtype=float), np.asarray(model_v, dtype=float)
+    vm = np.column_stack([np.interp(grid, model_t, model_v[:, i], 0.0, 0.0) for i in (0, 1)])
+    return _db(float(np.sum(v * v)), float(np.sum((v - vm) ** 2)))
+
+
+def stroke_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> list[StrokeFigures]:
+    """Per stroke of ``tag`` (one plan per trace), its shape error and velocity SNR.
+
+    Each recorded point and each instant of the recording's velocity grid
+    (:func:`recorded_velocity`) belongs to the stroke whose speed ``D·Λ`` is largest at the
+    model time it maps to: a point's nearest sample of the fitted path; an instant through the
+    trace's time mapping, the better of the shared clock and :func:`velocity_snr`'s best one.
+    """
+    from tagbot.model.motion import sample_plan
+
+    out: list[StrokeFigures] = []
+    size = tag.size if tag.size > 0 else 1.0
+    for k, (trace, plan) in enumerate(zip(traces, tag.plans, strict=True)):
+        mt, mxy, mv = sample_plan(tag, k, dt)
+        lengths = plan.geometry.length
+        elapsed = np.maximum(mt[:, None] - plan.onsets[None, :], np.finfo(float).tiny)
+        z = (np.log(elapsed) - plan.mu) / plan.sigma
+        speed = lengths * np.exp(-0.5 * z * z) / (plan.sigma * elapsed)
+        speed[mt[:, None] <= plan.onsets[None, :]] = 0.0
+        owner = np.argmax(speed, axis=1)
+        xy = np.asarray(getattr(trace, "xy", trace), dtype=float)
+        _, nearest = cKDTree(mxy).query(xy)
+        n = plan.n_strokes
+        dist = np.linalg.norm(xy - mxy[nearest], axis=1)
+        count = np.bincount(owner[nearest], minlength=n)
+        total = np.bincount(owner[nearest], weights=dist, minlength=n)
+        signal = noise = None
+        t = getattr(trace, "t", None)
+        if t is not None and len(mt) >= 2:
+            try:
+                grid, v = recorded_velocity(t, xy)
+                shared = clock_velocity_snr(t, xy, mt, mv)
+                best, scale, offset = velocity_snr(t, xy, mt, mv)
+            except ValueError:  # too short to compare
+                grid = None
+            if grid is not None:
+                if shared >= best:
+                    scale, offset = 1.0, float(mt[0])
+                tm = (grid - offset) / scale + mt[0]
+                vm = np.column_stack([np.interp(tm, mt, mv[:, i], 0.0, 0.0) for i in (0, 1)])
+                vm /= scale
+                mine = owner[np.clip(np.searchsorted(mt, tm), 0, len(mt) - 1)]
+                signal = np.bincount(mine, weights=np.sum(v * v, axis=1), minlength=n)
+                noise = np.bincount(mine, weights=np.sum((v - vm) ** 2, axis=1), minlength=n)
+        for j in range(n):
+            snr = None
+            if signal is not None and noise is not None and signal[j] > 0:
+                snr = _db(float(signal[j]), float(noise[j]))
+            error = float(total[j] / count[j]) / size if count[j] else None
+            out.append(StrokeFigures(k, j, error, snr))
+    return out
+
+
+def compare_with_recording(
+    executed: ArrayLike, traces: Sequence[object], plans: Sequence[int]
+) -> dict[str, object]:
+    """How the executed speed follows the *recorded* one: per pen-down run (the ``k``-th run
+    drew plan ``plans[k]``, fitted from ``traces[plans[k]]``), the speed SNR in dB after the
+    best uniform time scale and offset (:func:`velocity_snr` on the arc-length speed), the
+    recording's speed scaled by the ratio of path lengths (machine mm per input mm).
+
+    Returns ``recorded_speed_snr_db`` (energy-weighted over runs, None if no run has a timed
+    recording) and ``recorded_runs`` (per run: plan, SNR, time scale: machine s per recorded s).
+    """
+    runs = executed_runs(executed)
+    signal = noise = 0.0
+    per_run: list[dict[str, float | int]] = []
+    for run, plan in zip(runs, plans, strict=False):
+        trace = traces[plan] if 0 <= plan < len(traces) else None
+        t = getattr(trace, "t", None)
+        if t is None:
+            continue
+        xy = np.asarray(getattr(trace, "xy", trace), dtype=float)
+        length_e = float(np.sum(np.hypot(*np.diff(run[:, 1:3], axis=0).T)))
+        length_r = float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
+        if not (length_e > 0 and length_r > 0):
+            continue
+        try:
+            grid, v = recorded_velocity(t, xy)
+            arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(run[:, 1:3], axis=0).T))])
+            speed = np.hypot(v[:, 0], v[:, 1]) * (length_e / length_r)
+            # The executed run is the "recording" here and the recording the "model": time
+            # maps as t_exec = offset + scale·(t_rec − t_rec[0]).
+            db, scale, _ = velocity_snr(
+                run[:, 0], np.column_stack([arc, np.zeros_like(arc)]), grid,
+                np.column_stack([speed, np.zeros_like(speed)]),
+            )  # fmt: skip
+            _, mine = recorded_velocity(run[:, 0], np.column_stack([arc, np.zeros_like(arc)]))
+        except ValueError:  # too short to compare
+            continue
+        energy = float(np.sum(mine * mine))
+        signal, noise = signal + energy, noise + energy / 10 ** (db / 10)
+        per_run.append({"plan": int(plan), "snr_db": float(db), "time_scale": float(scale)})
+    return {
+        "recorded_speed_snr_db": _db(signal, noise) if per_run else None,
+        "recorded_runs": per_run,
+    }
