@@ -1,15 +1,16 @@
 """``tagbot demo``: the whole pipeline on a tag the project ships, into one folder.
 
-1. **fit**: the real DustTag capture ``examples/dusttag-142.json`` (a phone capture with timing)
-   becomes a ΓΛ* plan (``plan.json``), with its shape error and velocity SNR;
+1. **fit**: the real DustTag capture ``examples/hello-world-147.json`` ("hello world" written on a
+   phone, with timing) becomes a ΓΛ* plan (``plan.json``), with its shape error and velocity SNR;
 2. **plots**: the action plan over the trace (``plan.png``) and the speed with each stroke's
    lognormal and the recorded speed (``speed.png``);
 3. **variations**: plausible instances (``variations/*.json``) and a contact sheet
-   (``variations.png``);
-4. **render**: the tag painted with a speed-dependent brush and drips (``tag.png``,
-   ``tag.svg``) and drawn progressively (``tag.gif``);
-5. **plotter**: drawn on the simulated Grbl plotter (run folder ``plotter/``);
-6. **arm**: drawn by the simulated DYNAMIXEL arm (run folder ``arm/``);
+   (``variations.png``, the original large and marked);
+4. **render**: the tag painted in marker ink that spreads and drips where the pen lingers
+   (``tag.png`` textured, ``tag.svg``) and drawn progressively with its drips (``tag.gif``);
+5. **plotter**: drawn on the simulated Grbl plotter (run folder ``plotter/``, with the pictures
+   of what the plan asked for and what the machine drew);
+6. **arm**: drawn by the simulated DYNAMIXEL arm (run folder ``arm/``, the same pictures);
 
 then ``summary.json`` and a short summary of where everything is. Nothing touches hardware.
 """
@@ -28,7 +29,7 @@ import numpy as np
 
 __all__ = ["DEMO_INPUT", "DemoResult", "run_demo"]
 
-DEMO_INPUT = "dusttag-142.json"
+DEMO_INPUT = "hello-world-147.json"
 """The shipped capture the demo starts from (public domain, see examples/README.md)."""
 
 STEPS = ("fit", "plots", "variations", "render", "plotter", "arm")
@@ -129,9 +130,9 @@ def run_demo(
 
     started = time.perf_counter()
     step("render")
-    render(tag, folder / "tag.png", drips=True, seed=seed, size=1600)
+    render(tag, folder / "tag.png", drips=True, seed=seed, texture=True, size=1600)
     render(tag, folder / "tag.svg", drips=True, seed=seed)
-    render(tag, folder / "tag.gif", seed=seed, size=480, fps=20)
+    render(tag, folder / "tag.gif", drips=True, seed=seed, texture=True, size=720, fps=20)
     result.files.update(png="tag.png", svg="tag.svg", gif="tag.gif")
     timed("render", started)
 
@@ -149,20 +150,41 @@ def run_demo(
     return result
 
 
-def _contact_sheet(tags: list[Any], path: Path, seed: int, cell: int = 400) -> None:
-    """The tags side by side (the original first), on a common scale, as one PNG."""
-    from PIL import Image
+def _contact_sheet(tags: list[Any], path: Path, seed: int, cell: int = 360) -> None:
+    """The original (first, twice the size, marked) beside its variations, on a common scale,
+    as one PNG with no empty slot: the variations fill ``rows`` rows beside an original
+    ``rows`` cells high."""
+    from PIL import Image, ImageDraw
 
-    from tagbot.render import render_array
+    from tagbot.render import prepare, render_array
 
-    points = np.concatenate([p.targets for t in tags for p in t.plans])
-    low, high = points.min(axis=0), points.max(axis=0)
-    margin = 0.15 * float(np.max(high - low))
-    bounds = (low[0] - margin, low[1] - margin, high[0] + margin, high[1] + margin)
-    columns = 4 if len(tags) > 4 else len(tags)
-    rows = -(-len(tags) // columns)
-    sheet = Image.new("RGBA", (columns * cell, rows * cell), "white")
-    for i, tag in enumerate(tags):
-        pixels = render_array(tag, size=(cell, cell), bounds=bounds, drips=True, seed=seed + i)
-        sheet.paste(Image.fromarray(pixels), ((i % columns) * cell, (i // columns) * cell))
-    sheet.convert("RGB").save(path)
+    seeds = [seed + i for i in range(len(tags))]
+    boxes = np.array(
+        [prepare(t, drips=True, seed=s).bounds() for t, s in zip(tags, seeds, strict=True)]
+    )
+    bounds = (*boxes[:, :2].min(axis=0), *boxes[:, 2:].max(axis=0))
+    aspect = float(np.clip((bounds[2] - bounds[0]) / (bounds[3] - bounds[1]), 0.5, 2.0))
+    cw, ch = round(cell * aspect), cell
+    variations = len(tags) - 1
+    rows = 2 if variations % 2 == 0 and variations >= 4 else 1
+    columns = -(-variations // rows)
+    big = (rows * cw, rows * ch)
+    sheet = Image.new("RGB", (big[0] + columns * cw, big[1]), "white")
+    original = render_array(tags[0], size=big, bounds=bounds, drips=True, seed=seeds[0])
+    sheet.paste(Image.fromarray(original).convert("RGB"), (0, 0))
+    for i, tag in enumerate(tags[1:]):
+        pixels = render_array(tag, size=(cw, ch), bounds=bounds, drips=True, seed=seeds[i + 1])
+        sheet.paste(
+            Image.fromarray(pixels).convert("RGB"),
+            (big[0] + (i % columns) * cw, (i // columns) * ch),
+        )
+    pen = ImageDraw.Draw(sheet)
+    pen.rectangle((1, 1, big[0] - 2, big[1] - 2), outline="#c62828", width=3)
+    pen.text((12, 10), "original", fill="#c62828", font_size=max(14, cell // 14))
+    for i in range(variations):
+        x, y = big[0] + (i % columns) * cw, (i // columns) * ch
+        pen.rectangle((x, y, x + cw - 1, y + ch - 1), outline="#d0d0d0", width=1)
+        pen.text(
+            (x + 10, y + 8), f"variation {i + 1}", fill="#707070", font_size=max(12, cell // 18)
+        )
+    sheet.save(path)

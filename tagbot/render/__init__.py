@@ -1,14 +1,18 @@
 """Pictures of tags: a brush swept along the motion, animations, and speed and action-plan plots.
 
-The paper's §5: the brush thins as the pen speeds up and drips where it slows down; the samples,
+The paper's §5, with an ink model: the ink laid grows with the time the pen spends (thin where it
+is fast), spreads a little and drips where it pools (:mod:`.brush`; presets ``marker``,
+``fineliner``, ``chisel``, ``spray``); the samples,
 spaced by the model's speed, animate the gesture; Figures 4, 6 and 12 plot the speed with each
 stroke's lognormal and the action plan. ::
 
     from tagbot.render import render, render_array, plot, pictures_for_run
     render(tag, "tag.png", drips=True, seed=1)     # or .svg, .gif, .mp4 (tagbot[video])
+    render(tag, "spray.png", brush="spray", texture=True, seed=1)
     pixels = render_array(tag, size=(800, 600))    # RGBA uint8 (600, 800, 4)
     plot(tag, "speed.png", kind="speed")           # or kind="plan"
-    pictures_for_run("runs/2024-...")              # tag.png, speed.png, plan.png
+    pictures_for_run("runs/2024-...")              # tag.png, executed.png, execution.png,
+                                                   # speed.png, plan.png
 
 Submodules are imported on first use (matplotlib is not loaded by ``import tagbot.render``).
 """
@@ -19,6 +23,7 @@ import importlib
 from typing import Any
 
 _EXPORTS = {
+    "PRESETS": "brush",
     "Brush": "brush",
     "Drip": "brush",
     "Painting": "brush",
@@ -42,6 +47,7 @@ _EXPORTS = {
 }
 
 __all__ = [
+    "PRESETS",
     "Brush",
     "Drip",
     "Painting",

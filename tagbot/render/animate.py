@@ -15,10 +15,11 @@ Each frame adds only the brush pieces painted since the previous one (joined to 
 accumulated by the maximum of coverages, so the cost grows with the frames, not their square.
 
 GIF (Pillow): frame delays are whole centiseconds; each frame's delay is rounded so that the delays
-add up to ``frames / fps`` exactly (to the centisecond). Pillow merges consecutive identical frames
-(pen lifts, the hold) into one frame with their delays added, so a GIF can hold fewer frames than
-counted above but always lasts as long. Rates above 50 fps are refused: browsers slow down GIF
-frames shorter than 20 ms. The palette is the 256 mixes of the background and the ink, exact.
+add up to ``frames / fps`` exactly (to the centisecond). Consecutive identical frames (pen lifts,
+the hold) are merged into one frame with their delays added, so a GIF holds fewer frames than
+counted above (:func:`write_animation` returns the count in the file) but lasts as long. Rates
+above 50 fps are refused: browsers slow down GIF frames shorter than 20 ms. The palette is the
+256 mixes of the background and the ink, exact.
 
 MP4 (H.264, yuv420p) needs the optional ``imageio-ffmpeg`` package (``pip install
 'tagbot[video]'``), which ships its own ffmpeg; the picture's sides are rounded up to even numbers.
@@ -44,6 +45,7 @@ from tagbot.render.raster import (
     compound,
     drip_path,
     parse_color,
+    spray,
     stroke_path,
     texture_field,
 )
@@ -122,9 +124,10 @@ def paint_frames(
     if texture:
         if seed is None:
             raise RenderError("seed: the textured brush needs a seed")
-        factor = texture_field(
-            painting, view, seed, where=raster.coverage(stroke_path(painting)) > 0
-        )
+        wet = raster.coverage(stroke_path(painting))
+        if painting.drips:
+            wet = np.maximum(wet, raster.coverage(drip_path(painting)))
+        factor = texture_field(painting, view, seed, where=wet > 0)
     scale = timing.fps / timing.speed
     first_frame = [
         np.clip(np.ceil((run.t - painting.t0) * scale - 1e-9), 1, timing.drawing).astype(np.int64)
@@ -157,9 +160,10 @@ def paint_frames(
             if state != last_drips:
                 drips = raster.coverage(drip_path(painting, list(state)))
                 last_drips = state
-        frame = strokes * factor if factor is not None else strokes
-        if len(drip_t):
-            frame = frame + drips - frame * drips
+        frame = np.maximum(strokes, drips) if len(drip_t) else strokes
+        if factor is not None:
+            frame = frame * factor
+        frame = spray(frame, painting, view, seed)
         if progress is not None:
             progress(k, total)
         yield frame
@@ -181,13 +185,14 @@ def write_animation(
     *,
     color: object = "#111111",
     background: object = "white",
-) -> None:
-    """Write frames (ink opacities) as a GIF or MP4, by the suffix of ``path``."""
+) -> int:
+    """Write frames (ink opacities) as a GIF or MP4, by the suffix of ``path``; return the
+    number of frames in the file."""
     suffix = os.fspath(path).lower().rsplit(".", 1)[-1]
     if suffix == "gif":
-        _write_gif(frames, path, timing, _palette(color, background))
-    elif suffix == "mp4":
-        _write_mp4(frames, path, view, timing, color, background)
+        return _write_gif(frames, path, timing, _palette(color, background))
+    if suffix == "mp4":
+        return _write_mp4(frames, path, view, timing, color, background)
     else:
         raise RenderError(f"{os.fspath(path)}: an animation is a .gif or an .mp4")
 
@@ -209,28 +214,37 @@ def _write_gif(
     path: str | os.PathLike[str],
     timing: Timing,
     palette: bytes,
-) -> None:
+) -> int:
+    """Write the GIF, consecutive identical frames merged into one (their delays added, as
+    Pillow would); return the frames written."""
     from PIL import Image
 
-    def images() -> Iterator[Image.Image]:
-        for alpha in frames:
-            index = np.round(np.clip(alpha, 0.0, 1.0) * 255.0).astype(np.uint8)
-            image = Image.frombytes("P", (index.shape[1], index.shape[0]), index.tobytes())
-            image.putpalette(palette)
-            yield image
+    delays = gif_delays(timing.frames, timing.fps)
+    images: list[Image.Image] = []
+    durations: list[int] = []
+    previous = b""
+    for k, alpha in enumerate(frames):
+        data = np.round(np.clip(alpha, 0.0, 1.0) * 255.0).astype(np.uint8)
+        if images and data.tobytes() == previous:
+            durations[-1] += delays[k]
+            continue
+        previous = data.tobytes()
+        image = Image.frombytes("P", (data.shape[1], data.shape[0]), previous)
+        image.putpalette(palette)
+        images.append(image)
+        durations.append(delays[k])
 
-    sequence = images()
-    first = next(sequence)
-    first.save(
+    images[0].save(
         path,
         format="GIF",
         save_all=True,
-        append_images=sequence,
-        duration=gif_delays(timing.frames, timing.fps),
+        append_images=images[1:],
+        duration=durations,
         loop=0,
         optimize=False,
         disposal=1,
     )
+    return len(images)
 
 
 def _write_mp4(
@@ -240,7 +254,7 @@ def _write_mp4(
     timing: Timing,
     color: object,
     background: object,
-) -> None:
+) -> int:
     import imageio_ffmpeg
 
     if parse_color(background, "background") is None:
@@ -261,3 +275,4 @@ def _write_mp4(
             writer.send(np.ascontiguousarray(compose(alpha, color, background)[..., :3]).tobytes())
     finally:
         writer.close()
+    return timing.frames

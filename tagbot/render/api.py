@@ -19,7 +19,7 @@ from tagbot.render.animate import (
     write_animation,
 )
 from tagbot.render.brush import Brush, MotionLike, Painting, RenderError, paint
-from tagbot.render.raster import View, compose, coverage, make_view, write_png
+from tagbot.render.raster import UNITS_PER_INCH, View, compose, coverage, make_view, write_png
 from tagbot.render.svg import svg_document, write_svg
 
 if TYPE_CHECKING:
@@ -49,13 +49,19 @@ class Rendered:
     """The seed of the drips and texture (None when neither was asked for)."""
     drips: int
     frames: int | None = None
-    """Frames counted by the animation's schedule (see :mod:`.animate`)."""
+    """Frames in the animation file (a GIF merges identical consecutive frames)."""
     seconds: float | None = None
     """How long the animation plays."""
+    physical: tuple[float, float, str] | None = None
+    """An SVG's width and height in physical units, when it has them (else pixels)."""
 
     def summary(self) -> str:
-        """One line for people."""
-        text = f"{self.width}x{self.height} {self.format.upper()}"
+        """One line for people, saying what the file holds."""
+        if self.physical is not None:
+            w, h, units = self.physical
+            text = f"{w:.1f}x{h:.1f} {units} {self.format.upper()}"
+        else:
+            text = f"{self.width}x{self.height} {self.format.upper()}"
         if self.frames is not None and self.seconds is not None:
             text += f", {self.frames} frames, {self.seconds:.2f} s"
         if self.drips:
@@ -81,10 +87,11 @@ def prepare(
     drips: bool = False,
     seed: int | None = None,
     texture: bool = False,
-    brush: Brush | None = None,
+    brush: Brush | str | None = None,
 ) -> Painting:
-    """Sample a tag (every ``dt`` seconds) or take a motion as is, and paint it. A seed is drawn
-    when drips or texture need one and none is given (it is in ``painting.seed``)."""
+    """Sample a tag (every ``dt`` seconds) or take a motion as is, and paint it with ``brush`` (a
+    :class:`Brush` or a preset's name, see :data:`.brush.PRESETS`). A seed is drawn when drips or
+    texture need one and none is given (it is in ``painting.seed``)."""
     if isinstance(source, Tag):
         motion: MotionLike = source.sample(dt)
         units = source.units
@@ -97,6 +104,8 @@ def prepare(
         seed = new_seed()
     if seed is not None and (int(seed) != seed or seed < 0):
         raise RenderError(f"seed: must be a whole number >= 0, got {seed!r}")
+    if isinstance(brush, str):
+        brush = Brush.preset(brush)
     return paint(motion, brush, drips=drips, seed=seed, units=units)
 
 
@@ -121,7 +130,7 @@ def render_array(
     drips: bool = False,
     seed: int | None = None,
     texture: bool = False,
-    brush: Brush | None = None,
+    brush: Brush | str | None = None,
     color: object = "#111111",
     background: object = "white",
     bounds: tuple[float, float, float, float] | None = None,
@@ -148,7 +157,7 @@ def render(
     drips: bool = False,
     seed: int | None = None,
     texture: bool = False,
-    brush: Brush | None = None,
+    brush: Brush | str | None = None,
     color: object = "#111111",
     background: object = "white",
     bounds: tuple[float, float, float, float] | None = None,
@@ -188,8 +197,11 @@ def render(
             pixels=size is not None,
         )
         write_svg(text, path)
-        return Rendered(**common)
+        physical = None
+        if size is None and painting.units in UNITS_PER_INCH:
+            physical = (view.xmax - view.xmin, view.ymax - view.ymin, painting.units)
+        return Rendered(**common, physical=physical)
     timing = frame_times(painting.t0, painting.duration, fps, speed, hold)
     frames = paint_frames(painting, view, timing, texture=texture, seed=seed, progress=progress)
-    write_animation(frames, path, view, timing, color=color, background=background)
-    return Rendered(**common, frames=timing.frames, seconds=timing.seconds)
+    written = write_animation(frames, path, view, timing, color=color, background=background)
+    return Rendered(**common, frames=written, seconds=timing.seconds)

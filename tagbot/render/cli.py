@@ -9,11 +9,14 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from tagbot.corpus_cli import corpus_options, run_corpus
+
 if TYPE_CHECKING:
     from tagbot.inputs import Trace
     from tagbot.model.plan import Tag
+    from tagbot.render.api import Rendered
 
-__all__ = ["load_source", "plot_command", "render_command"]
+__all__ = ["load_source", "plot_command", "render_command", "render_file"]
 
 _SIZE = re.compile(r"\s*(\d+)\s*(?:[xX]\s*(\d+)\s*)?")
 
@@ -60,23 +63,43 @@ def _model_option(f: Any) -> Any:
 
 
 @click.command(name="render")
-@click.argument("source", metavar="PLAN|INPUT", type=click.Path(dir_okay=False, exists=True))
+@click.argument("sources", metavar="PLAN|INPUT...", nargs=-1, required=True)
 @click.option(
     "-o",
     "--output",
-    metavar="FILE",
-    type=click.Path(dir_okay=False),
+    metavar="FILE|DIR",
     required=True,
-    help="The picture: .png, .svg, .gif (animated) or .mp4 (needs tagbot[video]).",
+    help="The picture: .png, .svg, .gif (animated) or .mp4 (needs tagbot[video]); for many "
+    "inputs, the folder for the pictures and summary.csv.",
 )
-@click.option("--drips", is_flag=True, help="Paint drips where the pen slows down.")
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["png", "svg", "gif", "mp4"]),
+    default="png",
+    show_default=True,
+    help="Many inputs: the pictures' format.",
+)
+@click.option("--force", is_flag=True, help="Many inputs: replace pictures already in the folder.")
+@corpus_options
+@click.option("--drips", is_flag=True, help="Paint drips where ink pools (the pen lingers).")
 @click.option(
     "--seed",
     type=click.IntRange(min=0),
     default=None,
     help="Seed of the drips and texture (printed when not given, to repeat a picture).",
 )
-@click.option("--texture", is_flag=True, help="A textured brush: bristle streaks and grain.")
+@click.option(
+    "--texture", is_flag=True, help="A textured brush: felt streaks, dry breaks at speed, grain."
+)
+@click.option(
+    "--brush",
+    "brush_name",
+    type=click.Choice(["marker", "fineliner", "chisel", "spray"]),
+    default="marker",
+    show_default=True,
+    help="The pen: a felt marker, a fineliner, a chisel marker or a spray can.",
+)
 @click.option("--size", type=PixelSize(), default=None, help="Pixels: WxH, or the longer side.")
 @click.option(
     "--dpi",
@@ -121,11 +144,16 @@ def _model_option(f: Any) -> Any:
 )
 @_model_option
 def render_command(
-    source: str,
+    sources: tuple[str, ...],
     output: str,
+    fmt: str,
+    force: bool,
+    jobs: int | None,
+    scheduler: str | None,
     drips: bool,
     seed: int | None,
     texture: bool,
+    brush_name: str,
     size: int | tuple[int, int] | None,
     dpi: float | None,
     dt: float,
@@ -136,21 +164,27 @@ def render_command(
     background: str,
     model: str | None,
 ) -> None:
-    """Paint a tag with a brush that thins as the pen speeds up (paper §5).
+    """Paint a tag with ink that spreads where the pen lingers and drips (paper §5).
 
     PLAN|INPUT is a plan file, or a trace file (GML, SVG, points) that is fitted first. The
     output's suffix picks the format: PNG (anti-aliased), SVG (one outline per pen-down run),
     GIF or MP4 (the tag drawn progressively, in real time unless --speed says otherwise).
+    Many inputs (files, folders, quoted globs) are rendered in worker processes into the folder
+    -o DIR as --format pictures, with DIR/summary.csv; the exit status is 1 if any failed.
     """
-    from tagbot.render.api import format_of, render
-    from tagbot.render.brush import Brush
+    from tagbot.corpus import is_corpus
+    from tagbot.io.output import check_output_file
+    from tagbot.render.api import format_of
 
-    fmt = format_of(output)
+    corpus = is_corpus(sources)
+    if not corpus:
+        fmt = format_of(output)
     if fmt in ("gif", "mp4"):
         from tagbot.render.animate import check_animation
 
-        check_animation(output, fps)
-    tag, _ = load_source(source, model)
+        check_animation(f"x.{fmt}" if corpus else output, fps)
+    if not corpus:
+        check_output_file(output)
     if seed is None and (drips or texture):
         from tagbot.gesture import new_seed
 
@@ -163,24 +197,43 @@ def render_command(
         "drips": drips,
         "seed": seed,
         "texture": texture,
-        "brush": Brush(),
+        "brush": brush_name,
         "color": color,
         "background": background,
         "fps": fps,
         "speed": speed,
         "hold": hold,
     }
-    if fmt in ("gif", "mp4") and sys.stderr.isatty():
+    if corpus:
+        from tagbot.corpus import render_file as render_job
+
+        ctx = click.get_current_context()
+        jobs_options = {"model": model, "render": options}
+        ctx.exit(
+            run_corpus(render_job, sources, output, f".{fmt}", jobs_options, force, jobs, scheduler)
+        )
+    result = render_file(sources[0], output, model=model, options=options)
+    click.echo(f"wrote {output}: {result.summary()}", err=True)
+
+
+def render_file(
+    source: str, output: str, *, model: str | None, options: dict[str, Any]
+) -> Rendered:
+    """One file's work for ``tagbot render``: load (or fit) ``source`` and render it into
+    ``output`` with :func:`tagbot.render.render`'s keyword ``options`` (a progress bar for
+    animations on a terminal)."""
+    from tagbot.render.api import format_of, render
+
+    tag, _ = load_source(source, model)
+    if format_of(output) in ("gif", "mp4") and sys.stderr.isatty():
         with click.progressbar(length=1, label="frames", file=sys.stderr) as bar:
 
             def progress(done: int, total: int) -> None:
                 bar.length = total
                 bar.update(done - bar.pos)
 
-            result = render(tag, output, progress=progress, **options)
-    else:
-        result = render(tag, output, **options)
-    click.echo(f"wrote {output}: {result.summary()}", err=True)
+            return render(tag, output, progress=progress, **options)
+    return render(tag, output, **options)
 
 
 @click.command(name="plot")
@@ -207,9 +260,11 @@ def plot_command(source: str, output: str, kind: str, model: str | None) -> None
     PLAN|INPUT|RUNDIR is a plan file, a trace file (fitted first; a timed one adds its recorded
     speed, scaled and aligned), or a run folder of `tagbot draw` (planned and executed speed).
     """
+    from tagbot.io.output import check_output_file
     from tagbot.render.plots import plot, plot_format
 
     plot_format(output)
+    check_output_file(output)
     if Path(source).is_dir():
         plot(source, output, kind=kind)
     else:

@@ -46,14 +46,17 @@ from numpy.typing import NDArray
 from tagbot.errors import InputError
 from tagbot.model.lognormal import lognormal
 from tagbot.model.plan import Tag
-from tagbot.render.brush import RenderError
+from tagbot.render.brush import MotionLike, RenderError
 
 __all__ = [
     "PLOT_KINDS",
     "Curve",
     "RunFolder",
     "SpeedCurves",
+    "exaggerated",
+    "executed_motion",
     "executed_speed",
+    "execution_figure",
     "load_run",
     "pictures_for_run",
     "plan_figure",
@@ -80,6 +83,8 @@ MEASURED_COLOR = "#f28e2b"
 TARGET_COLOR = "#f28e2b"
 DT_COLOR = "#2e9e44"
 TRACE_COLOR = "#b0b0b0"
+LIFT_COLOR = "#000000"
+LIFT_ALPHA = 0.06
 
 
 @dataclass(frozen=True)
@@ -172,16 +177,19 @@ def speed_curves(
 def recorded_speed(trace: Any, model_t: Array, model_v: Array) -> Curve | None:
     """A timed trace's speed on the model's clock (None without timing or too short), by the
     time scale and offset that best match the model's velocity
-    (:func:`tagbot.metrics.velocity_snr`)."""
-    from tagbot.metrics import recorded_velocity, velocity_snr
+    (:func:`tagbot.metrics.velocity_snr`), or unmapped when the model shares the recording's
+    clock and matches better so (a fit with ``timing="match"``)."""
+    from tagbot.metrics import clock_velocity_snr, recorded_velocity, velocity_snr
 
     t = getattr(trace, "t", None)
     if t is None:
         return None
     xy = np.asarray(trace.xy, dtype=float)
     try:
-        _, scale, offset = velocity_snr(t, xy, model_t, model_v)
+        best, scale, offset = velocity_snr(t, xy, model_t, model_v)
         grid, v = recorded_velocity(t, xy)
+        if clock_velocity_snr(t, xy, model_t, model_v) >= best:
+            scale, offset = 1.0, float(model_t[0])
     except ValueError:
         return None
     return Curve(model_t[0] + (grid - offset) / scale, np.hypot(v[:, 0], v[:, 1]) * scale)
@@ -246,12 +254,12 @@ def _read_executed(path: Path) -> Executed:
     rows = [line for line in lines[1:] if line.strip()]
     if not rows:
         raise InputError(f"{path}: no samples")
-    try:
-        data = np.array([[float(v) for v in row.split(",")] for row in rows], dtype=float)
+    if any(row.count(",") != 3 for row in rows):
+        raise InputError(f"{path}: expected 4 fields per line (t,x,y,pen)")
+    try:  # one conversion of every field, in C
+        data = np.array(",".join(rows).split(","), dtype=float).reshape(-1, 4)
     except ValueError as e:
         raise InputError(f"{path}: not numbers ({e})") from None
-    if data.ndim != 2 or data.shape[1] != 4:
-        raise InputError(f"{path}: expected 4 fields per line (t,x,y,pen)")
     if not np.all(np.isfinite(data)):
         raise InputError(f"{path}: values must be finite")
     return Executed(t=data[:, 0], xy=data[:, 1:3], pen=(data[:, 3] != 0).astype(np.int8))
@@ -398,8 +406,15 @@ def speed_figure(curves: SpeedCurves, *, title: str | None = None) -> Figure:
     top)."""
     figure = _figure()
     ax = figure.add_subplot()
-    for a, b in curves.lifts:
-        ax.axvspan(a, b, color="#000000", alpha=0.05, linewidth=0)
+    for k, (a, b) in enumerate(curves.lifts):
+        ax.axvspan(
+            a,
+            b,
+            color=LIFT_COLOR,
+            alpha=LIFT_ALPHA,
+            linewidth=0,
+            label="pen up (lifted between runs)" if k == 0 else None,
+        )
     if curves.strokes:
         ax.add_collection(
             LineCollection(
@@ -429,9 +444,10 @@ def speed_figure(curves: SpeedCurves, *, title: str | None = None) -> Figure:
     if len(finite):
         ax.set_xlim(float(curves.speed.t[0]), float(curves.speed.t[-1]))
     ax.grid(True, alpha=0.25)
-    ax.legend(loc="upper right", fontsize="small", frameon=False)
     if title:
         ax.set_title(title)
+    # Outside the axes, above them: a legend never covers a curve.
+    figure.legend(loc="outside upper center", ncols=5, fontsize="small", frameon=False)
     return figure
 
 
@@ -509,20 +525,52 @@ def plan_figure(
         )
         ends = np.array([h[1] for h in dt_handles])
         ax.plot(ends[:, 0], ends[:, 1], "^", color=DT_COLOR, markersize=5)
-        for where, text in labels:
+        dt_labels = [
             ax.annotate(
                 text, where, textcoords="offset points", xytext=(3, -3), fontsize=6, color=DT_COLOR
             )
+            for where, text in labels
+        ]
+    else:
+        dt_labels = []
     ax.plot(
         points[:, 0], points[:, 1], "s", color=TARGET_COLOR, markersize=5, label="virtual targets"
     )
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.2)
-    ax.set_xlabel(tag.units)
+    ax.set_xlabel(f"x ({tag.units})")
+    ax.set_ylabel(f"y ({tag.units})")
     figure.legend(loc="outside lower center", ncols=5, fontsize="small", frameon=False)
     model = "ΓΛ*" if tag.model == "gamma" else "ΣΛ*"
     ax.set_title(title or f"{model} action plan: {len(tag.plans)} plans, {tag.n_strokes} strokes")
+    _thin_labels(figure, dt_labels)
     return figure
+
+
+def _thin_labels(figure: Figure, texts: Sequence[Any], pad: float = 2.0) -> None:
+    """Hide the labels that would overlap one shown before them (in order), so that no two
+    shown overlap: their boxes on the laid-out figure, grown by ``pad`` pixels."""
+    if len(texts) < 2:
+        return
+    figure.draw_without_rendering()  # lays the figure out, so the boxes are final
+    renderer = figure.canvas.get_renderer()  # type: ignore[attr-defined]
+    extents = np.array([t.get_window_extent(renderer).extents for t in texts])
+    boxes = extents + np.array([-pad, -pad, pad, pad])
+    kept = np.empty_like(boxes)
+    count = 0
+    for text, box in zip(texts, boxes, strict=True):
+        shown = kept[:count]
+        hit = (
+            (shown[:, 0] < box[2])
+            & (box[0] < shown[:, 2])
+            & (shown[:, 1] < box[3])
+            & (box[1] < shown[:, 3])
+        )
+        if hit.any():
+            text.set_visible(False)
+        else:
+            kept[count] = box
+            count += 1
 
 
 def plot_format(path: str | os.PathLike[str]) -> str:
@@ -567,17 +615,199 @@ def plot(
     return Path(path)
 
 
-def pictures_for_run(run_dir: str | os.PathLike[str], *, size: int = 1200) -> list[Path]:
-    """Write ``tag.png`` (brush render of the plan, else of motion.csv), ``speed.png`` (planned
-    and executed speed with the strokes' lognormals) and ``plan.png`` (the action plan, when
-    there is a plan.json) into a run folder; return the paths written."""
-    from tagbot.render.api import render
+def executed_motion(
+    executed: Executed, window: float = EXECUTED_WINDOW, spacing: float = 0.0
+) -> MotionLike:
+    """``executed.csv`` as a motion to paint: each pen-down run's positions smoothed by a moving
+    average over ``window`` seconds (a recorder's steps and jitter are not the pen's path),
+    velocities by central differences, and then only the samples that move at least ``spacing``
+    (tag units) or ``window`` seconds on from the previous one kept (a 1 ms record of a slow
+    machine holds far more samples than the brush needs)."""
+    from scipy.ndimage import uniform_filter1d
+
+    from tagbot.io.motionfile import MotionTable
+
+    t, xy, pen = executed.t, executed.xy.copy(), executed.pen
+    keep = np.concatenate([[True], np.diff(t) > 0])
+    t, xy, pen = t[keep], xy[keep], pen[keep]
+    down = np.concatenate([[0], (pen != 0).astype(np.int8), [0]])
+    edges = np.flatnonzero(np.diff(down))
+    v = np.zeros_like(xy)
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if b - a < 2:
+            continue
+        step = float(np.median(np.diff(t[a:b])))
+        span = max(1, round(window / step)) if step > 0 else 1
+        xy[a:b] = uniform_filter1d(xy[a:b], size=span, axis=0, mode="nearest")
+        v[a:b] = np.gradient(xy[a:b], t[a:b], axis=0)
+    if spacing > 0 and len(t) > 2:
+        step = np.concatenate([[0.0], np.hypot(*np.diff(xy, axis=0).T)])
+        # Both counts only grow, so their sum changes exactly when one of them does.
+        key = np.floor(np.cumsum(step) / spacing) + np.floor((t - t[0]) / window)
+        pen_change = np.concatenate([[True], np.diff(pen) != 0])
+        pen_change |= np.concatenate([np.diff(pen) != 0, [True]])
+        keep = pen_change | np.concatenate([[True], np.diff(key) != 0])
+        t, xy, v, pen = t[keep], xy[keep], v[keep], pen[keep]
+    return MotionTable(t=t, xy=xy, v=v, speed=np.hypot(v[:, 0], v[:, 1]), pen=pen)
+
+
+PLANNED_ONLY = "#1f6fd1"
+EXECUTED_ONLY = "#d62728"
+
+
+def exaggerated(
+    planned: Sequence[Array], executed: Sequence[Array], target: float
+) -> tuple[list[Array], float]:
+    """The executed runs' points moved away from the planned path ``k`` times their deviation
+    (the distance to the nearest point of the planned runs, densified to 1/200,000 of their
+    length; deviations under that spacing count as none), ``k`` in [1, 1000] chosen so the
+    largest deviation shows as ``target``."""
+    from scipy.spatial import cKDTree
+
+    lengths = [float(np.hypot(*np.diff(r, axis=0).T).sum()) for r in planned if len(r) > 1]
+    spacing = max(sum(lengths), 1e-12) / 200_000
+    dense = []
+    for run in planned:
+        if len(run) < 2:
+            dense.append(run)
+            continue
+        s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(run, axis=0).T))])
+        grid = np.linspace(0.0, s[-1], max(2, int(s[-1] / spacing) + 2))
+        dense.append(np.column_stack([np.interp(grid, s, run[:, i]) for i in (0, 1)]))
+    tree = cKDTree(np.concatenate(dense))
+    found = [tree.query(run) for run in executed]
+    largest = max((float(d.max()) for d, _ in found if len(d)), default=0.0)
+    exact = largest <= spacing  # within the densified path's own resolution
+    k = 1.0 if exact else float(np.clip(target / largest, 1.0, 1000.0))
+    points = tree.data
+    moved = [points[i] + k * (run - points[i]) for run, (_, i) in zip(executed, found, strict=True)]
+    return moved, k
+
+
+def execution_figure(
+    planned: NDArray[np.floating],
+    executed: NDArray[np.floating],
+    view: Any,
+    *,
+    paths: tuple[Sequence[Array], Sequence[Array]] | None = None,
+    target: float | None = None,
+    title: str = "planned and executed ink",
+) -> Figure:
+    """The planned and executed ink opacities ``(height, width)`` of one view overlaid: ink only
+    in the plan blue, only in the execution red, in both black; axes in machine mm. With
+    ``paths`` (planned and executed pen-down runs, ``(N, 2)`` each), a second panel shows the
+    executed paths with their deviation from the plan exaggerated (:func:`exaggerated`, the
+    largest shown as ``target`` mm, default a fiftieth of the view)."""
+    p = np.clip(np.asarray(planned, dtype=np.float32), 0.0, 1.0)[..., None]
+    e = np.clip(np.asarray(executed, dtype=np.float32), 0.0, 1.0)[..., None]
+    blue = np.array([int(PLANNED_ONLY[i : i + 2], 16) / 255 for i in (1, 3, 5)], dtype=np.float32)
+    red = np.array([int(EXECUTED_ONLY[i : i + 2], 16) / 255 for i in (1, 3, 5)], dtype=np.float32)
+    both = np.float32(0.07)
+    only_p, only_e, shared = p * (1 - e), e * (1 - p), p * e
+    rgb = (1 - only_p - only_e - shared) + only_p * blue + only_e * red + shared * both
+    aspect = view.height / view.width
+    panels = 1 if paths is None else 2
+    width = 7.0 * panels
+    figure = _figure(width, float(np.clip(7.0 * aspect + 1.2, 3.0, 12.0)))
+    axes = figure.subplots(1, panels, squeeze=False)[0]
+    ax = axes[0]
+    extent = (view.xmin, view.xmax, view.ymin, view.ymax)
+    ax.imshow(np.clip(rgb, 0.0, 1.0), extent=extent, interpolation="antialiased")
+    from matplotlib.patches import Patch
+
+    handles = [
+        Patch(color=PLANNED_ONLY, label="planned only"),
+        Patch(color=EXECUTED_ONLY, label="executed only"),
+        Patch(color="#121212", label="both"),
+    ]
+    ax.set_title(title)
+    if paths is not None:
+        target = target if target is not None else 0.02 * max(view.xmax - view.xmin, 1e-12)
+        moved, k = exaggerated(paths[0], paths[1], target)
+        path_ax = axes[1]
+        for j, run in enumerate(paths[0]):
+            path_ax.plot(
+                run[:, 0],
+                run[:, 1],
+                color=PLANNED_ONLY,
+                linewidth=0.9,
+                label="planned path" if j == 0 else None,
+            )
+        for j, run in enumerate(moved):
+            path_ax.plot(
+                run[:, 0],
+                run[:, 1],
+                color=EXECUTED_ONLY,
+                linewidth=0.9,
+                label=f"executed path, deviation x{k:.3g}" if j == 0 else None,
+            )
+        path_ax.set_xlim(view.xmin, view.xmax)
+        path_ax.set_ylim(view.ymin, view.ymax)
+        path_ax.set_aspect("equal")
+        path_ax.set_title(f"path deviation, exaggerated x{k:.3g}")
+        handles += path_ax.get_legend_handles_labels()[0]
+    for a in axes:
+        a.set_xlabel("x (mm)")
+        a.set_ylabel("y (mm)")
+    figure.legend(
+        handles=handles, loc="outside lower center", ncols=5, fontsize="small", frameon=False
+    )
+    return figure
+
+
+def _down_runs(motion: Any) -> list[Array]:
+    """The pen-down runs' positions of a motion (or a sampled tag)."""
+    if isinstance(motion, Tag):
+        motion = motion.sample(0.002)
+    pen = np.asarray(motion.pen) != 0
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], pen.astype(np.int8), [0]])))
+    xy = np.asarray(motion.xy, dtype=float)
+    return [xy[a:b] for a, b in zip(edges[::2], edges[1::2], strict=True)]
+
+
+def pictures_for_run(
+    run_dir: str | os.PathLike[str], *, size: int = 800, seed: int = 1
+) -> list[Path]:
+    """Write the pictures of a run folder and return the paths written:
+
+    - ``tag.png``: the plan's ink (``motion.csv`` in machine mm, else ``plan.json``), with drips
+      (``seed``);
+    - ``executed.png``: what the machine drew (``executed.csv``, :func:`executed_motion`), with the
+      same brush, seed and window as ``tag.png``, and ``execution.png``, both overlaid beside
+      the paths with the deviation exaggerated (:func:`execution_figure`), when the folder has
+      an ``motion.csv`` and an ``executed.csv``;
+    - ``speed.png``: planned and executed speed with the strokes' lognormals;
+    - ``plan.png``: the action plan, when there is a ``plan.json``.
+    """
+    from tagbot.render.api import prepare
+    from tagbot.render.raster import compose, coverage, make_view, write_png
 
     run = load_run(run_dir)
     written = []
-    tag_png = run.path / "tag.png"
-    render(run.tag if run.tag is not None else run.motion, tag_png, size=size)
-    written.append(tag_png)
+    source = run.motion if run.motion is not None else run.tag
+    planned = prepare(source, drips=True, seed=seed)
+    executed = None
+    if run.executed is not None and run.motion is not None and np.any(run.executed.pen):
+        spacing = planned.brush.nib * planned.size / 8.0
+        executed_source = executed_motion(run.executed, spacing=spacing)
+        executed = prepare(executed_source, drips=True, seed=seed, brush=planned.brush)
+    bounds = np.array(planned.bounds())
+    if executed is not None:
+        other = np.array(executed.bounds())
+        bounds = np.concatenate(
+            [np.minimum(bounds[:2], other[:2]), np.maximum(bounds[2:], other[2:])]
+        )
+    view = make_view(tuple(bounds.tolist()), size=size, units=planned.units)  # type: ignore[arg-type]
+    alpha = coverage(planned, view)
+    write_png(compose(alpha), run.path / "tag.png", view.dpi)
+    written.append(run.path / "tag.png")
+    if executed is not None:
+        drawn = coverage(executed, view)
+        write_png(compose(drawn), run.path / "executed.png", view.dpi)
+        paths = (_down_runs(source), _down_runs(executed_source))
+        figure = execution_figure(alpha, drawn, view, paths=paths)
+        save_figure(figure, run.path / "execution.png")
+        written += [run.path / "executed.png", run.path / "execution.png"]
     speed_png = run.path / "speed.png"
     save_figure(speed_figure(run_speed_curves(run), title="planned and executed speed"), speed_png)
     written.append(speed_png)

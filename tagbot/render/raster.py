@@ -7,18 +7,23 @@ layer.
 
 **Textured brush** (``texture=True``): the ink's opacity is multiplied by ``T`` in [0, 1]::
 
-    T = 1 − Brush.texture × clip(0.9·M + 0.1·N, 0, 1)
-    M = clip((1 − L) + D·G, 0, 1)          ink missing from the bristle under the pixel
-    L ~ U(0.85, 1)                         each bristle's ink load (per run, per bristle)
-    D = 1 − exp(−v / v̄)                    dryness: the faster the brush, the drier
-    G = (½ + ½ sin(2π f s / 6 + φ))⁴       dry streaks along the stroke (s in brush widths,
-                                           f ~ U(0.5, 1.5), φ ~ U(0, 2π) per bristle)
+    T = 1 − Brush.texture × clip(0.8·M + 0.12·N, 0, 1)
+    M = clip((1 − L) + 0.6·D·G + B, 0, 1)  ink missing from the felt under the pixel
+    L ~ U(0.88, 1)                         each felt streak's ink load (per run, per streak)
+    D = Brush.dry · clip((v/v̄ − 1.3) / 2.5, 0, 1)   dryness: only a fast pen runs dry
+    G = (½ + ½ sin(2π f s / 4 + φ))²       streaks along the stroke (s in nib widths)
+    B = clip(3·(D − n(s)), 0, 1)           dry-brush breaks: gaps where the streak's smooth noise
+                                           n(s) in [0, 1] falls under the dryness
     N ~ U(0, 1)                            per-pixel grain
 
-A pixel's bristle is found from its nearest pen-down sample (a Euclidean distance transform of the
-samples' pixels): its offset across the brush, over the half width there, split into
-``Brush.bristles`` bands. All random numbers come from the seed, so the texture is reproducible.
-Drips are liquid and stay untextured.
+A pixel's streak is found from its nearest centreline sample (a Euclidean distance transform of
+the samples' pixels): its offset across the stroke, over the half width there, split into
+``Brush.bristles`` bands, so the streaks follow the stroke's direction. Drips are textured the same
+way along their own (vertical) centrelines, never dry. All random numbers come from the seed.
+
+**Spray** (``Brush.soft``, ``Brush.overspray``): the coverage is blurred by a Gaussian of
+standard deviation ``soft × nib / 2`` (soft edges), and fine seeded dots of overspray are
+sprinkled around the strokes with a density falling off over about a nib.
 """
 
 from __future__ import annotations
@@ -224,24 +229,72 @@ def drip_path(painting: Painting, fractions: Sequence[float] | None = None) -> M
     if not shown:
         return compound()
     shapes = [d.shapes(f) for d, f in shown]
-    return compound(np.stack([s[0] for s in shapes]), np.stack([s[1] for s in shapes]))
+    return compound(*(group for s in shapes for group in s))
 
 
 def coverage(
     painting: Painting, view: View, *, texture: bool = False, seed: int | None = None
 ) -> NDArray[np.float32]:
-    """The ink's opacity per pixel ``(height, width)`` in [0, 1]: strokes (textured when asked)
-    under drips."""
+    """The ink's opacity per pixel ``(height, width)`` in [0, 1]: strokes under drips, textured
+    when asked, sprayed by a spray brush."""
     raster = Rasteriser(view)
     alpha = raster.coverage(stroke_path(painting))
+    drips = raster.coverage(drip_path(painting)) if painting.drips else None
+    if drips is not None:
+        alpha = np.maximum(alpha, drips)  # one ink: the drip's top lies inside the stroke
     if texture:
         if seed is None:
             raise RenderError("seed: the textured brush needs a seed")
         alpha = alpha * texture_field(painting, view, seed, where=alpha > 0)
-    if painting.drips:
-        drips = raster.coverage(drip_path(painting))
-        alpha = alpha + drips - alpha * drips
-    return np.clip(alpha, 0.0, 1.0).astype(np.float32)
+    return spray(np.clip(alpha, 0.0, 1.0).astype(np.float32), painting, view, seed)
+
+
+def spray(
+    alpha: NDArray[np.float32], painting: Painting, view: View, seed: int | None
+) -> NDArray[np.float32]:
+    """Soft edges and overspray of a spray brush (see the module docstring); ``alpha`` as is
+    for other brushes."""
+    brush = painting.brush
+    if brush.soft <= 0 and brush.overspray <= 0:
+        return alpha
+    from scipy.ndimage import gaussian_filter
+
+    nib = brush.nib * painting.size * view.scale  # pixels
+    out = alpha
+    if brush.soft > 0:
+        out = gaussian_filter(alpha, sigma=max(0.5 * brush.soft * nib, 0.3), mode="constant")
+    if brush.overspray > 0:
+        density = gaussian_filter(alpha, sigma=max(0.6 * nib, 1.0), mode="constant")
+        rng = np.random.default_rng([0 if seed is None else seed, 3])
+        chance = rng.random(alpha.shape, dtype=np.float32)
+        dots = (chance < 0.35 * brush.overspray * density) * np.float32(0.55)
+        out = out + dots - out * dots
+    return np.clip(out, 0.0, 1.0).astype(np.float32)
+
+
+def _centrelines(painting: Painting) -> dict[str, Array]:
+    """Every centreline sample the texture follows: pen-down samples, then drip stations."""
+    runs = painting.runs
+    nib = painting.brush.nib * painting.size
+    parts: dict[str, list[Array]] = {k: [] for k in ("xy", "normal", "half", "line", "s", "v")}
+    for k, r in enumerate(runs):
+        parts["xy"].append(r.xy)
+        parts["normal"].append(r.normal)
+        parts["half"].append(0.5 * r.width)
+        parts["line"].append(np.full(len(r), k, dtype=float))
+        parts["s"].append(np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(r.xy, axis=0).T))]))
+        parts["v"].append(r.speed / painting.mean_speed)
+    for k, drip in enumerate(painting.drips):
+        x, y, half = drip.outline()
+        parts["xy"].append(np.column_stack([x, y]))
+        parts["normal"].append(np.tile([1.0, 0.0], (len(x), 1)))
+        parts["half"].append(half)
+        parts["line"].append(np.full(len(x), len(runs) + k, dtype=float))
+        parts["s"].append(drip.y - y)
+        parts["v"].append(np.zeros(len(x)))
+    out = {k: np.concatenate(v) for k, v in parts.items()}
+    out["s"] = out["s"] / nib
+    return out
 
 
 def texture_field(
@@ -250,10 +303,9 @@ def texture_field(
     """The textured brush's opacity factor ``T`` per pixel (see the module docstring), computed
     where ``where`` is true (default: everywhere) and 1 elsewhere."""
     brush = painting.brush
-    runs = painting.runs
     h, w = view.height, view.width
-    xy = np.concatenate([r.xy for r in runs])
-    pixel = view.to_pixels(xy)  # float64 (column, row)
+    line = _centrelines(painting)
+    pixel = view.to_pixels(line["xy"])  # float64 (column, row)
     cell = np.floor(pixel).astype(np.intp)
     inside = (cell[:, 0] >= 0) & (cell[:, 0] < w) & (cell[:, 1] >= 0) & (cell[:, 1] < h)
     factor = np.ones((h, w), dtype=np.float32)
@@ -264,34 +316,38 @@ def texture_field(
     rows, cols = distance_transform_edt(index < 0, return_distances=False, return_indices=True)
     rng = np.random.default_rng([seed, 2])
     k = brush.bristles
-    load = rng.uniform(0.85, 1.0, (len(runs), k))
-    frequency = rng.uniform(0.5, 1.5, (len(runs), k))
-    phase = rng.uniform(0.0, 2.0 * np.pi, (len(runs), k))
+    lines = len(painting.runs) + len(painting.drips)
+    load = rng.uniform(0.88, 1.0, (lines, k))
+    frequency = rng.uniform(0.5, 1.5, (lines, k, 3))
+    phase = rng.uniform(0.0, 2.0 * np.pi, (lines, k, 3))
     grain = rng.random((h, w), dtype=np.float32)
 
     pick = np.ones((h, w), dtype=bool) if where is None else np.asarray(where, dtype=bool)
     pr, pc = np.nonzero(pick)
     nearest = index[rows[pr, pc], cols[pr, pc]]
     del rows, cols, index
-    # Offset across the brush, in half widths: the pixel's offset from its nearest sample along
+    # Offset across the stroke, in half widths: the pixel's offset from its nearest sample along
     # the normal there (pixel rows point down, y up).
-    normal = np.concatenate([r.normal for r in runs])[nearest]
+    normal = line["normal"][nearest]
     dx = pc + 0.5 - pixel[nearest, 0]
     dy = pixel[nearest, 1] - (pr + 0.5)
-    half = 0.5 * np.concatenate([r.width for r in runs])[nearest] * view.scale
+    half = np.maximum(line["half"][nearest] * view.scale, 1e-9)
     across = (dx * normal[:, 0] + dy * normal[:, 1]) / half
-    bristle = np.clip(np.floor((across + 1.0) * 0.5 * k), 0, k - 1).astype(np.intp)
-    run = np.repeat(np.arange(len(runs)), [len(r) for r in runs])[nearest]
-    along = np.concatenate(
-        [np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(r.xy, axis=0).T))]) for r in runs]
-    )[nearest] / (brush.width * painting.size)
-    speed = np.concatenate([r.speed for r in runs])[nearest]
-
-    dryness = 1.0 - np.exp(-speed / painting.mean_speed)
-    wave = np.sin(2.0 * np.pi * frequency[run, bristle] * along / 6.0 + phase[run, bristle])
-    streak = (0.5 + 0.5 * wave) ** 4
-    missing = np.clip((1.0 - load[run, bristle]) + dryness * streak, 0.0, 1.0)
-    value = 1.0 - brush.texture * np.clip(0.9 * missing + 0.1 * grain[pr, pc], 0.0, 1.0)
+    streak = np.clip(np.floor((across + 1.0) * 0.5 * k), 0, k - 1).astype(np.intp)
+    which = line["line"][nearest].astype(np.intp)
+    s = line["s"][nearest]
+    f, p = frequency[which, streak], phase[which, streak]
+    # Along the stroke, in nib widths, between samples too (the direction is the normal's turn).
+    s = s + (dx * normal[:, 1] - dy * normal[:, 0]) / (brush.nib * painting.size * view.scale)
+    dryness = brush.dry * np.clip((line["v"][nearest] - 1.3) / 2.5, 0.0, 1.0)
+    stripes = (0.5 + 0.5 * np.sin(2.0 * np.pi * f[:, 0] * s / 4.0 + p[:, 0])) ** 2
+    noise = 0.5 + 0.25 * (
+        np.sin(2.0 * np.pi * f[:, 1] * s / 3.0 + p[:, 1])
+        + np.sin(2.0 * np.pi * f[:, 2] * s / 1.3 + p[:, 2])
+    )
+    breaks = np.clip(3.0 * (dryness - noise), 0.0, 1.0)
+    missing = np.clip((1.0 - load[which, streak]) + 0.6 * dryness * stripes + breaks, 0.0, 1.0)
+    value = 1.0 - brush.texture * np.clip(0.8 * missing + 0.12 * grain[pr, pc], 0.0, 1.0)
     factor[pr, pc] = value
     return factor
 
@@ -325,6 +381,10 @@ def compose(
     rgb = np.asarray(ink[:3], dtype=np.float32)
     if paper is None:
         out = np.concatenate([np.broadcast_to(rgb, (*a.shape[:-1], 3)), a], axis=-1)
+    elif paper[3] >= 1.0:  # opaque paper: a plain mix, no division
+        under = np.asarray(paper[:3], dtype=np.float32)
+        mixed = under + a * (rgb - under)
+        out = np.concatenate([mixed, np.ones_like(a)], axis=-1)
     else:
         under = np.asarray(paper[:3], dtype=np.float32)
         top = a + np.float32(paper[3]) * (1 - a)

@@ -11,7 +11,8 @@ the tag's unit is known (mm, cm, in, pt, px) and no pixel size was asked for, el
 
 The textured brush (``texture=True``) becomes an SVG filter: seeded fractal noise
 (``feTurbulence``, its ``seed`` from the render's seed) removing up to ``Brush.texture × 0.6`` of
-the ink's opacity. SVG has no bristle streaks; the PNG does.
+the ink's opacity, on strokes and drips alike. A spray's soft edges are a Gaussian blur
+(``feGaussianBlur``). SVG has no felt streaks, dry breaks or overspray; the PNG does.
 """
 
 from __future__ import annotations
@@ -45,8 +46,7 @@ def outlines(painting: Painting) -> tuple[list[shapely.Geometry], list[shapely.G
     runs = [_union(run.pieces(), tolerance) for run in painting.runs]
     drips = []
     for drip in painting.drips:
-        body, bulb = drip.shapes()
-        drips.append(_union([body[None], bulb[None]], tolerance))
+        drips.append(_union(drip.shapes(), tolerance))
     return runs, drips
 
 
@@ -116,7 +116,7 @@ def svg_document(
     if texture:
         if seed is None:
             raise RenderError("seed: the textured brush needs a seed")
-        frequency = 1.0 / (0.5 * painting.brush.width * painting.size)
+        frequency = 1.0 / (0.5 * painting.brush.nib * painting.size)
         k = 0.6 * painting.brush.texture
         lines += [
             "<defs>",
@@ -130,18 +130,31 @@ def svg_document(
             "</defs>",
         ]
         brush_filter = ' filter="url(#texture)"'
+    if painting.brush.soft > 0:
+        blur = 0.5 * painting.brush.soft * painting.brush.nib * painting.size
+        lines += [
+            "<defs>",
+            '<filter id="soft" x="-10%" y="-10%" width="120%" height="120%">',
+            f'<feGaussianBlur stdDeviation="{_number(blur, decimals)}"/>',
+            "</filter>",
+            "</defs>",
+        ]
     if parse_color(background, "background") is not None:
         lines.append(
             f'<rect id="background" width="100%" height="100%" {_paint(background, "background")}/>'
         )
+    if painting.brush.soft > 0:
+        lines.append('<g id="ink" filter="url(#soft)">')
     lines.append(f'<g id="strokes" {_paint(color, "color")} fill-rule="evenodd"{brush_filter}>')
     for k, geometry in enumerate(runs):
         lines.append(f'<path id="run-{k}" d="{_path_data(geometry, view, decimals)}"/>')
     lines.append("</g>")
     if drips:
-        lines.append(f'<g id="drips" {_paint(color, "color")}>')
+        lines.append(f'<g id="drips" {_paint(color, "color")}{brush_filter}>')
         for k, geometry in enumerate(drips):
             lines.append(f'<path id="drip-{k}" d="{_path_data(geometry, view, decimals)}"/>')
+        lines.append("</g>")
+    if painting.brush.soft > 0:
         lines.append("</g>")
     lines.append("</svg>")
     return "\n".join(lines) + "\n"
@@ -150,8 +163,8 @@ def svg_document(
 def _description(painting: Painting, texture: bool, seed: int | None) -> str:
     brush = painting.brush
     text = (
-        f"{len(painting.runs)} pen-down runs, {len(painting.drips)} drips; brush width"
-        f" {brush.width:g}, thin {brush.thin:g}, speed_ref {brush.speed_ref:g}"
+        f"{len(painting.runs)} pen-down runs, {len(painting.drips)} drips; brush nib"
+        f" {brush.nib:g}, flow {brush.flow:g}, thin {brush.thin:g}, spread {brush.spread:g}"
         f"{'; textured' if texture else ''}{f'; seed {seed}' if seed is not None else ''}"
     )
     return escape(text)

@@ -44,6 +44,13 @@ def letter_b() -> Tag:
 
 
 @pytest.fixture(scope="session")
+def hello() -> Tag:
+    """The demo's capture ("hello world", public domain, tagbot/examples/hello-world-147.json) as
+    fitted once and kept here, so these tests do not follow changes of the fitter."""
+    return load_plan(Path(__file__).with_name("hello-world-plan.json"))
+
+
+@pytest.fixture(scope="session")
 def line() -> Tag:
     """One straight stroke 100 units long along x: slow at both ends, fast in the middle."""
     plan = Plan([[0.0, 0.0], [100.0, 0.0]], [0.0], [DEFAULT_MU], [DEFAULT_SIGMA], [0.0], [0.0])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib.util
 import os
 import re
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -71,7 +72,13 @@ def test_render_svg_and_gif(capsys: pytest.CaptureFixture[str], tmp_path: Path) 
     code, _, err = run(
         capsys, "render", LETTER_B, "-o", tmp_path / "b.svg", "--seed", "1", "--drips"
     )
-    assert code == 0 and "SVG" in err
+    assert code == 0
+    # The SVG is in mm, and the message says so.
+    root = ET.parse(tmp_path / "b.svg").getroot()
+    width, height = root.get("width"), root.get("height")
+    assert width.endswith("mm") and height.endswith("mm")
+    size = f"{float(width[:-2]):.1f}x{float(height[:-2]):.1f} mm SVG"
+    assert size in err, err
     gif = tmp_path / "b.gif"
     code, _, err = run(
         capsys,
@@ -89,9 +96,11 @@ def test_render_svg_and_gif(capsys: pytest.CaptureFixture[str], tmp_path: Path) 
         "0",
     )
     assert code == 0
-    assert re.search(r"\d+x80 GIF, 11 frames, 1\.10 s", err), err
+    reported = re.search(r"(\d+)x(\d+) GIF, (\d+) frames, 1\.10 s", err)
+    assert reported, err
     with Image.open(gif) as image:
         assert image.format == "GIF"
+        assert (image.width, image.height, image.n_frames) == tuple(map(int, reported.groups()))
 
 
 def test_render_fits_an_input_trace(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:

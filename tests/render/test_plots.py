@@ -16,10 +16,14 @@ from tagbot.model import Tag
 from tagbot.render import pictures_for_run, plot
 from tagbot.render.brush import RenderError
 from tagbot.render.plots import (
+    exaggerated,
     executed_speed,
+    execution_figure,
     load_run,
+    plan_figure,
     run_speed_curves,
     speed_curves,
+    speed_figure,
 )
 from tests.render.conftest import MM_PER_UNIT, TIME_SCALE, write_run_folder
 
@@ -138,7 +142,8 @@ def test_run_folder_speed_is_aligned_and_in_machine_units(run_dir: Path, cae: Ta
 
 def test_pictures_for_run(run_dir: Path) -> None:
     written = pictures_for_run(run_dir)
-    assert [p.name for p in written] == ["tag.png", "speed.png", "plan.png"]
+    names = ["tag.png", "executed.png", "execution.png", "speed.png", "plan.png"]
+    assert [p.name for p in written] == names
     for path in written:
         assert path.parent == run_dir
         assert_not_blank(path)
@@ -188,3 +193,123 @@ def test_strokes_follow_each_runs_own_time_scale(tmp_path: Path, cae: Tag, devic
     # With the right clock per run, the planned speed stays under the strokes' envelope (a wrong
     # scale or start moves the lognormals off the speed's peaks).
     assert np.all(planned <= total + 0.03 * planned.max())
+
+
+def ink(path: Path) -> np.ndarray:
+    with Image.open(path) as image:
+        return (255.0 - np.asarray(image.convert("L")).astype(float)) / 255.0
+
+
+def test_executed_picture_shows_what_the_machine_drew(run_dir: Path) -> None:
+    """executed.png paints executed.csv: like tag.png when the machine followed the plan, and
+    visibly different where it did not."""
+    pictures_for_run(run_dir)
+    planned, drawn = ink(run_dir / "tag.png"), ink(run_dir / "executed.png")
+    assert planned.shape == drawn.shape
+    exact = np.abs(planned - drawn)
+    assert exact.mean() < 0.01 and np.count_nonzero(exact > 0.5) < 0.02 * np.count_nonzero(
+        planned > 0.5
+    )
+    # The machine drifts 1.5 mm sideways along its second run, and stops 0.8 s halfway.
+    lines = (run_dir / "executed.csv").read_text().splitlines()
+    rows = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+    runs = np.flatnonzero(np.diff(np.concatenate([[0], rows[:, 3] > 0, [0]])))
+    a, b = runs[2], runs[3]
+    rows[a:b, 1] += np.linspace(0.0, 1.5, b - a)
+    middle = (a + b) // 2
+    rows[middle:, 0] += 0.8
+    rows = np.insert(rows, middle, rows[middle - 1] + [0.4, 0, 0, 0], axis=0)
+    text = "\n".join(",".join(repr(float(v)) for v in row[:3]) + f",{int(row[3])}" for row in rows)
+    (run_dir / "executed.csv").write_text("t,x,y,pen\n" + text + "\n")
+    pictures_for_run(run_dir)
+    changed = np.abs(ink(run_dir / "tag.png") - ink(run_dir / "executed.png"))
+    assert np.count_nonzero(changed > 0.5) > 5 * np.count_nonzero(exact > 0.5) + 200
+    pixels = colours(run_dir / "execution.png")
+    assert has_colour(pixels, "#1f6fd1") and has_colour(pixels, "#d62728")
+
+
+def _legend_boxes(figure: object) -> list:
+    legends = list(figure.legends)  # type: ignore[attr-defined]
+    legends += [ax.get_legend() for ax in figure.axes if ax.get_legend() is not None]  # type: ignore[attr-defined]
+    renderer = figure.canvas.get_renderer()  # type: ignore[attr-defined]
+    return [legend.get_window_extent(renderer) for legend in legends]
+
+
+def assert_readable(figure: object) -> None:
+    """Every axes has labelled axes with units; no legend covers a point of any line; no two
+    visible annotations overlap."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.text import Annotation
+
+    figure.canvas.draw()  # type: ignore[attr-defined]
+    renderer = figure.canvas.get_renderer()  # type: ignore[attr-defined]
+    boxes = _legend_boxes(figure)
+    assert boxes, "no legend"
+    for ax in figure.axes:  # type: ignore[attr-defined]
+        for label in (ax.get_xlabel(), ax.get_ylabel()):
+            assert label and "(" in label and label.endswith(")"), label
+        points = [line.get_xydata() for line in ax.lines]
+        points += [
+            np.concatenate(c.get_segments())
+            for c in ax.collections
+            if isinstance(c, LineCollection) and c.get_segments()
+        ]
+        for image in ax.images:
+            x0, x1, y0, y1 = image.get_extent()
+            points.append(np.array([[x0, y0], [x1, y1]]))
+        for xy in points:
+            xy = np.asarray(xy, dtype=float)
+            xy = xy[np.all(np.isfinite(xy), axis=1)]
+            shown = ax.transData.transform(xy)
+            for box in boxes:
+                inside = (
+                    (shown[:, 0] > box.x0)
+                    & (shown[:, 0] < box.x1)
+                    & (shown[:, 1] > box.y0)
+                    & (shown[:, 1] < box.y1)
+                )
+                assert not inside.any(), "a legend covers data"
+        texts = [t for t in ax.texts if isinstance(t, Annotation) and t.get_visible()]
+        extents = [t.get_window_extent(renderer) for t in texts]
+        for i, first in enumerate(extents):
+            for second in extents[i + 1 :]:
+                assert not first.overlaps(second), "two labels overlap"
+
+
+def test_plots_are_readable(tmp_path: Path, cae: Tag, hello: Tag, run_dir: Path) -> None:
+    for tag in (cae, hello):
+        assert_readable(speed_figure(speed_curves(tag)))
+        figure = plan_figure(tag)
+        assert_readable(figure)
+        labels = [t for t in figure.axes[0].texts if t.get_text().endswith(" ms")]
+        assert sum(t.get_visible() for t in labels) >= min(len(labels), 5)
+    # hello has dense Δt labels: some are thinned.
+    dense = [t for t in plan_figure(hello).axes[0].texts if t.get_text().endswith(" ms")]
+    assert not all(t.get_visible() for t in dense)
+    run = load_run(run_dir)
+    figure = speed_figure(run_speed_curves(run), title="planned and executed speed")
+    assert_readable(figure)
+    legend = [t.get_text() for t in figure.legends[0].get_texts()]
+    assert any(text.startswith("pen up") for text in legend), legend
+    assert sum(1 for p in figure.axes[0].patches) >= len(cae.plans) - 1  # lift bands drawn
+    from tagbot.render.raster import make_view
+
+    view = make_view((0.0, 0.0, 10.0, 5.0), size=200)
+    a = np.zeros((view.height, view.width))
+    a[10:30, 10:100] = 1
+    assert_readable(execution_figure(a, np.roll(a, 5, axis=0), view))
+    line = np.column_stack([np.linspace(0.0, 10.0, 50), np.full(50, 2.0)])
+    figure = execution_figure(a, a, view, paths=([line], [line + np.array([0.0, 0.05])]))
+    assert_readable(figure)
+    assert len(figure.axes) == 2 and "x4" in figure.axes[1].get_title()  # 0.05 mm shown as 0.2
+
+
+def test_deviation_is_exaggerated_to_show() -> None:
+    planned = [np.column_stack([np.linspace(0.0, 100.0, 11), np.zeros(11)])]
+    executed = [np.column_stack([np.linspace(3.0, 97.0, 30), 0.1 * np.sin(np.arange(30.0))])]
+    moved, k = exaggerated(planned, executed, target=2.0)
+    assert k == pytest.approx(2.0 / np.abs(executed[0][:, 1]).max(), rel=1e-3)
+    # Within k times the densified path's spacing (100 / 200,000).
+    np.testing.assert_allclose(moved[0][:, 1], k * executed[0][:, 1], atol=1e-3)
+    np.testing.assert_allclose(moved[0][:, 0], executed[0][:, 0], atol=k * 5e-4)
+    assert exaggerated(planned, [planned[0].copy()], target=2.0)[1] == 1.0

@@ -39,7 +39,7 @@ def test_one_outline_per_run_with_the_motions_bounds(
     document = svgelements.SVG.parse(str(out))
     paths = [e for e in document.elements() if isinstance(e, svgelements.Path)]
     assert len(paths) == len(tag.plans)
-    w_max = painting.brush.width * painting.size
+    w_max = painting.brush.cap * painting.size
     for run, element in zip(painting.runs, found["strokes"], strict=True):
         xmin, ymin, xmax, ymax = svgelements.Path(element.get("d")).bbox()
         # Back to the tag's coordinates (the SVG's y points down from the view's top).
