@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from tagbot import metrics_kernels as kernels
 from tagbot.model.motion import Motion
 from tagbot.model.plan import Tag
 
@@ -20,15 +21,11 @@ Array = NDArray[np.float64]
 DENSITY = 4000
 """The maximum (Hausdorff) distance is found to within 1/(2·DENSITY) of the size..."""
 
-MEAN_DENSITY = 500
+MEAN_DENSITY = 250
 """... and the mean from samples this many per bounding-box diagonal..."""
 
 MAX_SAMPLES = 200_000
 """... at most this many per drawing (long scribbles get a coarser spacing)."""
-
-_NEIGHBOURS = 3
-"""Closest samples whose segments are measured exactly, per query point."""
-
 
 GRID_PER_POINT = 4
 """A recording is resampled at most this many times per recorded point (velocity SNR)."""
@@ -73,24 +70,25 @@ class _Polylines:
         self.before[ends[:-1]] = ends[:-1]
         self.before[0] = 0
         self.after[ends - 1] = ends - 1
-        self.tree = cKDTree(self.points)
+        self.spacing = spacing
+        self.cell = 2.0 * spacing
+        self.fine = kernels.grid_of(self.points, self.cell)
+        self.coarse = kernels.grid_of(self.points, kernels.COARSE * self.cell)
 
     def distance(self, query: Array) -> Array:
-        """Each query point's distance to the polylines: exact to the segments next to its
-        closest few samples (the polylines' own segments, cut at the samples)."""
-        k = min(_NEIGHBOURS, len(self.points))
-        _, near = self.tree.query(query, k=k)
-        near = near.reshape(len(query), k)
-        best = np.full(len(query), np.inf)
-        for i in near.T:
-            for j in (self.before[i], self.after[i]):
-                a, b = self.points[i], self.points[j]
-                ab = b - a
-                length2 = np.einsum("ij,ij->i", ab, ab)
-                u = np.einsum("ij,ij->i", query - a, ab) / np.where(length2 > 0, length2, 1.0)
-                foot = a + np.clip(u, 0.0, 1.0)[:, None] * ab
-                best = np.minimum(best, np.hypot(*(query - foot).T))
-        return best
+        """Each query point's exact distance to the polylines (their own segments, cut at the
+        samples), through grids of the samples (:mod:`tagbot.metrics_kernels`)."""
+        return kernels.distances(
+            np.ascontiguousarray(query, dtype=np.float64),
+            self.points,
+            self.before,
+            self.after,
+            self.fine,
+            self.cell,
+            self.coarse,
+            kernels.COARSE * self.cell,
+            self.spacing,
+        )
 
     def farthest(self, other: _Polylines, coarse: Array, fine: float) -> float:
         """The largest distance from these polylines (not only their samples) to ``other``,
@@ -118,8 +116,9 @@ def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) 
 
     Both are lists of polylines ``(N, 2)``. Each is sampled :data:`MEAN_DENSITY` points per
     diagonal (at most :data:`MAX_SAMPLES` per drawing) and each sample measured exactly against
-    the other drawing's segments: the mean is over these samples (by arc length); the max is
-    refined where it could be, to within 1/(2·:data:`DENSITY`) of the size. Cost O(n log n).
+    the other drawing's segments (a grid search, compiled): the mean is over these samples (by
+    arc length); the max is refined where it could be, to within 1/(2·:data:`DENSITY`) of the
+    size. Cost linear in the samples for drawings that are close.
     """
     ref = [np.asarray(p, dtype=float) for p in reference if len(p)]
     cand = [np.asarray(p, dtype=float) for p in candidate if len(p)]
