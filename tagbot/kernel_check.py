@@ -102,7 +102,7 @@ class _Checked:
 def install() -> int:
     """Put checking proxies in front of every kernels module that a loaded tagbot module calls
     through; returns how many references were replaced. Idempotent."""
-    for package in ("tagbot.gesture", "tagbot.model"):  # the modules that call kernels
+    for package in ("tagbot.gesture", "tagbot.model", "tagbot.metrics"):  # kernels callers
         importlib.import_module(package)
 
     replaced = 0
