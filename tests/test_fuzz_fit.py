@@ -38,6 +38,10 @@ TRACE_FILES = [
     ),
 ]
 PLAN_FILES = [(EXAMPLES / name).read_bytes() for name in ("cae.json", "letter-b.json")]
+PROFILES = [
+    ("tagbot.plotter.profile", (resources.files("tagbot") / "plotter" / "profiles" / name))
+    for name in ("default.toml", "zpen.toml")
+] + [("tagbot.arm.profile", resources.files("tagbot") / "arm" / "profiles" / "default.toml")]
 
 ABSURD = [
     "1e308", "-1e308", "1e309", "nan", "inf", "-inf", "0", "-0", "1e-308", "5e-324", "1e15",
@@ -133,3 +137,36 @@ def test_mutated_plans_load_and_sample_or_fail_clearly(seed: int, edits) -> None
         assert "\n" not in str(e)
         return
     assert np.isfinite(motion.xy).all() and np.isfinite(motion.v).all()
+
+
+@FUZZ
+@given(seed=st.sampled_from(range(len(PROFILES))), edits=edits)
+def test_mutated_machine_profiles_load_or_fail_clearly(seed: int, edits, tmp_path_factory) -> None:
+    import importlib
+
+    module, source = PROFILES[seed]
+    path = tmp_path_factory.mktemp("profile") / "machine.toml"
+    path.write_bytes(mutate(source.read_bytes(), edits))
+    try:
+        importlib.import_module(module).load_profile(str(path))
+    except TagbotError as e:
+        assert "\n" not in str(e) and str(path) in str(e), str(e)
+
+
+@FUZZ
+@given(seed=st.sampled_from(range(len(PLAN_FILES))), edits=edits)
+def test_mutated_motion_files_read_or_fail_clearly(seed: int, edits, tmp_path_factory) -> None:
+    from tagbot.io.motionfile import read_motion_csv, write_motion_csv
+    from tagbot.io.planfile import tag_from_dict
+
+    folder = tmp_path_factory.mktemp("motion")
+    clean = folder / "clean.csv"
+    write_motion_csv(tag_from_dict(json.loads(PLAN_FILES[seed])).sample(0.05), clean)
+    path = folder / "motion.csv"
+    path.write_bytes(mutate(clean.read_bytes(), edits))
+    try:
+        table = read_motion_csv(path)
+    except TagbotError as e:
+        assert "\n" not in str(e) and str(e).startswith(f"{path}"), str(e)
+        return
+    assert np.isfinite(table.t).all() and np.isfinite(table.xy).all()
