@@ -190,7 +190,7 @@ def test_pty_end_to_end_with_a_real_serial_port():
     device = SimulatedGrbl(clock="real")
     path, stop = serve_pty(device)
     try:
-        with serial.Serial(path, 115200, timeout=2) as port:
+        with serial.Serial(path, 115200, timeout=10) as port:  # busy hosts: data ends waits
             assert port.read(len(WELCOME)) == WELCOME
             port.write(b"$$\n")
             listing = port.read_until(b"ok\r\n").decode().split("\r\n")
@@ -215,7 +215,7 @@ def test_pty_drop_connection():
     device = SimulatedGrbl(clock="real")
     path, stop = serve_pty(device)
     try:
-        with serial.Serial(path, 115200, timeout=2) as port:
+        with serial.Serial(path, 115200, timeout=10) as port:  # busy hosts: data ends waits
             assert port.read(len(WELCOME)) == WELCOME
             device.drop_connection()
             with pytest.raises(serial.SerialException):
@@ -311,7 +311,7 @@ def test_pty_write_latency():
     device = SimulatedGrbl(clock="real")
     path, stop = serve_pty(device, write_latency=0.2)
     try:
-        with serial.Serial(path, 115200, timeout=2) as port:
+        with serial.Serial(path, 115200, timeout=10) as port:  # busy hosts: data ends waits
             assert port.read(len(WELCOME)) == WELCOME
             port.write(b"?")
             sent = time.monotonic()
