@@ -5,6 +5,7 @@ Shared by ``tagbot fit``, the benchmarks and the machine reports.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -24,8 +25,13 @@ DENSITY = 4000
 MEAN_DENSITY = 250
 """... and the mean from samples this many per bounding-box diagonal..."""
 
-MAX_SAMPLES = 200_000
+MAX_SAMPLES = 50_000
 """... at most this many per drawing (long scribbles get a coarser spacing)."""
+
+_CROWDED = 64
+"""Samples expected within half a spacing of a point above which a drawing counts as crowded."""
+_NEIGHBOURS = 4
+"""Nearest samples whose segments a crowded drawing's distances are measured to."""
 
 GRID_PER_POINT = 4
 """A recording is resampled at most this many times per recorded point (velocity SNR)."""
@@ -71,15 +77,33 @@ class _Polylines:
         self.before[0] = 0
         self.after[ends - 1] = ends - 1
         self.spacing = spacing
-        self.cell = 2.0 * spacing
-        self.fine = kernels.grid_of(self.points, self.cell)
-        self.coarse = kernels.grid_of(self.points, kernels.COARSE * self.cell)
+        # Cells about two samples wide along a curve, narrower where the samples crowd an area
+        # (a scribble over itself), so that a cell holds a few samples whatever the drawing.
+        extent = np.ptp(self.points, axis=0)
+        area = float(extent[0] * extent[1])
+        crowded = 2.0 * math.sqrt(area / len(self.points))
+        self.cell = min(2.0 * spacing, max(0.25 * spacing, crowded)) if crowded > 0 else spacing
+        # Where many long segments pass near every point (thousands of strokes over one another,
+        # segments long because of MAX_SAMPLES), the exact search would visit all of them: the
+        # KD-tree of the samples then gives distances to the segments of the nearest few.
+        self.tree = (
+            cKDTree(self.points)
+            if area > 0 and len(self.points) * math.pi * (0.5 * spacing) ** 2 > _CROWDED * area
+            else None
+        )
+        if self.tree is None:
+            self.fine = kernels.grid_of(self.points, self.cell)
+            self.coarse = kernels.grid_of(self.points, kernels.COARSE * self.cell)
 
     def distance(self, query: Array) -> Array:
-        """Each query point's exact distance to the polylines (their own segments, cut at the
-        samples), through grids of the samples (:mod:`tagbot.metrics_kernels`)."""
+        """Each query point's distance to the polylines (their own segments, cut at the
+        samples): exact, through grids of the samples (:mod:`tagbot.metrics_kernels`), or for a
+        crowded scribble to the segments next to its :data:`_NEIGHBOURS` nearest samples."""
+        query = np.ascontiguousarray(query, dtype=np.float64)
+        if self.tree is not None:
+            return self._near_segments(query)
         return kernels.distances(
-            np.ascontiguousarray(query, dtype=np.float64),
+            query,
             self.points,
             self.before,
             self.after,
@@ -88,7 +112,22 @@ class _Polylines:
             self.coarse,
             kernels.COARSE * self.cell,
             self.spacing,
+            math.ceil(0.5 * self.spacing / self.cell) + 2,
         )
+
+    def _near_segments(self, query: Array) -> Array:
+        assert self.tree is not None
+        k = min(_NEIGHBOURS, len(self.points))
+        _, near = self.tree.query(query, k=k)
+        best = np.full(len(query), np.inf)
+        for i in near.reshape(len(query), k).T:
+            for j in (self.before[i], self.after[i]):
+                a, ab = self.points[i], self.points[j] - self.points[i]
+                length2 = np.einsum("ij,ij->i", ab, ab)
+                u = np.einsum("ij,ij->i", query - a, ab) / np.where(length2 > 0, length2, 1.0)
+                foot = a + np.clip(u, 0.0, 1.0)[:, None] * ab
+                best = np.minimum(best, np.hypot(*(query - foot).T))
+        return best
 
     def farthest(self, other: _Polylines, coarse: Array, fine: float) -> float:
         """The largest distance from these polylines (not only their samples) to ``other``,
@@ -167,7 +206,7 @@ def velocity_snr(
     taken by central differences; the model velocity ``model_v`` (at ``model_t``) is mapped to the
     recording's clock by ``t = offset + scale·(t_model − model_t[0])`` (velocities divide by
     ``scale``). Returns ``(snr_db, scale, offset)`` for the scale and offset maximising
-    ``10·log10(Σ|v|² / Σ|v − v̂|²)``: for each of 41 scales from ¼ to 4 times the span ratio,
+    ``10·log10(Σ|v|² / Σ|v − v̂|²)``: for each of 41 scales from ¼ to 4 times the span ratio, and 1,
     every offset on the ``dt`` grid at once (a cross-correlation by FFT), then a local search
     around the best pair. Cost O(n log n) in the samples.
     """
@@ -194,7 +233,8 @@ def velocity_snr(
 
     n = len(rec)
     ratio = span / model_span if model_span > 0 else 1.0
-    scales = np.geomspace(0.25, 4.0, 41) * ratio
+    # Scale 1 (the model on the recording's own clock, as a timed fit is) is always tried too.
+    scales = np.append(np.geomspace(0.25, 4.0, 41) * ratio, 1.0)
     # The model on the recording's grid spacing for every scale at once: scale i's sample k is
     # at model time k·dt/scale_i, and an offset of m grid steps puts it on recording sample k + m.
     lengths = (model_span * scales / dt).astype(np.intp) + 1

@@ -15,10 +15,8 @@ import numpy as np
 from tagbot.gesture.refine_kernels import buckets
 from tagbot.model.kernels import compiled
 
-__all__ = ["COARSE", "FINE_RINGS", "distances", "grid_of"]
+__all__ = ["COARSE", "distances", "grid_of"]
 
-FINE_RINGS = 4
-"""Rings of fine cells searched before the coarse grid takes over."""
 COARSE = 16
 """Coarse cells are this many fine cells wide."""
 
@@ -60,8 +58,8 @@ def _search(
 ) -> tuple[float, bool]:
     """Improve ``best``, the distance from ``(x, y)`` to the polylines, over the cells of one
     grid, ring by ring outwards, at most ``rings`` rings; and whether no segment left can be
-    nearer. A segment lies within ``spacing`` of its end samples, so a ring farther than the best
-    distance plus ``spacing`` ends the search."""
+    nearer. Every point of a segment (at most ``spacing`` long) is within ``spacing / 2`` of one
+    of its end samples, so a ring farther than the best distance plus that ends the search."""
     x0, y0 = header[0, 0], header[0, 1]
     nx, ny = int(header[0, 2]), int(header[0, 3])
     cx = min(max(math.floor((x - x0) / cell), 0), nx - 1)
@@ -74,7 +72,7 @@ def _search(
                 if 0 <= ix < nx:
                     dx = max(x0 + ix * cell - x, 0.0, x - x0 - (ix + 1) * cell)
                     dy = max(y0 + iy * cell - y, 0.0, y - y0 - (iy + 1) * cell)
-                    reach = best + spacing
+                    reach = best + 0.5 * spacing
                     if dx * dx + dy * dy < reach * reach:
                         c = iy * nx + ix
                         for e in range(start[c], start[c + 1]):
@@ -86,7 +84,7 @@ def _search(
                                     best = math.sqrt(d2)
                 ix += 1 if edge else max(2 * ring, 1)
         # Cells beyond this ring are at least ``ring`` cells away from the query.
-        if ring * cell >= best + spacing:
+        if ring * cell >= best + 0.5 * spacing:
             return best, True
     return best, max(nx, ny) <= rings
 
@@ -102,15 +100,17 @@ def distances(
     coarse: tuple[np.ndarray, np.ndarray, np.ndarray],
     coarse_cell: float,
     spacing: float,
+    fine_rings: int,
 ) -> np.ndarray:
-    """Each query point's exact distance to the polylines: searched in the fine grid for a few
-    rings (near points, the usual case), then, if that could not settle it, in the coarse one
-    (far points cost a few coarse rings, not thousands of fine ones)."""
+    """Each query point's exact distance to the polylines: searched in the fine grid for
+    ``fine_rings`` rings (enough for points near the polylines, the usual case), then, if that
+    could not settle it, in the coarse one (far points cost a few coarse rings, not thousands of
+    fine ones)."""
     out = np.empty(query.shape[0])
     for q in range(query.shape[0]):
         x, y = query[q, 0], query[q, 1]
         best, done = _search(x, y, np.inf, points, before, after, fine[0], fine[1], fine[2],
-                             fine_cell, spacing, FINE_RINGS)  # fmt: skip
+                             fine_cell, spacing, fine_rings)  # fmt: skip
         if not done:
             best, done = _search(x, y, best, points, before, after, coarse[0], coarse[1],
                                  coarse[2], coarse_cell, spacing, 1 << 30)  # fmt: skip
