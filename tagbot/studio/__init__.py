@@ -7,6 +7,8 @@ draws go through :mod:`tagbot.draw`. :mod:`tagbot.studio.design` holds the edita
 its operations, :mod:`tagbot.studio.server` the web app and its JSON API.
 """
 
-from tagbot.studio.design import Design, History, StudioError, apply, empty_design, view
+from tagbot._lazy import lazy_exports
 
 __all__ = ["Design", "History", "StudioError", "apply", "empty_design", "view"]
+
+__getattr__, __dir__ = lazy_exports(__name__, dict.fromkeys(__all__, ".design"))
