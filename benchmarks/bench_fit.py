@@ -161,6 +161,11 @@ def _timed_traces(components: list[tuple[bool, np.ndarray]], rate: float) -> lis
 # --- one fit ---------------------------------------------------------------------------------
 
 
+TIMING = os.environ.get("TAGBOT_BENCH_TIMING", "ignore")
+"""``fit(timing=...)`` (``--timing``; workers read it from the environment): ``ignore``, the
+geometric fit, by default (see bench_timing.py for the timed fit)."""
+
+
 def run_case(case: tuple[str, str, object], model: str, refine: bool) -> Row:
     dataset, name, payload = case
     row = Row(dataset, name)
@@ -177,8 +182,9 @@ def run_case(case: tuple[str, str, object], model: str, refine: bool) -> Row:
         else:
             traces = _timed_traces(payload, 100.0 if dataset == "unipen" else 120.0)
         # Fit and sampling are each timed as the best of 3 runs (a fit is deterministic).
-        tag = fit(traces, model=model, refine=refine)
-        row.fit_s = min(_timed(lambda: fit(traces, model=model, refine=refine)) for _ in range(3))
+        options = {"model": model, "refine": refine, "timing": TIMING}
+        tag = fit(traces, **options)
+        row.fit_s = min(_timed(lambda: fit(traces, **options)) for _ in range(3))
         sampling = min(_timed(lambda: tag.sample(0.01)) for _ in range(3))
         report = fit_report(traces, tag)
         report_s = min(_timed(lambda: fit_report(traces, tag)) for _ in range(3))
@@ -227,11 +233,13 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=default_data, help="the shared data folder")
     parser.add_argument("--model", choices=["gamma", "sigma"], default="gamma")
     parser.add_argument("--no-refine", dest="refine", action="store_false")
+    parser.add_argument("--timing", choices=["ignore", "auto", "match"], default="ignore")
     parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     parser.add_argument("--datasets", default="gml,unipen,mocap,synthetic")
     parser.add_argument("--csv", type=Path, help="write every row to this CSV file")
     parser.add_argument("--quiet", action="store_true", help="summaries only")
     args = parser.parse_args()
+    os.environ["TAGBOT_BENCH_TIMING"] = args.timing  # spawned workers read it at import
     names = args.datasets.split(",")
     unknown = sorted(set(names) - {"gml", "unipen", "mocap", "synthetic"})
     if unknown:

@@ -19,7 +19,8 @@ the run folder, the same for both devices:
   1 ms recorder, or what the machine reported (Grbl status reports, servo read-backs);
 - ``report.json``: what happened (see :func:`run_report`: the same keys for both devices, with
   the device's own figures under ``details``), and the comparison of executed against planned;
-- pictures (``tag.png``, ``speed.png``, ``plan.png``) when the rendering extras are installed.
+- pictures (``tag.png``, the plan's ink; ``executed.png`` and ``execution.png``, what the machine
+  drew and both overlaid; ``speed.png``, ``plan.png``) when the rendering extras are installed.
 
 ``plan.json`` and ``motion.csv`` are written before the machine starts, ``report.json`` in every
 case: a run folder is complete, or its ``report.json`` says what happened.
@@ -30,7 +31,7 @@ from __future__ import annotations
 import importlib
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -41,7 +42,7 @@ from tagbot.control import RunControl
 from tagbot.errors import InputError
 from tagbot.io.motionfile import MotionTable, write_motion_csv
 from tagbot.io.planfile import save_plan
-from tagbot.metrics import compare_execution, compare_reports
+from tagbot.metrics import compare_execution, compare_reports, compare_with_recording
 from tagbot.model import Tag
 
 __all__ = [
@@ -158,12 +159,15 @@ def draw(
     control: RunControl | None = None,
     pictures: bool = True,
     prepared: PreparedRun | None = None,
+    recorded: Sequence[Any] | None = None,
     **options: Any,
 ) -> DrawResult:
     """Draw ``tag`` on ``device`` (simulated unless ``port`` is given); write the run folder.
 
     ``prepared`` (from :func:`prepare`) skips the preparation; otherwise it happens here, before
     the folder is created. A fault or Ctrl-C is raised again once the folder is written.
+    ``recorded``: the traces ``tag`` was fitted from (one per plan); with timing, the report
+    also compares the executed speed with the recorded one (:func:`run_report`).
     """
     job = prepared or prepare(
         tag, device=device, port=port, profile=profile, overrides=overrides, **options
@@ -185,7 +189,7 @@ def draw(
         raise
     write_motion_csv(run.motion, folder / "motion.csv")
     write_executed_csv(run.executed, folder / "executed.csv")
-    report = run_report(run)
+    report = run_report(run, recorded)
     _write_json(folder / "report.json", report)
     if pictures and run.error is None:
         report["pictures"] = [str(p.name) for p in _pictures(folder)]
@@ -195,7 +199,7 @@ def draw(
     return DrawResult(folder, report)
 
 
-def run_report(run: MachineRun) -> dict[str, Any]:
+def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[str, Any]:
     """``report.json``: the same keys for both devices.
 
     ``device``, ``port``, ``simulated``, ``completed``, ``error``, ``warnings``, ``unit``
@@ -204,6 +208,8 @@ def run_report(run: MachineRun) -> dict[str, Any]:
     ``executed_source``, ``placement``, the comparison (``path_deviation_mean_mm``,
     ``path_deviation_max_mm``, ``speed_snr_db``, drawing durations, per-run figures; or
     ``comparison_error`` when nothing was drawn) and ``details`` (the device's own figures).
+    With ``recorded`` traces (timed), also ``recorded_speed_snr_db`` and ``recorded_runs``: the
+    executed speed against the *recorded* one (:func:`tagbot.metrics.compare_with_recording`).
     """
     report: dict[str, Any] = {
         "device": run.device,
@@ -236,6 +242,11 @@ def run_report(run: MachineRun) -> dict[str, Any]:
             report.update(comparison.as_dict())
     else:
         report["comparison_error"] = "nothing was executed"
+    if recorded is not None and run.executed.size and not run.sparse:
+        try:
+            report.update(compare_with_recording(run.executed, recorded, run.plans))
+        except ValueError as e:
+            report["recorded_comparison_error"] = str(e)
     report["details"] = run.details
     return report
 

@@ -41,10 +41,12 @@ from tagbot.errors import PlanError
 from tagbot.gesture import contour, kernels
 from tagbot.gesture.refine import RefineOptions, refine
 from tagbot.gesture.strokes import Strokes
+from tagbot.gesture.timing import TIMINGS, Timing, TimingOptions, match
 from tagbot.model.plan import (
     DEFAULT_MU,
     DEFAULT_SIGMA,
     END_TOLERANCE,
+    MAX_COORDINATE,
     MODELS,
     Model,
     Plan,
@@ -122,15 +124,33 @@ class FitOptions:
                 raise PlanError(f"{name}: must be a whole number >= 0, got {value!r}")
 
 
-def fit(traces: Sequence[Any], model: Model = "gamma", **options: Any) -> Tag:
+def fit(
+    traces: Sequence[Any],
+    model: Model = "gamma",
+    timing: Timing = "auto",
+    timing_options: TimingOptions | None = None,
+    **options: Any,
+) -> Tag:
     """Reconstruct a tag from traces: one plan per trace, in the given order, pen lifted between.
 
     ``traces`` holds objects with an ``xy`` array ``(N, 2)`` (such as those of
     :func:`tagbot.load_traces`) or plain ``(N, 2)`` arrays. ``options`` override
     :class:`FitOptions` fields by name.
+
+    ``timing``: ``"ignore"`` fits the shape only (the paper's method: plans move at its default
+    rhythm, pen lifts of ``lift`` seconds); ``"match"`` then refits every trace's onsets,
+    ``mu``, ``sigma``, tangents and targets so that the velocity follows the recorded one, plans
+    starting at their recorded times (:mod:`tagbot.gesture.timing`; every trace needs
+    timestamps); ``"auto"`` (the default) is ``"match"`` when every trace has timestamps and one
+    has a plausible sampling rate (:func:`tagbot.gesture.timing.usable`), else ``"ignore"``.
     """
     if model not in MODELS:
         raise PlanError(f"model: must be 'gamma' or 'sigma', got {model!r}")
+    if timing not in TIMINGS:
+        raise PlanError(f"timing: must be 'auto', 'ignore' or 'match', got {timing!r}")
+    traces = list(traces)
+    if timing == "match" and any(getattr(tr, "t", None) is None for tr in traces):
+        raise PlanError("timing: 'match' needs timestamps on every trace (use 'auto' or 'ignore')")
     unknown = sorted(set(options) - {f.name for f in fields(FitOptions)})
     if unknown:
         raise PlanError(f"{unknown[0]}: not a fit option (see tagbot.gesture.FitOptions)")
@@ -142,7 +162,15 @@ def fit(traces: Sequence[Any], model: Model = "gamma", **options: Any) -> Tag:
     size = float(np.hypot(*np.ptp(points, axis=0)))
     if not size > _NO_SIZE:
         size = 1.0  # only dots, all at one place (or closer than a plan tells apart): any scale
-    return sequence(fit_plans(polylines, size, model, opts), opts.lift, model)
+    plans = fit_plans(polylines, size, model, opts)
+    timed = match(plans, traces, size, model, timing, timing_options)
+    if timed is not None:
+        try:
+            return Tag(tuple(timed), model)
+        except PlanError:  # e.g. a recorded tag longer than a tag may last
+            if timing == "match":
+                raise
+    return sequence(plans, opts.lift, model)
 
 
 _NO_SIZE = 1e-90
@@ -255,6 +283,8 @@ def _polyline(trace: Any, index: int) -> Array:
         raise PlanError(f"traces[{index}]: expected (N, 2) points with N >= 1, got {xy.shape}")
     if not np.all(np.isfinite(xy)):
         raise PlanError(f"traces[{index}]: points must be finite")
+    if np.abs(xy).max() > MAX_COORDINATE:
+        raise PlanError(f"traces[{index}]: points must be within ±{MAX_COORDINATE:g}")
     return xy
 
 

@@ -53,9 +53,9 @@ Coordinates far outside 0..1 (beyond ±4: not normalised at all, e.g. pixels) ar
 the y-above-1 rule; the drawing is moved to start at (0, 0) and scaled so that its longer side is
 100 mm.
 
-**Timing.** A point's time is ``<t>`` (GML 1.0) or ``<time>`` (older files), in seconds. Each
-trace's ``t`` is on the file's clock, zero at the file's first point, so pen lifts keep their
-durations. The rules, in order:
+**Timing.** A point's time is ``<t>`` (GML 1.0) or ``<time>`` (older files), nominally in
+seconds. Each trace's ``t`` is on the file's clock, zero at the file's first point, so pen lifts
+keep their durations. The rules, in order:
 
 * no time anywhere → ``t`` is None for every trace;
 * points without a time before the file's first timed point read as 0 (GML4U omits the zero
@@ -68,7 +68,17 @@ durations. The rules, in order:
   when the previous stroke ended; the real pen-lift duration is unknown and becomes zero;
 * a time that decreases inside a stroke cannot be repaired: the file is untimed;
 * equal consecutive times (zero dt) and long stalls are kept as they are;
-* if all times are equal (e.g. all zero) the file is untimed.
+* if all times are equal (e.g. all zero) the file is untimed;
+* **clock unit**: files are not always in seconds (eyeSaver/EyeWriter files count milliseconds:
+  ``<time>`` running 0…2828 is a 2.8 s tag, not a 47-minute one). The unit is read from the
+  point rate: the median positive interval between consecutive points of a stroke (zero
+  intervals, duplicated times, do not count) must be a plausible sampling interval for a pen,
+  touch screen, camera or eye tracker, between :data:`SAMPLE_INTERVAL_MIN` (2 ms, 500 Hz) and
+  :data:`SAMPLE_INTERVAL_MAX` (200 ms, 5 Hz), and the whole span at most :data:`SPAN_MAX`
+  (one hour). Seconds, milliseconds and microseconds are tried in that order and the first
+  plausible one is used; when none is, the times stay in seconds. Epoch times are not
+  rescaled (their magnitude fixes the unit). Each trace's ``clock`` says which unit was
+  chosen and why, and fit reports repeat it.
 """
 
 from __future__ import annotations
@@ -94,9 +104,13 @@ from tagbot.inputs._common import (
 from tagbot.inputs.trace import Trace
 
 __all__ = [
+    "CLOCK_UNITS",
     "EPOCH_MS_MIN",
     "EPOCH_SECONDS_MIN",
+    "SAMPLE_INTERVAL_MAX",
+    "SAMPLE_INTERVAL_MIN",
     "SCALE_MM",
+    "SPAN_MAX",
     "read_gml",
     "read_gml_document",
     "read_gml_json",
@@ -110,6 +124,19 @@ EPOCH_SECONDS_MIN = 1e8
 
 EPOCH_MS_MIN = 1e11
 """Times at or above this are unix epoch milliseconds."""
+
+SAMPLE_INTERVAL_MIN = 2e-3
+"""Shortest plausible median sampling interval, seconds (500 Hz: pen digitisers and touch screens
+sample at 60-240 Hz; an integer millisecond clock ticking once per sample is not this fast)."""
+
+SAMPLE_INTERVAL_MAX = 0.2
+"""Longest plausible median sampling interval, seconds (5 Hz, e.g. sparse eye-tracker points)."""
+
+SPAN_MAX = 3600.0
+"""Longest plausible capture, seconds (stalls included)."""
+
+CLOCK_UNITS = (("seconds", 1.0), ("milliseconds", 1e-3), ("microseconds", 1e-6))
+"""Clock units tried, in order, for times that are not epoch times."""
 
 _BEYOND = 1e-3
 """How far past 0..1 a coordinate must lie to show the file was not normalised per axis."""
@@ -222,12 +249,12 @@ def _traces(root: Node, name: str, cut: str) -> list[Trace]:
         raise InputError(f"{name}: no points ({why}{cut})")
     up, bounds, uniform = _environment(root)
     points = _to_mm(np.array(xy, dtype=np.float64), up, None if uniform else bounds)
-    t = _clock(times, lengths)
+    t, clock = _clock(times, lengths)
     traces = []
     start = 0
     for n in lengths:
         rows = slice(start, start + n)
-        traces.append(make_trace(name, points[rows], None if t is None else t[rows]))
+        traces.append(make_trace(name, points[rows], None if t is None else t[rows], clock))
         start += n
     return traces
 
@@ -282,8 +309,12 @@ def _environment(root: Node) -> tuple[_Vector | None, _Vector | None, bool]:
                 bounds = _vector(c)
             elif c.name == "screenscale":
                 uniform = uniform or (parse_number(c.text) or 0) > 0
-    if bounds is not None and not (bounds[0] > 0 and bounds[1] > 0):
-        bounds = None
+    if bounds is not None and not (
+        0 < bounds[0] <= MAX_MAGNITUDE
+        and 0 < bounds[1] <= MAX_MAGNITUDE
+        and max(bounds) <= MAX_ASPECT * min(bounds)
+    ):
+        bounds = None  # absurd: a screen is not 10^308 pixels wide, nor a thousand times longer
     return up, bounds, uniform
 
 
@@ -305,6 +336,10 @@ def _vector(node: Node) -> _Vector | None:
 
 
 # --------------------------------------------------------------------------- geometry
+
+MAX_ASPECT = 1000.0
+"""Largest ``screenBounds`` aspect ratio used to restore a per-axis normalised drawing; a file
+with a more elongated (or non-finite, or non-positive) screen is read without stretching."""
 
 
 def _to_mm(p: np.ndarray, up: _Vector | None, bounds: _Vector | None) -> np.ndarray:
@@ -348,30 +383,33 @@ def _stretch(lo: np.ndarray, hi: np.ndarray, bounds: _Vector | None) -> _Vector:
 # --------------------------------------------------------------------------- timing
 
 
-def _clock(times: list[float | None], lengths: list[int]) -> np.ndarray | None:
-    """Times on the file's clock, zero at the first point, or None; see the module doc."""
+def _clock(times: list[float | None], lengths: list[int]) -> tuple[np.ndarray | None, str | None]:
+    """Times in seconds on the file's clock, zero at the first point, and how the unit was
+    chosen; (None, None) when the file is untimed. See the module doc."""
     first = next((i for i, v in enumerate(times) if v is not None), None)
     if first is None or any(v is None for v in times[first:]):
-        return None
+        return None, None
     t = np.array([0.0 if v is None else v for v in times], dtype=np.float64)
     if not np.all(np.isfinite(t)):
-        return None
+        return None, None
     largest = float(np.max(np.abs(t)))
-    unit = 1.0
+    epoch = None
     if largest >= EPOCH_MS_MIN:
         if np.min(t) < EPOCH_MS_MIN:
-            return None
-        unit = 1e-3
-    elif largest >= EPOCH_SECONDS_MIN and np.min(t) < EPOCH_SECONDS_MIN:
-        return None
-    t = (t - t[0]) * unit  # differences first: exact for epoch times
+            return None, None
+        epoch = ("epoch milliseconds", 1e-3)
+    elif largest >= EPOCH_SECONDS_MIN:
+        if np.min(t) < EPOCH_SECONDS_MIN:
+            return None, None
+        epoch = ("epoch seconds", 1.0)
+    t = t - t[0]  # differences first: exact for epoch times
     end = None
     offset = 0.0
     start = 0
     for n in lengths:
         seg = t[start : start + n]  # a view: shifted in place
         if np.any(np.diff(seg) < 0):
-            return None
+            return None, None
         seg += offset
         if end is not None and seg[0] < end:  # the clock restarted: shift this and later strokes
             offset += end - seg[0]
@@ -380,5 +418,32 @@ def _clock(times: list[float | None], lengths: list[int]) -> np.ndarray | None:
         start += n
     t -= t[0]
     if t[-1] <= 0:
-        return None
-    return t
+        return None, None
+    if epoch is not None:
+        return t * epoch[1], f"{epoch[0]} (by magnitude)"
+    unit, clock = _unit(t, lengths)
+    return t * unit, clock
+
+
+def _unit(t: np.ndarray, lengths: list[int]) -> tuple[float, str]:
+    """The clock unit (seconds per tick) read from the point rate and span, and why."""
+    inside = np.ones(t.size - 1, dtype=bool)  # intervals between points of the same stroke
+    inside[np.cumsum(lengths)[:-1] - 1] = False
+    dt = np.diff(t)
+    steps = dt[inside & (dt > 0)]
+    if steps.size == 0:
+        steps = dt[dt > 0]
+    tick = float(np.median(steps))
+    span = float(t[-1])
+    for name, unit in CLOCK_UNITS:
+        interval = tick * unit
+        if SAMPLE_INTERVAL_MIN <= interval <= SAMPLE_INTERVAL_MAX and span * unit <= SPAN_MAX:
+            return unit, (
+                f"{name}: median sample interval {tick:.4g} = {interval * 1e3:.3g} ms "
+                f"({1 / interval:.3g} Hz), span {span * unit:.3g} s"
+            )
+    return 1.0, (
+        f"seconds (no unit gives a plausible rate: median sample interval {tick:.4g}, "
+        f"span {span:.4g}; plausible is {SAMPLE_INTERVAL_MIN * 1e3:g} to "
+        f"{SAMPLE_INTERVAL_MAX * 1e3:g} ms and at most {SPAN_MAX:g} s)"
+    )

@@ -25,6 +25,10 @@ class Trace:
     """Times in seconds, shape (N,), finite and non-decreasing, or None when the source has no
     usable timing. All traces read from one file share its clock: the file's first point is at 0,
     so the gaps between traces (pen lifts) are kept."""
+    clock: str | None = None
+    """How the source's clock was read as seconds, when a reader had to decide it (e.g.
+    ``"milliseconds: median interval 24 → 24 ms (42 Hz), span 2828 → 2.83 s"``); None when the
+    trace is untimed or its unit is fixed by the format. Fit reports repeat it."""
 
     def __post_init__(self) -> None:
         try:
@@ -38,6 +42,8 @@ class Trace:
             raise InputError(f"xy: point {bad[0]} is not finite: {xy[bad[0]].tolist()}")
         xy.flags.writeable = False
         object.__setattr__(self, "xy", xy)
+        if self.clock is not None and not isinstance(self.clock, str):
+            raise InputError(f"clock: expected a string or None, got {type(self.clock).__name__}")
         if self.t is None:
             return
         try:

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from tagbot.errors import InputError
 from tagbot.inputs import SCALE_MM, load_traces, read_gml
-from tagbot.inputs.gml import read_gml_json
+from tagbot.inputs.gml import CLOCK_UNITS, read_gml_json
 
 from .conftest import DATA, gml, stroke
 
@@ -337,8 +337,9 @@ def test_chained_clock_never_decreases_and_keeps_stroke_timing(strokes_times) ->
         return
     clock = np.concatenate([tr.t for tr in traces])
     assert clock[0] == 0.0 and np.all(np.diff(clock) >= 0)
+    unit = dict(CLOCK_UNITS)[traces[0].clock.split(":")[0].split()[0]]  # read from the rate
     for tr, ts in zip(traces, strokes_times, strict=True):
-        assert np.allclose(np.diff(tr.t), np.diff(ts), rtol=0, atol=1e-12 * scale)
+        assert np.allclose(np.diff(tr.t), np.diff(ts) * unit, rtol=0, atol=1e-12 * scale * unit)
 
 
 def test_eyewriter_clocks_restart_in_every_drawing() -> None:
@@ -403,10 +404,12 @@ def test_real_book_jsonp_capture() -> None:
 
 
 def test_real_eyewriter_capture() -> None:
-    """nothub (MIT): EyeWriter clicks; the clock restarts in the second drawing."""
+    """nothub (MIT): EyeWriter clicks; the clock restarts in the second drawing and counts
+    milliseconds (points about 19 ms apart: as seconds the tag would last 6 minutes)."""
     traces = load_traces(DATA / "nothub__temptTag-2010_7_30_16_3_46.gml")
     assert [len(tr) for tr in traces] == [4, 3, 2, 2]
-    assert times(traces)[2] == [252.953018, 267.328018]  # restarted at 0, chained
+    assert times(traces)[2] == [0.252953018, 0.267328018]  # restarted at 0, chained
+    assert traces[0].clock.startswith("milliseconds: median sample interval 19 ")
     points = np.concatenate([tr.xy for tr in traces])
     assert np.allclose(points.min(axis=0), [0.0, 38.5013], atol=1e-3)
     assert np.allclose(points.max(axis=0), [100.0, 100.0])

@@ -1,0 +1,664 @@
+"""Timing-aware reconstruction (beyond the paper): when a capture has real timestamps, make the
+plan's velocity follow the recorded one, not only its shape.
+
+The paper (§6) ignores timing, so static and timed traces are fitted alike; a geometric fit of a
+timed capture therefore moves at the paper's default rhythm, not the writer's. With
+``fit(..., timing="match")`` each trace's geometric plan is refined further:
+
+1. **The recording, resampled by time** (:func:`resample`): positions and velocities on a
+   regular grid by Gaussian-weighted local-quadratic regression of the samples, the kernel as wide
+   as the median sampling interval (at least :attr:`TimingOptions.min_bandwidth`). No single
+   sample decides a value: repeated timestamps (zero dt), jittered clocks and noisy points are
+   averaged with their neighbours; where the kernel holds no samples (a stall or dropped
+   samples) the value is interpolated linearly between the samples around the gap, and those
+   grid points count less in the fit; gaps longer than :attr:`TimingOptions.stall` hold no
+   grid points at all. Restarted clocks are chained by the readers.
+2. **Initial timing** (:func:`initial_timing`): the geometric plan's clock is mapped onto the
+   recording's by arc length (the instant the plan has travelled a fraction of its path goes to
+   the instant the recording has); each stroke follows the map's chord between its 10 % and
+   90 % instants (``t_q = t0 + exp(mu + sigma·z_q)``): its median instant is mapped, ``mu``
+   shifted by the log of the local time scale, ``sigma`` kept.
+3. **Levenberg-Marquardt** (:func:`_levenberg_marquardt`, steps projected onto the bounds) over
+   each stroke's onset, ``mu``, ``sigma`` and tangents and the interior targets, with residuals
+   on the grid: velocity minus recorded velocity (over the recording's RMS speed), position
+   minus recorded position (over :attr:`TimingOptions.shape_budget` of the tag's size, times
+   ``position_weight``: the shape may move only as much as that budget allows), a weak pull of
+   each target back to the geometric fit, and a penalty on tails outlasting the recording. The
+   Jacobian is exact for onsets, ``mu`` and ``sigma`` (``∂x/∂t0 = −c·u``, ``∂x/∂mu = −c·u·e``,
+   ``∂x/∂sigma = −c·u·e·z`` and their velocity counterparts) and for the targets (the
+   trajectory is linear in them), central differences of the G1 fit for the tangents
+   (:func:`~tagbot.gesture.timing_kernels.model_terms`); parameters ordered stroke by stroke,
+   the normal equations are banded and an iteration costs time linear in the grid and the
+   strokes. Stages (:attr:`TimingOptions.stages`): the timing alone, then everything.
+4. **Added strokes** (:func:`_split`): where the recorded speed dips between two peaks inside a
+   stroke and the plan misses much of the velocity there, that stroke is split in two and the
+   fit repeated, kept only if the cost drops by :attr:`TimingOptions.split_gain` (up to
+   :attr:`TimingOptions.max_stroke_ratio` times the geometric stroke count).
+
+Bounds (:class:`TimingOptions`): onsets within ``onset_slack`` (0.5 s) of the initial timing,
+``exp(mu)`` between 10 ms and 1 s, ``sigma`` between 0.05 and 0.6, tangents within ±3 rad; onsets
+stay in order (a plan's delays are >= 0). The first and last targets sit on the recording's
+first and last points.
+
+A trace with too few distinct timestamps (:data:`MIN_SAMPLES`) keeps its geometric timing, only
+moved and scaled to the recorded start and duration. Each plan starts at its trace's recorded
+time (on the file's clock, which is zero at the first point), so pen lifts keep their recorded
+durations unless a plan's tail would overlap the next one: plans never overlap, so the next
+then starts :attr:`TimingOptions.min_lift` after the previous one has ended (its lognormal
+tails within ``END_TOLERANCE`` of the size, typically 0.2-0.5 s after the visible motion). On
+captures with short pen lifts (UNIPEN words: ~0.1 s) later plans drift late by that much per
+lift; each plan's own rhythm is kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import ndtri
+
+from tagbot.errors import PlanError
+from tagbot.gesture import timing_kernels
+from tagbot.gesture.strokes import Strokes
+from tagbot.model.plan import END_TOLERANCE, MAX_COORDINATE, Model, Plan, unit_strokes
+
+Array = NDArray[np.float64]
+Timing = Literal["auto", "ignore", "match"]
+TIMINGS: tuple[Timing, ...] = ("auto", "ignore", "match")
+
+MIN_SAMPLES = 8
+"""A trace needs at least this many distinct timestamps for its speed to be fitted."""
+
+MAX_INTERVAL = 0.1
+"""``auto`` matches timing only when the median sampling interval is at most this (10 Hz)."""
+
+_Z90 = float(ndtri(0.9))
+
+
+@dataclass(frozen=True)
+class TimingOptions:
+    """Constants of the timing fit; times in seconds, lengths fractions of the tag's size."""
+
+    step: float = 0.01
+    """Resampling grid step (coarser for sparse recordings: at most 3 grid steps per sample)."""
+    min_bandwidth: float = 0.006
+    """Smallest Gaussian kernel width of the resampling."""
+    bandwidth: float = 1.0
+    """Kernel width in median sampling intervals..."""
+    jitter_bandwidth: float = 4.0
+    """... and at least this many times the timestamps' own noise (estimated from the spread of
+    the positive sampling intervals)."""
+    shape_budget: float = 0.004
+    """Position residuals are position errors over this fraction of the tag's size, times
+    ``position_weight``; velocity residuals are velocity errors over the recording's RMS speed."""
+    position_weight: float = 3.0
+    """See ``shape_budget``."""
+    target_pull: float = 0.05
+    """Weight of each interior target's pull back to the geometric fit (per budget moved)."""
+    onset_slack: float = 0.5
+    """How far an onset may move from its initial timing."""
+    mu_bounds: tuple[float, float] = (float(np.log(0.01)), float(np.log(1.0)))
+    """Bounds of ``mu`` (log seconds): a stroke's median delay between 10 ms and 1 s."""
+    sigma_bounds: tuple[float, float] = (0.05, 0.6)
+    """Bounds of ``sigma`` (handwriting strokes are found between about 0.1 and 0.5)."""
+    tail_weight: float = 1.0
+    """Each stroke should be complete (as a plan's end counts it: within ``END_TOLERANCE`` of
+    the size) by the recording's end plus ``pad``: beyond, a penalty of this per ``step`` late.
+    Long tails would make a plan outlast its recording by far and push the next plan back."""
+    phi_limit: float = 3.0
+    """Tangent deviations stay within ± this, radians."""
+    pad: float = 0.15
+    """The grid extends this far before the first sample and after the last (pen at rest)."""
+    min_lift: float = 0.05
+    """Shortest pen lift between plans: a plan whose recorded start comes sooner after the
+    previous plan's end (a restarted clock chained at zero lift, a long tail) starts this long
+    after it (a sampled tag shows every lift as pen-up samples)."""
+    stall: float = 0.5
+    """Gaps between samples longer than this (or 4 kernel widths) hold no grid instants: the
+    pen rested or the capture dropped out, and nothing there is fitted."""
+    iterations: int = 20
+    """Levenberg-Marquardt steps per trace and stage at most."""
+    stages: tuple[tuple[bool, float], ...] = ((False, 1.0), (True, 0.2), (True, 1.0))
+    """Successive solver stages: (whether targets and tangents move, the velocity residuals'
+    weight relative to the positions'). The timing alone first (the geometric fit's shape is
+    kept while the strokes find their instants), then everything with positions weighing more
+    (a wider basin), then velocities in full."""
+    tolerance: float = 1e-4
+    """Stop once a step lowers the cost by less than this fraction."""
+    work: float = 2e8
+    """Floating-point operations a solver stage may spend, about: traces whose strokes overlap
+    so much that the normal equations' band is wide get fewer iterations (at least one)."""
+    max_stroke_ratio: float = 1.5
+    """Strokes may be added up to this many times the geometric fit's count (at least 2)."""
+    split_rounds: int = 3
+    """Rounds of stroke splitting at most (each followed by a new fit; 0: none)."""
+    split_energy: float = 0.01
+    """A stroke is split where the recorded speed dips (``dip_depth``) and the velocity the plan
+    misses within ``dip_reach`` of the dip is at least this fraction of the recording's
+    velocity energy."""
+    dip_depth: float = 0.75
+    """A dip: the recorded speed's local minimum below this fraction of the lower of its peaks
+    within ``dip_reach`` on either side."""
+    dip_reach: float = 0.15
+    """See ``dip_depth``, seconds."""
+    split_gain: float = 0.05
+    """A round of splits is kept only if it lowers the cost by at least this fraction."""
+
+
+def usable(trace: Any) -> bool:
+    """Whether ``trace`` has plausible timestamps for ``timing="auto"``: at least
+    :data:`MIN_SAMPLES` distinct times, a median sampling interval of at most
+    :data:`MAX_INTERVAL`, and a clock unit its reader found plausible."""
+    t = getattr(trace, "t", None)
+    if t is None:
+        return False
+    clock = getattr(trace, "clock", None)
+    if clock is not None and "no unit gives a plausible rate" in clock:
+        return False
+    dt = np.diff(np.asarray(t, dtype=float))
+    steps = dt[dt > 0]
+    return steps.size + 1 >= MIN_SAMPLES and float(np.median(steps)) <= MAX_INTERVAL
+
+
+# --------------------------------------------------------------------------- the recording
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A recording resampled on a regular grid (:func:`resample`)."""
+
+    t: Array
+    """Grid times, seconds on the trace's clock."""
+    xy: Array
+    """Smoothed positions ``(G, 2)``."""
+    v: Array
+    """Smoothed velocities ``(G, 2)``."""
+    weight: Array
+    """Per grid time, 1 where samples surround it closely, less across gaps and in the pads."""
+    deadline: float
+    """When the plan should have ended (see :attr:`TimingOptions.tail_weight`)."""
+
+
+def resample(t: Array, xy: Array, options: TimingOptions) -> Recording:
+    """The recording on a regular grid by local-quadratic regression (see the module doc)."""
+    t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
+    dt = np.diff(t)
+    steps = dt[dt > 0]
+    interval = float(np.median(steps)) if steps.size else options.step
+    # The clock's own noise: an interval is the difference of two stamps, so the stamps' noise
+    # is the intervals' robust spread over √2.
+    jitter = 1.4826 * float(np.median(np.abs(steps - interval))) / np.sqrt(2) if steps.size else 0
+    width = max(
+        options.min_bandwidth, options.bandwidth * interval, options.jitter_bandwidth * jitter
+    )
+    step = max(options.step, interval / 3.0)
+    grid = _grid(t, step, max(options.stall, 4.0 * width), options.pad)
+    out = timing_kernels.local_quadratic(t, xy[:, 0].copy(), xy[:, 1].copy(), grid, width)
+    return Recording(
+        grid, out[:, 0:2].copy(), out[:, 2:4].copy(), out[:, 4].copy(), float(grid[-1])
+    )
+
+
+def _grid(t: Array, step: float, stall: float, pad: float) -> Array:
+    """Instants every ``step`` from ``pad`` before the first sample to ``pad`` after the last,
+    leaving out gaps between samples longer than ``stall`` (nothing was recorded there), so
+    the grid's size follows the samples, not the clock's span."""
+    cut = np.flatnonzero(np.diff(t) > stall)
+    starts = np.r_[t[0] - pad, t[cut + 1]]
+    ends = np.r_[t[cut], t[-1] + pad]
+    counts = np.floor((ends - starts) / step).astype(np.intp) + 1
+    first = np.repeat(starts, counts)
+    index = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+    return first + step * index
+
+
+# --------------------------------------------------------------------------- initial timing
+
+
+def _arc(xy: Array) -> Array:
+    step = np.hypot(*np.diff(xy, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(step)])
+    return s / s[-1] if s[-1] > 0 else np.linspace(0.0, 1.0, len(s))
+
+
+def initial_timing(plan: Plan, rec: Recording, size: float, options: TimingOptions) -> Strokes:
+    """``plan``'s strokes (one trace) moved onto the recording's clock by arc length: the
+    instant the plan has travelled a fraction of its path maps to the instant the recording has,
+    and each stroke follows the map's chord between its 10 % and 90 % instants (its median
+    instant mapped, its ``mu`` shifted by the log of the local time scale, ``sigma`` kept)."""
+    strokes = Strokes.of([plan.at(0.0)])
+    end = float(strokes.ends(size)[0])
+    tau = np.linspace(0.0, end, max(256, 8 * len(rec.t)))
+    xy, _ = strokes.evaluate(np.zeros(len(tau), dtype=np.intp), tau, size)
+    s_model = _arc(xy)
+    s_rec = _arc(rec.xy)
+    keep = np.concatenate([[True], np.diff(s_rec) > 0])  # stalls map to their first instant
+    z = ndtri(np.array([0.1, 0.5, 0.9]))
+    times = strokes.onsets[:, None] + np.exp(strokes.mu[:, None] + strokes.sigma[:, None] * z)
+    mapped = np.interp(np.interp(times, tau, s_model), s_rec[keep], rec.t[keep])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = (mapped[:, 2] - mapped[:, 0]) / (times[:, 2] - times[:, 0])
+    duration = float(rec.t[-1] - rec.t[0]) - 2 * options.pad
+    overall = duration / end if end > 0 and duration > 0 else 1.0
+    scale = np.where(np.isfinite(scale) & (scale > 0.05 * overall), scale, overall)
+    mu = np.clip(strokes.mu + np.log(scale), *options.mu_bounds)
+    onsets = np.maximum.accumulate(mapped[:, 1] - np.exp(mu))
+    sigma = np.clip(strokes.sigma, *options.sigma_bounds)
+    return strokes.replace(onsets=onsets, mu=mu, sigma=sigma)
+
+
+# --------------------------------------------------------------------------- the fit
+
+
+class _Fit:
+    """One trace's least-squares problem: the parameter vector, residuals and Jacobian."""
+
+    def __init__(
+        self,
+        strokes: Strokes,
+        rec: Recording,
+        size: float,
+        arcs: bool,
+        opts: TimingOptions,
+        velocity: float = 1.0,
+        anchor: Array | None = None,
+    ) -> None:
+        self.rec = rec
+        self.size = size
+        self.arcs = arcs
+        self.opts = opts
+        self.n = len(strokes.onsets)
+        self.angles = 1 if arcs else 2
+        self.interior = len(strokes.targets) - 2
+        # Stroke by stroke: t0, mu, sigma, its angles, then the target it arrives at (if
+        # interior); so ordered, JᵀJ is banded (a residual sees only the strokes active then).
+        width = np.full(self.n, 3 + self.angles + 2)
+        width[-1] -= 2
+        self.column = np.concatenate([[0], np.cumsum(width)[:-1]]).astype(np.intp)
+        self.target_column = (self.column[:-1] + 3 + self.angles).astype(np.intp)
+        self.params = int(width.sum())
+        speed = np.hypot(rec.v[:, 0], rec.v[:, 1])
+        rms = float(np.sqrt(np.sum(speed**2 * rec.weight) / max(np.sum(rec.weight), 1e-300)))
+        self.v_scale = max(rms, 1e-9 * size)
+        self.wv = velocity * np.sqrt(rec.weight) / self.v_scale
+        budget = opts.shape_budget * size
+        self.wp = np.sqrt(rec.weight) * opts.position_weight / budget
+        self.pull = opts.target_pull / budget
+        self.targets0 = np.ascontiguousarray(strokes.targets, dtype=float)
+        self.anchor = self.targets0 if anchor is None else anchor
+        self.rec_v = (rec.v * self.wv[:, None]).ravel()
+        self.deadline = rec.deadline
+        self.late = opts.tail_weight / opts.step
+        self.rec_xy = (rec.xy * self.wp[:, None]).ravel()
+
+    def pack(self, s: Strokes) -> Array:
+        x = np.empty(self.params)
+        x[self.column], x[self.column + 1], x[self.column + 2] = s.onsets, s.mu, s.sigma
+        if self.arcs:
+            x[self.column + 3] = s.phi2
+        else:
+            x[self.column + 3], x[self.column + 4] = s.phi1, s.phi2
+        x[self.target_column], x[self.target_column + 1] = s.targets[1:-1, 0], s.targets[1:-1, 1]
+        return x
+
+    def arrays(self, x: Array) -> tuple[Array, ...]:
+        targets = self.targets0.copy()
+        targets[1:-1, 0], targets[1:-1, 1] = x[self.target_column], x[self.target_column + 1]
+        phi2 = x[self.column + 3 + (self.angles - 1)]
+        phi1 = -phi2 if self.arcs else x[self.column + 3]
+        return (
+            targets,
+            x[self.column],
+            x[self.column + 1],
+            x[self.column + 2],
+            np.ascontiguousarray(phi1),
+            np.ascontiguousarray(phi2),
+        )
+
+    def strokes(self, x: Array, like: Strokes) -> Strokes:
+        targets, onsets, mu, sigma, phi1, phi2 = self.arrays(x)
+        return like.replace(
+            targets=targets, onsets=onsets, mu=mu, sigma=sigma, phi1=phi1, phi2=phi2
+        )
+
+    def bounds(self, x: Array) -> tuple[Array, Array]:
+        o = self.opts
+        lower, upper = np.full(self.params, -np.inf), np.full(self.params, np.inf)
+        onsets = x[self.column]
+        lower[self.column], upper[self.column] = onsets - o.onset_slack, onsets + o.onset_slack
+        lower[self.column + 1], upper[self.column + 1] = o.mu_bounds
+        lower[self.column + 2], upper[self.column + 2] = o.sigma_bounds
+        for a in range(self.angles):
+            lower[self.column + 3 + a], upper[self.column + 3 + a] = -o.phi_limit, o.phi_limit
+        return lower, upper
+
+    def project(self, x: Array, lower: Array, upper: Array) -> Array:
+        """Within the bounds, onsets in order."""
+        x = np.clip(x, lower, upper)
+        x[self.column] = np.maximum.accumulate(x[self.column])
+        return x
+
+    def evaluate(
+        self, x: Array, jacobian: bool
+    ) -> tuple[Array, tuple[NDArray[np.intp], NDArray[np.intp], Array] | None]:
+        targets, onsets, mu, sigma, phi1, phi2 = self.arrays(x)
+        if not (np.all(np.isfinite(x)) and np.abs(targets).max() <= MAX_COORDINATE):
+            return np.full(1, np.inf), None
+        if np.any(np.hypot(*np.diff(targets, axis=0).T) <= 1e-9 * self.size):
+            return np.full(1, np.inf), None
+        xy, v, rows, cols, vals = timing_kernels.model_terms(
+            self.rec.t, targets, onsets, mu, sigma, phi1, phi2, self.arcs, self.size,
+            self.wv, self.wp, jacobian, ANGLE_STEP, self.column, self.target_column,
+            JACOBIAN_TAIL,
+        )  # fmt: skip
+        pull = (targets[1:-1] - self.anchor[1:-1]).ravel() * self.pull
+        chords = np.hypot(*np.diff(targets, axis=0).T)
+        lengths = unit_strokes(phi1, phi2).length * chords
+        budget = np.minimum(END_TOLERANCE * self.size / (self.n * lengths), 1e-2)
+        z_tail = -ndtri(budget)  # where the plan's window ends (Plan.windows)
+        delay = np.exp(mu + sigma * z_tail)
+        late = onsets + delay - self.deadline
+        overdue = late > 0
+        r = np.concatenate([(v * self.wv[:, None]).ravel() - self.rec_v,
+                            (xy * self.wp[:, None]).ravel() - self.rec_xy, pull,
+                            np.where(overdue, late, 0.0) * self.late])  # fmt: skip
+        if not np.all(np.isfinite(r)):
+            return np.full(1, np.inf), None
+        if not jacobian:
+            return r, None
+        g = len(self.rec.t)
+        k = 2 * self.interior
+        j = np.flatnonzero(overdue)
+        tail_rows = 4 * g + k + j
+        pull_cols = np.column_stack([self.target_column, self.target_column + 1]).ravel()
+        rows = np.r_[rows, 4 * g + np.arange(k), tail_rows, tail_rows, tail_rows]
+        base = self.column[j]
+        cols = np.r_[cols, pull_cols, base, base + 1, base + 2]
+        d = delay[j] * self.late
+        vals = np.r_[vals, np.full(k, self.pull), np.full(j.size, self.late), d, d * z_tail[j]]
+        jac = (rows.astype(np.intp), cols.astype(np.intp), vals)
+        return r, jac
+
+
+ANGLE_STEP = 1e-6
+"""Central-difference step of the tangents' Jacobian columns, radians."""
+JACOBIAN_TAIL = 1e-4
+"""In the Jacobian (not the residuals), a stroke within this of not started or complete counts
+as such (:func:`~tagbot.gesture.timing_kernels.model_terms`)."""
+
+
+def match_trace(
+    plan: Plan, trace: Any, size: float, model: Model, options: TimingOptions
+) -> tuple[Plan, float]:
+    """``plan`` (a geometric fit of ``trace``, start 0) refitted to ``trace``'s timing. Returns
+    the plan on the trace's clock relative to its first timestamp (``start`` = its first onset,
+    possibly negative) and that first timestamp."""
+    t = np.asarray(trace.t, dtype=float)
+    xy = np.asarray(trace.xy, dtype=float)
+    t0 = float(t[0])
+    distinct = int(np.count_nonzero(np.diff(t) > 0)) + 1
+    rec = resample(t - t0, xy, options)
+    initial = initial_timing(plan, rec, size, options)
+    try:
+        fallback = _as_plan(initial)
+    except PlanError:  # e.g. a timing beyond a plan's bounds: the geometric plan, at the start
+        fallback = plan.at(0.0)
+    if distinct < MIN_SAMPLES or len(rec.t) < 8:
+        return fallback, t0
+    try:
+        return _as_plan(_refit(initial, rec, size, model == "sigma", plan.n_strokes, options)), t0
+    except PlanError:  # the refit left a plan's bounds (collapsed targets): keep the first timing
+        return fallback, t0
+
+
+def _refit(
+    strokes: Strokes, rec: Recording, size: float, arcs: bool, count: int, options: TimingOptions
+) -> Strokes:
+    """The least-squares fit of ``strokes`` to ``rec``, with strokes added where the recorded
+    speed shows a bump the plan misses (up to ``max_stroke_ratio`` times ``count``)."""
+    strokes, cost = _solve(strokes, rec, size, arcs, options)
+    room = max(int(np.ceil((options.max_stroke_ratio - 1.0) * count)), 2)
+    for _ in range(options.split_rounds):
+        if room <= 0:
+            break
+        split = _split(strokes, rec, size, options, room)
+        if split is None:
+            break
+        candidate, new_cost = _solve(split, rec, size, arcs, options, options.stages[-1:])
+        if not new_cost < (1.0 - options.split_gain) * cost:
+            break
+        room -= len(candidate.onsets) - len(strokes.onsets)
+        strokes, cost = candidate, new_cost
+    return strokes
+
+
+_Z10 = -_Z90
+
+
+def _split(
+    strokes: Strokes, rec: Recording, size: float, options: TimingOptions, room: int
+) -> Strokes | None:
+    """``strokes`` with strokes split in two (a new target between) where the recorded speed
+    dips between two peaks and the plan misses much of the recorded velocity around the dip:
+    the stroke split is the fastest there among those whose 10-90 % interval holds the dip
+    (at most ``room`` splits, one per stroke), or None if there is none."""
+    _, v = strokes.evaluate(np.zeros(len(rec.t), dtype=np.intp), rec.t, size)
+    speed = np.hypot(rec.v[:, 0], rec.v[:, 1])
+    miss = np.sum((rec.v - v) ** 2, axis=1) * rec.weight
+    total = float(np.sum(speed**2 * rec.weight))
+    if total <= 0:
+        return None
+    step = float(rec.t[1] - rec.t[0])
+    reach = max(2, round(options.dip_reach / step))
+    dips = _dips(speed, reach, options.dip_depth, 0.1 * float(speed.max()))
+    if dips.size == 0:
+        return None
+    cumulative = np.concatenate([[0.0], np.cumsum(miss)])
+    lo_i, hi_i = np.maximum(dips - reach, 0), np.minimum(dips + reach + 1, len(miss))
+    energy = (cumulative[hi_i] - cumulative[lo_i]) / total
+    lo = strokes.onsets + np.exp(strokes.mu + strokes.sigma * _Z10)
+    hi = strokes.onsets + np.exp(strokes.mu + strokes.sigma * _Z90)
+    margin = 0.1 * (hi - lo)
+    cuts: dict[int, float] = {}
+    for d in dips[np.argsort(-energy)]:
+        if len(cuts) >= room or energy[np.searchsorted(dips, d)] < options.split_energy:
+            break
+        t = float(rec.t[d])
+        holds = np.flatnonzero((lo + margin < t) & (t < hi - margin))
+        holds = holds[[j not in cuts for j in holds]]
+        if holds.size == 0:
+            continue
+        elapsed = np.maximum(t - strokes.onsets[holds], 1e-300)
+        z = (np.log(elapsed) - strokes.mu[holds]) / strokes.sigma[holds]
+        fastest = strokes.lengths[holds] * np.exp(-0.5 * z * z) / (strokes.sigma[holds] * elapsed)
+        cuts[int(holds[np.argmax(fastest)])] = t
+    if not cuts:
+        return None
+    return _insert(strokes, rec, list(cuts.items()))
+
+
+def _dips(speed: Array, reach: int, depth: float, floor: float) -> NDArray[np.intp]:
+    """Grid indices where ``speed`` has a local minimum below ``depth`` times the lower of the
+    highest speeds within ``reach`` samples on either side (which must exceed ``floor``)."""
+    n = len(speed)
+    if n < 3:
+        return np.zeros(0, dtype=np.intp)
+    i = np.flatnonzero((speed[1:-1] < speed[:-2]) & (speed[1:-1] <= speed[2:])) + 1
+    if i.size == 0:
+        return i
+    padded = np.r_[np.full(reach, -np.inf), speed, np.full(reach, -np.inf)]
+    windows = np.lib.stride_tricks.sliding_window_view(padded, reach + 1)
+    left = windows[i].max(axis=1)  # speed[i − reach .. i]
+    right = windows[i + reach].max(axis=1)  # speed[i .. i + reach]
+    low = np.minimum(left, right)
+    return i[(speed[i] < depth * low) & (low > floor)]
+
+
+def _insert(strokes: Strokes, rec: Recording, cuts: list[tuple[int, float]]) -> Strokes:
+    """Split stroke ``j`` at recorded time ``t`` for each cut: a new target at the recording's
+    position then, each half timed over its share of the stroke's 10-90 % interval (``sigma``
+    kept), straight halves."""
+    targets = list(strokes.targets)
+    onsets, mu, sigma = list(strokes.onsets), list(strokes.mu), list(strokes.sigma)
+    phi1, phi2 = list(strokes.phi1), list(strokes.phi2)
+    for j, t in sorted(cuts, reverse=True):
+        s = sigma[j]
+        lo = onsets[j] + np.exp(mu[j] + s * _Z10)
+        hi = onsets[j] + np.exp(mu[j] + s * _Z90)
+        point = np.array([np.interp(t, rec.t, rec.xy[:, 0]), np.interp(t, rec.t, rec.xy[:, 1])])
+        halves = []
+        for a, b in ((lo, t), (t, hi)):
+            delay = max(b - a, 1e-3) / (2.0 * np.sinh(s * _Z90))
+            halves.append((a - delay * np.exp(s * _Z10), float(np.log(delay))))
+        targets.insert(j + 1, point)
+        onsets[j : j + 1] = [halves[0][0], halves[1][0]]
+        mu[j : j + 1] = [halves[0][1], halves[1][1]]
+        sigma[j : j + 1] = [s, s]
+        phi1[j : j + 1] = [0.0, 0.0]
+        phi2[j : j + 1] = [0.0, 0.0]
+    return Strokes(
+        targets=np.array(targets),
+        onsets=np.maximum.accumulate(np.array(onsets)),
+        mu=np.array(mu),
+        sigma=np.array(sigma),
+        phi1=np.array(phi1),
+        phi2=np.array(phi2),
+        counts=np.array([len(onsets)], dtype=np.intp),
+    )
+
+
+def _solve(
+    strokes: Strokes,
+    rec: Recording,
+    size: float,
+    arcs: bool,
+    options: TimingOptions,
+    stages: tuple[tuple[bool, float], ...] | None = None,
+) -> tuple[Strokes, float]:
+    """Levenberg-Marquardt on :class:`_Fit`'s residuals, steps projected onto the bounds."""
+    targets = strokes.targets.copy()
+    targets[0], targets[-1] = rec.xy[0], rec.xy[-1]
+    chords = np.hypot(*np.diff(targets, axis=0).T)
+    if np.all(chords > 1e-9 * size):
+        strokes = strokes.replace(targets=targets)
+    anchor = strokes.targets
+    cost = np.inf
+    for free, velocity in options.stages if stages is None else stages:
+        problem = _Fit(strokes, rec, size, arcs, options, velocity, anchor)
+        x, cost = _levenberg_marquardt(problem, problem.pack(strokes), options, free)
+        strokes = problem.strokes(x, strokes)
+    return strokes, cost
+
+
+def _levenberg_marquardt(
+    problem: _Fit, x: Array, options: TimingOptions, geometry: bool = True
+) -> tuple[Array, float]:
+    """Minimise ``problem``'s residuals from ``x``: damped Gauss-Newton steps projected onto the
+    bounds, kept only when they lower the cost; with ``geometry`` False, only the onsets, ``mu``
+    and ``sigma`` move (targets and tangents held where they are)."""
+    lower, upper = problem.bounds(x)
+    if not geometry:
+        held = np.ones(problem.params, dtype=bool)
+        held[problem.column], held[problem.column + 1], held[problem.column + 2] = (
+            False,
+            False,
+            False,
+        )
+        lower[held], upper[held] = x[held], x[held]
+    x = problem.project(x, lower, upper)
+    r, jac = problem.evaluate(x, True)
+    if jac is None:
+        return x, np.inf
+    cost = float(r @ r)
+    damping = 1e-3
+    iterations = options.iterations
+    for iteration in range(options.iterations):
+        if iteration >= iterations:
+            break
+        a, grad = timing_kernels.normal_band(*jac, r, problem.params)
+        if iteration == 0:  # bound the work: a step costs about params·band² (and the rows')
+            band = a.shape[1]
+            work = problem.params * band * band + jac[0].size * band
+            iterations = int(np.clip(options.work / (7 * work), 1, options.iterations))
+        diag = np.maximum(a[:, 0], 1e-12 * max(float(np.max(a[:, 0])), 1e-300))
+        accepted = False
+        for _ in range(6):
+            step, ok = timing_kernels.damped_step(a, grad, diag, damping)
+            if not ok:
+                damping *= 10.0
+                continue
+            trial = problem.project(x + step, lower, upper)
+            r_new, _ = problem.evaluate(trial, False)
+            c_new = float(r_new @ r_new)
+            if c_new < cost:
+                accepted = True
+                break
+            damping *= 4.0
+        if not accepted:
+            break
+        gain = (cost - c_new) / cost
+        x, cost = trial, c_new
+        damping = max(damping / 3.0, 1e-9)
+        r, jac = problem.evaluate(x, True)
+        if jac is None or gain < options.tolerance:
+            break
+    return x, cost
+
+
+def _as_plan(strokes: Strokes) -> Plan:
+    onsets = strokes.onsets
+    start = float(onsets[0])
+    dt = np.diff(onsets, prepend=start)
+    return Plan(strokes.targets, dt, strokes.mu, strokes.sigma, strokes.phi1, strokes.phi2, start)
+
+
+def match(
+    plans: list[Plan],
+    traces: list[Any],
+    size: float,
+    model: Model,
+    timing: Timing,
+    options: TimingOptions | None = None,
+) -> list[Plan] | None:
+    """Plans refitted to their traces' timing and placed on the file's clock (see the module
+    doc), or None when ``timing`` says not to (``ignore``, or ``auto`` without usable timing on
+    every trace)."""
+    if timing == "ignore":
+        return None
+    opts = options or TimingOptions()
+    timed = [getattr(tr, "t", None) is not None for tr in traces]
+    if not all(timed) or (timing == "auto" and not any(usable(tr) for tr in traces)):
+        return None
+    fitted = [
+        match_trace(plan, trace, size, model, opts)
+        for plan, trace in zip(plans, traces, strict=True)
+    ]
+    points = np.concatenate([plan.targets for plan, _ in fitted])
+    tag_size = float(np.hypot(*np.ptp(points, axis=0)))  # what Tag measures its plans' ends by
+    out: list[Plan] = []
+    previous_end = -np.inf
+    for plan, t0 in fitted:
+        start = t0 + plan.start
+        if start < previous_end + opts.min_lift:  # a tail outlasting the lift: wait for it
+            start = previous_end + opts.min_lift
+        placed = plan.at(start)
+        out.append(placed)
+        previous_end = placed.end(tag_size)
+    return out
+
+
+__all__ = [
+    "MAX_INTERVAL",
+    "MIN_SAMPLES",
+    "TIMINGS",
+    "Recording",
+    "Timing",
+    "TimingOptions",
+    "initial_timing",
+    "match",
+    "match_trace",
+    "resample",
+    "usable",
+]
