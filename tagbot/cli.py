@@ -407,7 +407,7 @@ def draw_command(
     from tagbot.control import RunControl
     from tagbot.draw import draw, prepare
     from tagbot.errors import InputError
-    from tagbot.source import load_tag
+    from tagbot.source import load_source
 
     if resume_from is not None and not position_known:
         raise InputError(
@@ -423,7 +423,7 @@ def draw_command(
         }
     elif send_and_wait or unlock or resume_from:
         raise InputError("--send-and-wait, --unlock, --home and --resume-from are Grbl options")
-    tag = load_tag(source)
+    tag, traces = load_source(source)  # a trace file's traces: the report compares with them
     job = prepare(tag, device=device, port=port, profile=profile, overrides=overrides, **options)
     if out is None:
         stem = Path(source).name.split(".")[0]
@@ -450,6 +450,7 @@ def draw_command(
                 progress=progress,
                 control=keys.control,
                 pictures=not no_pictures,
+                recorded=traces,
             )
         except (TagbotError, KeyboardInterrupt):
             bar.close()
@@ -530,6 +531,8 @@ def _draw_summary(report: dict[str, Any], out: str) -> str:
             f"{report['path_deviation_max_mm']:.3f} mm max; speed SNR "
             f"{report['speed_snr_db']:.1f} dB; drawing time x{report['drawing_duration_ratio']:.3f}"
         )
+    if report.get("recorded_speed_snr_db") is not None:
+        parts.append(f"speed against the recording {report['recorded_speed_snr_db']:.1f} dB")
     return "; ".join(parts)
 
 

@@ -219,6 +219,8 @@ def velocity_snr(
     rec = v[:, 0] + 1j * v[:, 1]
     model = model_v[:, 0] + 1j * model_v[:, 1]
     energy = float(np.sum(rec.real**2 + rec.imag**2))
+    if not energy > 0:
+        raise ValueError("velocity_snr: the recording does not move")
     model_span = float(model_t[-1])
     span = float(grid[-1] - grid[0])
 

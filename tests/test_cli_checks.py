@@ -105,3 +105,11 @@ def test_fit_prints_the_whole_commands_time_and_can_skip_the_report(tmp_path, ca
     code, err = run(capsys, "fit", TRACES, "-o", str(tmp_path / "b.json"), "--no-report")
     assert code == 0 and "shape error" not in err and "report" not in err
     assert (tmp_path / "a.json").read_bytes() == (tmp_path / "b.json").read_bytes()
+
+
+def test_drawing_a_timed_capture_compares_with_the_recording(tmp_path, capsys):
+    out = tmp_path / "run"
+    code, err = run(capsys, "draw", TRACES, "--out", str(out), "--no-pictures")
+    assert code == 0 and "speed against the recording" in err
+    report = json.loads((out / "report.json").read_text())
+    assert report["recorded_speed_snr_db"] > 10  # the writer's rhythm, up to the run's scale

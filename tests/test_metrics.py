@@ -40,7 +40,7 @@ def test_shape_error_matches_exact_segment_distances(seed: int) -> None:
 def test_shape_error_of_a_long_scribble_is_bounded_and_still_exact() -> None:
     # 10 000 strokes across the box: densified at the fixed density this was 40 million points.
     zigzag = np.column_stack([np.tile([0.0, 1.0], 5000), np.arange(10_000) * 1e-4])
-    error = shape_error([zigzag], [zigzag + [0.0, 0.001]])
+    error = shape_error([zigzag], [zigzag + np.array([0.0, 0.001])])
     assert error.max == pytest.approx(0.001 / error.size, rel=1e-3)
     assert error.mean <= error.max
 

@@ -4,7 +4,11 @@ from tagbot.gesture.reconstruct import FitOptions, critical_points, fit, fit_tra
 from tagbot.gesture.vary import Variation, iter_vary, new_seed, vary
 
 __all__ = [
-    "FitOptions", "Variation", "critical_points", "fit", "fit_trace",
+    "FitOptions",
+    "Variation",
+    "critical_points",
+    "fit",
+    "fit_trace",
     "iter_vary",
     "new_seed",
     "vary",

@@ -51,11 +51,10 @@ def gcode_command(
     (G93) moves whose durations adapt to the motion (motion.dt to motion.max_dt, within
     motion.tolerance mm). Nothing is written when the tag would leave the bed.
     """
+    from tagbot.io.output import check_output_file
     from tagbot.plotter.place import place
     from tagbot.plotter.profile import load_profile
     from tagbot.plotter.program import build_program
-
-    from tagbot.io.output import check_output_file
     from tagbot.source import load_tag
 
     machine = load_profile(profile, overrides)
