@@ -17,8 +17,10 @@ import math
 import os
 import time
 import traceback
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -248,25 +250,55 @@ def map_files(
 def _map_processes(
     work: Callable[[FileJob], dict[str, Any]], jobs: Sequence[FileJob], workers: int
 ) -> Iterator[dict[str, Any]]:
+    """Rows from a pool of ``workers`` processes, at most twice as many jobs in flight. A worker
+    that dies (a native crash) breaks the pool: the jobs it held are run again one by one, each
+    in a process of its own, so the file that kills a process gets an error row and the others
+    their results; a new pool takes the rest."""
+    queue = deque(jobs)
+    while queue:
+        in_flight: dict[Future[dict[str, Any]], FileJob] = {}
+        suspects: list[FileJob] = []
+        with _pool(min(workers, len(queue))) as pool:
+            try:
+                while (queue or in_flight) and not suspects:
+                    while queue and len(in_flight) < 2 * workers:
+                        job = queue.popleft()
+                        in_flight[pool.submit(work, job)] = job
+                    done, _ = wait(in_flight, return_when=FIRST_COMPLETED)
+                    for future in done:
+                        job = in_flight.pop(future)
+                        try:
+                            row = future.result()
+                        except BrokenProcessPool:
+                            suspects.append(job)
+                            continue
+                        yield row
+            finally:
+                for future in in_flight:
+                    future.cancel()
+        for job in [*suspects, *in_flight.values()]:
+            yield _alone(work, job)
+
+
+def _pool(workers: int) -> ProcessPoolExecutor:
     import multiprocessing
 
     # spawn: workers share nothing with this process's threads (fork with threads can deadlock).
-    context = multiprocessing.get_context("spawn")
-    pending: set[Future[dict[str, Any]]] = set()
-    queue = iter(jobs)
-    with ProcessPoolExecutor(min(workers, len(jobs)), mp_context=context) as pool:
+    return ProcessPoolExecutor(max(1, workers), mp_context=multiprocessing.get_context("spawn"))
+
+
+def _alone(work: Callable[[FileJob], dict[str, Any]], job: FileJob) -> dict[str, Any]:
+    """``work(job)`` in a process of its own; an error row if that process dies."""
+    with _pool(1) as pool:
         try:
-            for job in _take(queue, 2 * workers):  # bounded: never the whole corpus in flight
-                pending.add(pool.submit(work, job))
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for future in done:
-                    yield future.result()
-                for job in _take(queue, len(done)):
-                    pending.add(pool.submit(work, job))
-        finally:
-            for future in pending:
-                future.cancel()
+            return pool.submit(work, job).result()
+        except BrokenProcessPool:
+            return {
+                "input": job.source,
+                "output": job.output or "",
+                "status": "error",
+                "error": f"{job.source}: the worker process died on this file (a native crash)",
+            }
 
 
 def _take(it: Iterator[FileJob], n: int) -> list[FileJob]:

@@ -138,3 +138,23 @@ def test_the_same_function_maps_over_a_dask_cluster(corpus, tmp_path, dask_sched
     assert main(["fit", str(corpus), "-o", str(local), "--no-report", "--jobs", "1"]) == 0
     for plan in local.glob("*.json"):
         assert (out / plan.name).read_bytes() == plan.read_bytes()
+
+
+def crash_on_marked_files(job: FileJob) -> dict:
+    """``fit_file``, except that the worker process dies (as in a native crash) on crash*.gml."""
+    import os
+
+    if Path(job.source).name.startswith("crash"):
+        os._exit(70)
+    return fit_file(job)
+
+
+def test_a_worker_that_dies_costs_only_its_own_file(corpus, tmp_path):
+    (corpus / "broken.gml").unlink()
+    shutil.copy(DATA / "spec10.gml", corpus / "crash.gml")
+    jobs = [FileJob(p, None, {"report": False}) for p in expand_inputs([str(corpus)])]
+    rows = {Path(r["input"]).name: r for r in map_files(crash_on_marked_files, jobs, workers=2)}
+    assert sorted(rows) == ["crash.gml", "dust.json", "sideways.gml", "spec.gml"]
+    assert rows["crash.gml"]["status"] == "error"
+    assert "worker process died on this file" in rows["crash.gml"]["error"]
+    assert all(rows[n]["status"] == "ok" for n in ("dust.json", "sideways.gml", "spec.gml"))
