@@ -209,7 +209,9 @@ def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[s
     ``path_deviation_max_mm``, ``speed_snr_db``, drawing durations, per-run figures; or
     ``comparison_error`` when nothing was drawn) and ``details`` (the device's own figures).
     With ``recorded`` traces (timed), also ``recorded_speed_snr_db`` and ``recorded_runs``: the
-    executed speed against the *recorded* one (:func:`tagbot.metrics.compare_with_recording`).
+    executed speed against the *recorded* one (:func:`tagbot.metrics.compare_with_recording`);
+    for a sparse trace (a real machine's status reports), ``recorded_comparison_error`` says why
+    there is none.
     """
     report: dict[str, Any] = {
         "device": run.device,
@@ -242,7 +244,12 @@ def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[s
             report.update(comparison.as_dict())
     else:
         report["comparison_error"] = "nothing was executed"
-    if recorded is not None and run.executed.size and not run.sparse:
+    if recorded is not None and run.sparse:
+        report["recorded_comparison_error"] = (
+            "the executed trace is the device's status reports (a few a second): too sparse"
+            " for a speed to compare with the recording's"
+        )
+    elif recorded is not None and run.executed.size:
         try:
             report.update(compare_with_recording(run.executed, recorded, run.plans))
         except ValueError as e:

@@ -13,17 +13,24 @@ from tagbot.errors import PlanError
 from tagbot.inputs import Trace
 from tagbot.model.plan import Tag
 
-__all__ = ["load_source", "load_tag"]
+__all__ = ["load_source", "load_tag", "read_source"]
 
 
 def load_source(path: str, model: str | None = None) -> tuple[Tag, list[Trace] | None]:
     """The tag in ``path`` and, for a trace file, its traces (fitted with ``model``, default
     gamma). A plan file is returned as is, with ``None`` for the traces."""
+    from tagbot.inputs import read_input
+
+    return read_source(read_input(path), path, model)  # bounded like every input
+
+
+def read_source(data: bytes, name: str, model: str | None = None) -> tuple[Tag, list[Trace] | None]:
+    """:func:`load_source` for a file's bytes already read (an upload); ``name`` is used in
+    errors."""
     from tagbot.gesture import fit
-    from tagbot.inputs import read_input, read_traces_bytes
+    from tagbot.inputs import read_traces_bytes
     from tagbot.io.planfile import tag_from_dict
 
-    data = read_input(path)  # bounded like every input
     try:
         document = json.loads(data.decode("utf-8-sig"))
     except (ValueError, UnicodeDecodeError):
@@ -32,8 +39,8 @@ def load_source(path: str, model: str | None = None) -> tuple[Tag, list[Trace] |
         try:
             return tag_from_dict(document), None
         except PlanError as e:
-            raise type(e)(f"{path}: {e}") from e
-    traces = read_traces_bytes(data, path)
+            raise type(e)(f"{name}: {e}") from e
+    traces = read_traces_bytes(data, name)
     return fit(traces, model=model or "gamma"), traces
 
 

@@ -26,7 +26,15 @@ from tagbot.errors import PlanFileError
 from tagbot.io.output import write_atomic
 from tagbot.model.plan import Plan, Tag
 
-__all__ = ["FORMAT", "VERSION", "load_plan", "save_plan", "tag_from_dict", "tag_to_dict"]
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "load_plan",
+    "plan_bytes",
+    "save_plan",
+    "tag_from_dict",
+    "tag_to_dict",
+]
 
 FORMAT = "tagbot-plan"
 """Value of the ``"format"`` marker field."""
@@ -263,7 +271,12 @@ def tag_to_dict(tag: Tag) -> dict[str, Any]:
 
 def save_plan(tag: Tag, path: str | os.PathLike[str]) -> None:
     """Write ``tag`` to ``path`` as a plan file, atomically (temp file + ``os.replace``)."""
-    write_atomic(path, (_dumps(tag_to_dict(tag)) + "\n").encode("utf-8"))
+    write_atomic(path, plan_bytes(tag))
+
+
+def plan_bytes(tag: Tag) -> bytes:
+    """The bytes :func:`save_plan` writes for ``tag`` (UTF-8 JSON, one final newline)."""
+    return (_dumps(tag_to_dict(tag)) + "\n").encode("utf-8")
 
 
 def _dumps(v: Any, indent: str = "") -> str:

@@ -83,6 +83,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from tagbot.control import RunControl
 from tagbot.errors import Interrupted, TagbotError
+from tagbot.io.planfile import plan_bytes
 from tagbot.model.plan import Tag
 from tagbot.studio.design import (
     Design,
@@ -393,7 +394,7 @@ def create_app(studio: Studio, port: int) -> Starlette:
     async def get_plan(request: Request) -> Response:
         tag = _tag(studio)
         if request.query_params.get("download"):
-            data = await _in_worker(studio, _plan_bytes, tag)
+            data = await _in_worker(studio, plan_bytes, tag)
             return _attachment(data, f"{studio.name}.json", "application/json")
         from tagbot.io.planfile import tag_to_dict
 
@@ -817,30 +818,12 @@ def _fit_gesture(design: Design, points: Any) -> tuple[Design, Tag | None]:
 
 def _read_source(data: bytes, name: str, model: str) -> tuple[Tag, list[Any] | None]:
     """A plan file as is, or any trace file fitted with ``model`` (as ``tagbot draw`` does)."""
-    from tagbot.gesture import fit
-    from tagbot.inputs import read_traces_bytes
-    from tagbot.io.planfile import tag_from_dict
+    from tagbot.source import read_source
 
     try:
-        document = json.loads(data.decode("utf-8-sig"))
-    except (ValueError, UnicodeDecodeError):
-        document = None
-    if isinstance(document, dict) and document.get("format") == "tagbot-plan":
-        try:
-            return tag_from_dict(document), None
-        except TagbotError as e:
-            raise StudioError(f"{name}: {e}") from e
-    traces = read_traces_bytes(data, name)
-    return fit(traces, model=model), traces
-
-
-def _plan_bytes(tag: Tag) -> bytes:
-    from tagbot.io.planfile import save_plan
-
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "plan.json"
-        save_plan(tag, path)
-        return path.read_bytes()
+        return read_source(data, name, model)
+    except TagbotError as e:
+        raise StudioError(str(e)) from e
 
 
 def _brush_png(tag: Tag, size: tuple[int, int], drips: bool, seed: int) -> bytes:
@@ -859,7 +842,7 @@ def _export_bytes(tag: Tag, fmt: str, drips: bool, seed: int | None) -> bytes:
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / f"tag.{fmt}"
         if fmt == "json":
-            return _plan_bytes(tag)
+            return plan_bytes(tag)
         if fmt == "gcode":
             from tagbot.plotter.place import place
             from tagbot.plotter.profile import load_profile
