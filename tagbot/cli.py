@@ -7,10 +7,13 @@ and 130 when interrupted. Unexpected exceptions propagate: they are bugs.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import signal
 import sys
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any, TypeVar
 
 import click
@@ -606,6 +609,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``tagbot`` command line with ``argv`` (default: ``sys.argv[1:]``); return the exit
     status."""
     args = list(sys.argv[1:] if argv is None else argv)
+    with _terminate_as_interrupt():
+        return _main(args)
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM (``kill``, ``timeout``, a service manager) stops a command as Ctrl-C does: a
+    machine is stopped safely and its run folder written, instead of the process vanishing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _main(args: list[str]) -> int:
     try:
         rv = cli.main(args=args, prog_name=PROG, standalone_mode=False)
     except click.UsageError as e:

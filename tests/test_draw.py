@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -328,6 +329,31 @@ def test_sim_grbl_serves_a_pty_until_interrupted():
         _, err = process.communicate(timeout=10)
     assert process.returncode == 130
     assert err.strip().splitlines()[-1] == "tagbot: error: interrupted" and "Traceback" not in err
+
+
+def test_sigterm_stops_a_draw_safely_and_keeps_the_run_folder(tmp_path):
+    device = SimulatedGrbl(device_settings(load_profile()), clock="real")
+    path, stop = serve_pty(device)
+    out = tmp_path / "run"
+    try:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "tagbot", "draw", str(LETTER_B), "--port", path,
+             "--out", str(out), "--no-pictures"],
+            stderr=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        assert process.stderr.readline().startswith("drawing ")
+        deadline = time.monotonic() + 30
+        while device.executed_lines < 40 and time.monotonic() < deadline:
+            time.sleep(0.05)  # until the machine is well into the program (past its preamble)
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=30)
+    finally:
+        stop()
+    assert process.returncode == 130 and "Traceback" not in err
+    assert "the last line the machine executed" in err
+    report = json.loads((out / "report.json").read_text())
+    assert not report["completed"] and report["executed"] >= 1
 
 
 def test_demo_makes_everything_it_lists(tmp_path, capsys):
