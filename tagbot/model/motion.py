@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtr
 
 from tagbot.errors import PlanError
+from tagbot.model import kernels
 from tagbot.model.plan import END_TOLERANCE, Plan, Tag
 
 MAX_SAMPLES = 50_000_000
@@ -96,13 +97,14 @@ def sample(tag: Tag, dt: float = 0.01) -> Motion:
     v = np.zeros((n, 2))
     pen = np.zeros(n, dtype=np.int8)
     plan_index = np.full(n, -1, dtype=np.intp)
+    rows = [slice(first[k], last[k] + 1) for k in range(len(tag.plans))]
+    drawn = evaluate_plans(tag.plans, [t[r] for r in rows], size)
     lift_start = 0
-    for k, plan in enumerate(tag.plans):
+    for k, (plan, (p, pv)) in enumerate(zip(tag.plans, drawn, strict=True)):
         xy[lift_start : first[k]] = plan.targets[0]  # pen up, waiting where it goes down next
-        rows = slice(first[k], last[k] + 1)
-        xy[rows], v[rows] = evaluate_plan(plan, t[rows], size)
-        pen[rows] = 1
-        plan_index[rows] = k
+        xy[rows[k]], v[rows[k]] = p, pv
+        pen[rows[k]] = 1
+        plan_index[rows[k]] = k
         lift_start = last[k] + 1
     speed = np.hypot(v[:, 0], v[:, 1])
     for array in (t, xy, v, speed, pen, plan_index):
@@ -123,11 +125,22 @@ def _check_dt(dt: float) -> float:
 def sample_plan(tag: Tag, k: int, step: float) -> tuple[Array, Array, Array]:
     """Times, positions and velocities of plan ``k`` of ``tag`` every ``step`` seconds of the
     tag's clock, from its start to its end (the last sample at or just past the end)."""
-    plan = tag.plans[k]
-    count = math.ceil((plan.end(tag.size) - plan.start) / step - 1e-9) + 1
-    t = plan.start + np.arange(count) * step
-    xy, v = evaluate_plan(plan, t, tag.size)
-    return t, xy, v
+    return sample_plans(tag, step, [k])[0]
+
+
+def sample_plans(
+    tag: Tag, step: float, plans: Sequence[int] | None = None
+) -> list[tuple[Array, Array, Array]]:
+    """:func:`sample_plan` for each of ``plans`` (by default all), evaluated in one pass: each
+    plan on its own grid, so that no pen lift is too short for ``step``."""
+    chosen = range(len(tag.plans)) if plans is None else plans
+    times = []
+    for k in chosen:
+        plan = tag.plans[k]
+        count = math.ceil((plan.end(tag.size) - plan.start) / step - 1e-9) + 1
+        times.append(plan.start + np.arange(count) * step)
+    drawn = evaluate_plans([tag.plans[k] for k in chosen], times, tag.size)
+    return [(t, xy, v) for t, (xy, v) in zip(times, drawn, strict=True)]
 
 
 def evaluate_plan(plan: Plan, t: ArrayLike, size: float | None = None) -> tuple[Array, Array]:
@@ -136,48 +149,75 @@ def evaluate_plan(plan: Plan, t: ArrayLike, size: float | None = None) -> tuple[
     ``size`` sets the windows' tolerance (``END_TOLERANCE × size``); by default the extent of the
     plan's own targets. :func:`sample` calls this on its grid with the tag's size.
     """
-    t = np.asarray(t, dtype=float)
-    if t.ndim != 1 or np.any(np.diff(t) < 0) or not np.all(np.isfinite(t)):
-        raise ValueError("t: must be a finite, sorted 1-D array of times")
     if size is None:
         size = float(np.hypot(*np.ptp(plan.targets, axis=0)))
-    count = len(t)
-    geometry = plan.geometry
-    t_on, t_off = plan.windows(size, END_TOLERANCE)
-    # Active sample range [begin, stop) of each stroke.
-    begin = np.searchsorted(t, t_on, side="left")
-    stop = np.searchsorted(t, t_off, side="right")
+    return evaluate_plans([plan], [t], size)[0]
 
-    # Strokes completed before a sample contribute their whole chord.
-    done = np.zeros((count + 1, 2))
-    np.add.at(done, stop, plan.chords)
-    xy = plan.targets[0] + np.cumsum(done[:count], axis=0)
-    v = np.zeros((count, 2))
+
+def evaluate_plans(
+    plans: Sequence[Plan], times: Sequence[ArrayLike], size: float
+) -> list[tuple[Array, Array]]:
+    """:func:`evaluate_plan` of each plan at its own sorted times, all (sample, stroke) pairs of
+    all plans in one pass: a tag of many short plans costs what one plan of as many strokes
+    does."""
+    ts = [np.asarray(t, dtype=float) for t in times]
+    for t in ts:
+        if t.ndim != 1 or np.any(np.diff(t) < 0) or not np.all(np.isfinite(t)):
+            raise ValueError("t: must be a finite, sorted 1-D array of times")
+    sizes = [len(t) for t in ts]
+    first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.intp)
+    xy = np.empty((int(first[-1]), 2))
+    v = np.zeros((int(first[-1]), 2))
+    begin, stop = [], []
+    for k, (plan, t) in enumerate(zip(plans, ts, strict=True)):
+        t_on, t_off = plan.windows(size, END_TOLERANCE)
+        # Active sample range [begin, stop) of each stroke, in this plan's rows.
+        b = np.searchsorted(t, t_on, side="left")
+        e = np.searchsorted(t, t_off, side="right")
+        # Strokes completed before a sample contribute their whole chord.
+        done = np.zeros((len(t) + 1, 2))
+        np.add.at(done, e, plan.chords)
+        xy[first[k] : first[k + 1]] = plan.targets[0] + np.cumsum(done[: len(t)], axis=0)
+        begin.append(b + first[k])
+        stop.append(e + first[k])
+    if not plans or not len(xy):
+        return [(xy[first[k] : first[k + 1]], v[first[k] : first[k + 1]]) for k in range(len(ts))]
+    t_all = np.concatenate(ts)
+    begin_all, stop_all = np.concatenate(begin), np.concatenate(stop)
+    onsets = np.concatenate([p.onsets for p in plans])
+    mu = np.concatenate([p.mu for p in plans])
+    sigma = np.concatenate([p.sigma for p in plans])
+    length = np.concatenate([p.geometry.length for p in plans])
+    constants = np.concatenate([p.geometry.constants for p in plans])
 
     # Flatten the (sample, active stroke) pairs, processed in cache-sized chunks of consecutive
-    # strokes.
-    counts = stop - begin
+    # strokes (a stroke's active samples are consecutive rows of its plan).
+    counts = stop_all - begin_all
     chunk_of = np.cumsum(counts) // _CHUNK
     for chunk in np.unique(chunk_of[counts > 0]):
         strokes = np.flatnonzero(chunk_of == chunk)
         n = counts[strokes]
-        lo = int(begin[strokes].min())
-        row = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n - (begin[strokes] - lo), n)
+        lo = int(begin_all[strokes].min())
+        row = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n - (begin_all[strokes] - lo), n)
         span = int(row.max()) + 1
-        inv_sigma = 1.0 / plan.sigma[strokes]
-        elapsed = t[lo:][row] - np.repeat(plan.onsets[strokes], n)
+        inv_sigma = 1.0 / sigma[strokes]
+        elapsed = t_all[lo:][row] - np.repeat(onsets[strokes], n)
         np.maximum(elapsed, np.finfo(float).tiny, out=elapsed)
         z = np.log(elapsed)
         z *= np.repeat(inv_sigma, n)
-        z -= np.repeat(plan.mu[strokes] * inv_sigma, n)
-        length = geometry.length[strokes]
-        dx, dy, tx, ty = geometry.evaluate_runs(strokes, n, np.repeat(length, n) * ndtr(z))
+        z -= np.repeat(mu[strokes] * inv_sigma, n)
+        dx, dy, tx, ty = kernels.evaluate_runs(
+            constants,
+            np.ascontiguousarray(strokes, dtype=np.intp),
+            np.ascontiguousarray(n, dtype=np.intp),
+            np.repeat(length[strokes], n) * ndtr(z),
+        )
         speed = np.exp(-0.5 * z * z)
         speed /= elapsed
-        speed *= np.repeat(length * inv_sigma * _INV_SQRT_2PI, n)
+        speed *= np.repeat(length[strokes] * inv_sigma * _INV_SQRT_2PI, n)
         rows = slice(lo, lo + span)
         xy[rows, 0] += np.bincount(row, weights=dx, minlength=span)
         xy[rows, 1] += np.bincount(row, weights=dy, minlength=span)
         v[rows, 0] += np.bincount(row, weights=speed * tx, minlength=span)
         v[rows, 1] += np.bincount(row, weights=speed * ty, minlength=span)
-    return xy, v
+    return [(xy[first[k] : first[k + 1]], v[first[k] : first[k + 1]]) for k in range(len(ts))]

@@ -8,7 +8,9 @@ from pyclothoids import Clothoid
 
 from tagbot.errors import PlanError
 from tagbot.model import euler
+from tagbot.model import motion as motion_module
 from tagbot.model.lognormal import lognormal_cdf
+from tagbot.model.motion import evaluate_plan, evaluate_plans
 from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, END_TOLERANCE, Plan, Tag
 
 from .strategies import plans, random_plan
@@ -202,13 +204,14 @@ def test_bad_dt_is_refused(dt):
 def test_strokes_are_evaluated_only_inside_their_windows(monkeypatch):
     """A long plan: evaluated (sample, stroke) pairs stay far below samples × strokes."""
     evaluated = []
-    original = euler.Clothoids.evaluate_runs
+    kernels = motion_module.kernels  # what the sampler calls (behind the tests' argument checks)
+    original = kernels.evaluate_runs
 
-    def counting(self, segments, counts, s):
+    def counting(constants, segments, counts, s):
         evaluated.append(len(s))
-        return original(self, segments, counts, s)
+        return original(constants, segments, counts, s)
 
-    monkeypatch.setattr(euler.Clothoids, "evaluate_runs", counting)
+    monkeypatch.setattr(kernels, "evaluate_runs", counting)
     rng = np.random.default_rng(8)
     m = 200
     targets = np.cumsum(rng.normal(size=(m, 2)) * 20, axis=0)
@@ -233,3 +236,16 @@ def test_motion_arrays_are_read_only():
     motion = chain(np.random.default_rng(0), plans_count=1).sample(0.01)
     with pytest.raises(ValueError, match="read-only"):
         motion.xy[0, 0] = 1.0
+
+
+def test_plans_evaluated_together_match_each_plan_on_its_own():
+    rng = np.random.default_rng(3)
+    plans = [random_plan(rng, 3 + 2 * k, start=0.3 * k) for k in range(4)]
+    times = [np.sort(rng.uniform(-0.2, 2.5, 50 + 30 * k)) for k in range(4)]
+    together = evaluate_plans(plans, times, 120.0)
+    for plan, t, (xy, v) in zip(plans, times, together, strict=True):
+        alone_xy, alone_v = evaluate_plan(plan, t, 120.0)
+        # The same sums, possibly split at other chunk boundaries: equal to rounding.
+        np.testing.assert_allclose(xy, alone_xy, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(v, alone_v, rtol=0, atol=1e-7)
+    assert evaluate_plans([], [], 1.0) == []
