@@ -81,7 +81,7 @@ def load_plan(path: str | os.PathLike[str]) -> Tag:
 def tag_from_dict(d: Any) -> Tag:
     """Build a :class:`Tag` from parsed plan-file JSON; every problem raises PlanFileError."""
     if not isinstance(d, Mapping):
-        raise PlanFileError(f"expected a JSON object at the top level, got {_kind(d)}")
+        raise PlanFileError(f"expected a JSON object at the top level, got {json_kind(d)}")
     fmt = _field(d, "format", "")
     if fmt != FORMAT:
         raise PlanFileError(f'format: expected "{FORMAT}", got {_show(fmt)}')
@@ -96,7 +96,7 @@ def tag_from_dict(d: Any) -> Tag:
         raise PlanFileError(f"units: expected a string, got {_show(units)}")
     raw_plans = _field(d, "plans", "")
     if not isinstance(raw_plans, list):
-        raise PlanFileError(f"plans: expected a list of plans, got {_kind(raw_plans)}")
+        raise PlanFileError(f"plans: expected a list of plans, got {json_kind(raw_plans)}")
     if not raw_plans:
         raise PlanFileError("plans: empty")
 
@@ -110,19 +110,21 @@ def tag_from_dict(d: Any) -> Tag:
 def _plan_from_dict(p: Any, path: str, model: str) -> Plan:
     """Validate one plan object's structure and construct the Plan."""
     if not isinstance(p, Mapping):
-        raise PlanFileError(f"{path}: expected an object, got {_kind(p)}")
+        raise PlanFileError(f"{path}: expected an object, got {json_kind(p)}")
     start = _number(_field(p, "start", path), f"{path}.start")
 
     raw_targets = _field(p, "targets", path)
     if not isinstance(raw_targets, list):
-        raise PlanFileError(f"{path}.targets: expected a list of [x, y], got {_kind(raw_targets)}")
+        got = json_kind(raw_targets)
+        raise PlanFileError(f"{path}.targets: expected a list of [x, y], got {got}")
     targets = [_point(xy, f"{path}.targets[{i}]") for i, xy in enumerate(raw_targets)]
     if len(targets) < 2:
         raise PlanFileError(f"{path}.targets: need at least 2, got {len(targets)}")
 
     raw_strokes = _field(p, "strokes", path)
     if not isinstance(raw_strokes, list):
-        raise PlanFileError(f"{path}.strokes: expected a list of strokes, got {_kind(raw_strokes)}")
+        got = json_kind(raw_strokes)
+        raise PlanFileError(f"{path}.strokes: expected a list of strokes, got {got}")
     if len(raw_strokes) != len(targets) - 1:
         raise PlanFileError(
             f"{path}.strokes: expected {len(targets) - 1} strokes for {len(targets)} targets, "
@@ -133,7 +135,7 @@ def _plan_from_dict(p: Any, path: str, model: str) -> Plan:
     for i, s in enumerate(raw_strokes):
         spath = f"{path}.strokes[{i}]"
         if not isinstance(s, Mapping):
-            raise PlanFileError(f"{spath}: expected an object, got {_kind(s)}")
+            raise PlanFileError(f"{spath}: expected an object, got {json_kind(s)}")
         for name in names:
             if name not in s:
                 raise PlanFileError(f"{spath}.{name}: missing{_model_hint(model, name, s)}")
@@ -196,14 +198,14 @@ def _model_hint(model: str, name: str, stroke: Mapping[str, Any]) -> str:
     return ""
 
 
-def _kind(v: Any) -> str:
-    """Name a JSON value's type for messages."""
+def json_kind(v: Any, quote_numbers: bool = False) -> str:
+    """Name a JSON value's type for messages (a number as itself with ``quote_numbers``)."""
     if v is None:
         return "null"
     if isinstance(v, bool):
         return "a boolean"
     if isinstance(v, int | float):
-        return "a number"
+        return repr(v) if quote_numbers else "a number"
     if isinstance(v, str):
         return "a string"
     if isinstance(v, list):

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from tagbot.errors import PlanError, TagbotError
+from tagbot.io.planfile import json_kind
 from tagbot.model.lognormal import lognormal
 from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, MODELS, Plan, Tag, sequence
 
@@ -222,19 +223,7 @@ def integer(value: Any, where: str, lo: int, hi: int) -> int:
 
 
 def _kind(value: Any) -> str:
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, int | float):
-        return repr(value)
-    if isinstance(value, str):
-        return "a string"
-    if isinstance(value, list):
-        return "a list"
-    if isinstance(value, Mapping):
-        return "an object"
-    return type(value).__name__
+    return json_kind(value, quote_numbers=True)
 
 
 # --------------------------------------------------------------------------- operations
