@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from tagbot import metrics_kernels as kernels
-from tagbot.model.motion import Motion
+from tagbot.model.motion import Motion, sample_plans
 from tagbot.model.plan import Tag
 
 Array = NDArray[np.float64]
@@ -197,24 +197,67 @@ def turning_of(polylines: Sequence[ArrayLike]) -> float:
     return total / np.pi
 
 
+VELOCITY_CUTOFF = 15.0
+"""Cut-off frequency (Hz) of the low-pass filter that gives the recorded velocity the velocity SNR
+is measured against (:func:`recorded_velocity`); None there for raw differences. Handwriting's
+velocity spectrum peaks near 5 Hz and holds little above 10 Hz (Teulings & Maarse 1984, "Digital
+recording and processing of handwriting movements", Human Movement Science 3; 10 Hz is the usual
+low-pass of handwriting kinematics, e.g. NeuroScript MovAlyzeR's filtering guide), but graffiti
+strokes are faster than pen-on-paper writing and a 20 dB figure counts every percent of the
+energy: 15 Hz, the cut-off a public implementation of Martín-Albo et al.'s Sigma-Lognormal
+extractor applies to the speed, is the one that recovers the *true* velocity of synthetic
+timed plans best over simulated digitisers (30-120 Hz, pixel quantisation, stamp jitter; see
+BENCHMARKS.md, issue 16, and ``bench_timing.py --calibrate``): on touch screens within 0.4 dB
+of the best cut-off, where 10 Hz scores 1.6-13 dB below the best (it removes real movement).
+Above it, what a digitiser adds is mostly noise."""
+
+FILTER_ORDER = 4
+"""Order of the Butterworth low-pass whose magnitude :func:`low_pass` applies squared, as if run
+forwards and backwards (zero phase): -6 dB at the cut-off, within 0.4 % up to half of it, -48 dB
+at twice the cut-off."""
+
+
 def velocity_snr(
-    t: ArrayLike, xy: ArrayLike, model_t: ArrayLike, model_v: ArrayLike, dt: float = 0.01
+    t: ArrayLike,
+    xy: ArrayLike,
+    model_t: ArrayLike,
+    model_v: ArrayLike,
+    dt: float = 0.01,
+    cutoff: float | None = VELOCITY_CUTOFF,
 ) -> tuple[float, float, float]:
     """SNR in dB of a model velocity against a recorded trajectory, after the best time mapping.
 
     The recording (times ``t``, points ``xy``) is resampled every ``dt`` seconds and its velocity
-    taken by central differences; the model velocity ``model_v`` (at ``model_t``) is mapped to the
-    recording's clock by ``t = offset + scale·(t_model − model_t[0])`` (velocities divide by
-    ``scale``). Returns ``(snr_db, scale, offset)`` for the scale and offset maximising
-    ``10·log10(Σ|v|² / Σ|v − v̂|²)``: for each of 41 scales from ¼ to 4 times the span ratio, and 1,
-    every offset on the ``dt`` grid at once (a cross-correlation by FFT), then a local search
-    around the best pair. Cost O(n log n) in the samples.
+    estimated by :func:`recorded_velocity` (low-passed at ``cutoff`` Hz, by default
+    :data:`VELOCITY_CUTOFF`; None: raw central differences); the model velocity ``model_v`` (at
+    ``model_t``) is mapped to the recording's clock by ``t = offset + scale·(t_model −
+    model_t[0])`` (velocities divide by ``scale``). Returns ``(snr_db, scale, offset)`` for the
+    scale and offset maximising ``10·log10(Σ|v|² / Σ|v − v̂|²)``: for each of 41 scales from ¼
+    to 4 times the span ratio, and 1, every offset on the ``dt`` grid at once (a
+    cross-correlation by FFT), then a local search around the best pair and around the shared
+    clock (scale 1, offset ``model_t[0]``: a timed fit's own mapping, which the grid of offsets
+    can miss by a fraction of a step), so the result is never below
+    :func:`clock_velocity_snr`'s. Cost O(n log n) in the samples.
     """
+    snr_db, scale, offset, _ = _velocity_snr(t, xy, model_t, model_v, dt, cutoff)
+    return snr_db, scale, offset
+
+
+def _velocity_snr(
+    t: ArrayLike,
+    xy: ArrayLike,
+    model_t: ArrayLike,
+    model_v: ArrayLike,
+    dt: float,
+    cutoff: float | None,
+) -> tuple[float, float, float, float]:
+    """:func:`velocity_snr`, and the recorded velocity's energy ``Σ|v|²`` it is relative to."""
     model_t, model_v = np.asarray(model_t, dtype=float), np.asarray(model_v, dtype=float)
     if len(model_t) < 2:
         raise ValueError("velocity_snr: the model needs at least 2 samples")
+    shared = float(model_t[0])  # the offset of the shared clock
     model_t = model_t - model_t[0]  # the mapping's offset is from the model's first sample
-    grid, v = recorded_velocity(t, xy, dt)
+    grid, v = recorded_velocity(t, xy, dt, cutoff)
     dt = float(grid[1] - grid[0])
     rec = v[:, 0] + 1j * v[:, 1]
     model = model_v[:, 0] + 1j * model_v[:, 1]
@@ -227,9 +270,7 @@ def velocity_snr(
     def errors(scales: Array, offsets: Array) -> Array:
         """Σ|v − v̂|² for each (scale, offset) pair, all pairs at once."""
         tm = (grid[None, :] - offsets[:, None]) / scales[:, None]
-        vm = np.interp(tm.ravel(), model_t, model.real, 0.0, 0.0) + 1j * np.interp(
-            tm.ravel(), model_t, model.imag, 0.0, 0.0
-        )
+        vm = np.interp(tm.ravel(), model_t, model, 0.0, 0.0)
         err = rec[None, :] - vm.reshape(tm.shape) / scales[:, None]
         return np.sum(err.real**2 + err.imag**2, axis=1)
 
@@ -245,11 +286,7 @@ def velocity_snr(
     inside = np.arange(k)[None, :] < lengths[:, None]
     w = np.where(
         inside,
-        (
-            np.interp(times.ravel(), model_t, model.real)
-            + 1j * np.interp(times.ravel(), model_t, model.imag)
-        ).reshape(times.shape)
-        / scales[:, None],
+        np.interp(times.ravel(), model_t, model).reshape(times.shape) / scales[:, None],
         0.0,
     )
     size = 1 << int(np.ceil(np.log2(n + k + 1)))
@@ -273,9 +310,13 @@ def velocity_snr(
     )
     err = np.where(own, err, np.inf)
     i, j = np.unravel_index(int(np.argmin(err)), err.shape)
-    scale, offset = float(scales[i]), float(grid[0] + m[j] * dt)
-    # Polish on a shrinking pattern (scale relative, offset in seconds), 7×7 pairs at a time.
-    best = float(errors(np.array([scale]), np.array([offset]))[0])
+    # Polish from the better of the grid's best pair and the shared clock, so that the result is
+    # never below the shared clock's, on a shrinking pattern (scale relative, offset in
+    # seconds), 7×7 pairs at a time.
+    starts = np.array([float(scales[i]), 1.0]), np.array([float(grid[0] + m[j] * dt), shared])
+    e = errors(*starts)
+    pick = int(np.argmin(e))
+    best, scale, offset = float(e[pick]), float(starts[0][pick]), float(starts[1][pick])
     steps = np.linspace(-1.0, 1.0, 7)
     for width in (0.1, 0.03, 0.01, 0.003, 0.001):
         s_try = np.repeat(scale * (1 + width * steps), 7)
@@ -284,7 +325,7 @@ def velocity_snr(
         pick = int(np.argmin(e))
         if e[pick] < best:
             best, scale, offset = float(e[pick]), float(s_try[pick]), float(o_try[pick])
-    return 10.0 * np.log10(energy / max(best, 1e-300)), scale, offset
+    return 10.0 * np.log10(energy / max(best, 1e-300)), scale, offset, energy
 
 
 @dataclass(frozen=True)
@@ -326,22 +367,20 @@ def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitRepo
     Traces are objects with ``xy`` and optional ``t`` (as :func:`tagbot.load_traces` returns).
     """
     polylines = [np.asarray(getattr(tr, "xy", tr), dtype=float) for tr in traces]
-    # Each plan sampled on its own: a pen lift shorter than dt cannot make the report fail.
-    motions = [Tag((plan,), tag.model, tag.units).sample(dt) for plan in tag.plans]
-    shape = shape_error(polylines, [p for m in motions for p in pen_down_paths(m)])
+    # Each plan sampled on its own grid: a pen lift shorter than dt cannot make the report fail.
+    motions = sample_plans(tag, dt)
+    shape = shape_error(polylines, [xy for _, xy, _ in motions])
     turning = turning_of(polylines)
     snr = None
     timed = [tr for tr in traces if getattr(tr, "t", None) is not None]
     if timed and len(timed) == len(traces) == len(tag.plans):
         signal = noise = 0.0
-        for trace, motion in zip(traces, motions, strict=True):
+        for trace, (model_t, _, model_v) in zip(traces, motions, strict=True):
             t, xy = np.asarray(trace.t), np.asarray(trace.xy)
             try:
-                db, _, _ = velocity_snr(t, xy, motion.t, motion.v)
+                db, _, _, energy = _velocity_snr(t, xy, model_t, model_v, 0.01, VELOCITY_CUTOFF)
             except ValueError:  # too short to compare
                 continue
-            _, v = recorded_velocity(t, xy)
-            energy = float(np.sum(v * v))
             signal += energy
             noise += energy / 10 ** (db / 10)
         snr = 10 * np.log10(signal / noise) if noise > 0 else None
@@ -356,14 +395,34 @@ def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitRepo
     )
 
 
-def recorded_velocity(t: ArrayLike, xy: ArrayLike, dt: float = 0.01) -> tuple[Array, Array]:
+def recorded_velocity(
+    t: ArrayLike, xy: ArrayLike, dt: float = 0.01, cutoff: float | None = None
+) -> tuple[Array, Array]:
     """A recording resampled on a regular grid and its velocity by central differences.
 
     The grid's step is ``dt`` seconds, or coarser for a sparse recording: at most
     :data:`GRID_PER_POINT` grid samples per recorded point, so the cost follows the points, not
-    the clock's span. Repeated time stamps are dropped (the first of each kept).
+    the clock's span.
+
+    With ``cutoff`` None (raw differences), repeated time stamps are dropped (the first of each
+    kept) and the positions interpolated linearly. With a ``cutoff`` (Hz; the velocity SNR uses
+    :data:`VELOCITY_CUTOFF`), the velocity is an estimate of the writer's: samples sharing a
+    stamp are spread evenly towards the next stamp (at most one median interval apart: events
+    delivered in a burst), the positions interpolated linearly on the grid and low-passed by a
+    zero-phase Butterworth filter (:func:`low_pass`; point reflection at the ends, which keeps
+    the end velocities), then differentiated. Dropped samples and stalls are bridged by the
+    interpolation; no single sample decides a value. O(n log n) in the samples. The
+    Sigma-Lognormal extractors likewise fit, and score, a smoothed recording, not raw
+    differences: ScriptStudio (O'Reilly & Plamondon 2009, Pattern Recognition 42:3324) smooths
+    the signal first, iDeLog (Ferrer, Diaz, Carmona-Duarte & Plamondon, IEEE TPAMI 2020,
+    doi:10.1109/TPAMI.2018.2879312) offers that smoothing as its pre-processing, and a public
+    implementation of Martín-Albo et al.'s extractor resamples at 200 Hz and low-passes the
+    speed by a zero-phase Butterworth at 15 Hz. A grid too coarse for the cut-off (Nyquist at
+    or below it) is not filtered.
     """
     t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
+    if cutoff is not None:
+        t = _spread_stamps(t)
     keep = np.concatenate([[True], np.diff(t) > 0])
     t, xy = t[keep], xy[keep]
     if len(t) >= 3:
@@ -373,7 +432,50 @@ def recorded_velocity(t: ArrayLike, xy: ArrayLike, dt: float = 0.01) -> tuple[Ar
     grid = t[0] + dt * np.arange(int((t[-1] - t[0]) / dt) + 1)
     grid = grid[grid <= t[-1]]
     rec = np.column_stack([np.interp(grid, t, xy[:, 0]), np.interp(grid, t, xy[:, 1])])
+    if cutoff is not None:
+        rec = low_pass(rec, dt, cutoff)
     return grid, np.gradient(rec, dt, axis=0)
+
+
+def _spread_stamps(t: Array) -> Array:
+    """Time stamps with each run of equal (or out-of-order) stamps spread evenly over the
+    interval to the next distinct stamp, at most one median sampling interval apart."""
+    if t.size < 2 or np.all(np.diff(t) > 0):
+        return t
+    t = np.maximum.accumulate(t)
+    new = np.concatenate([[True], np.diff(t) > 0])
+    starts = np.flatnonzero(new)
+    steps = np.diff(t[starts])
+    interval = float(np.median(steps)) if steps.size else 0.0
+    group = np.cumsum(new) - 1
+    counts = np.diff(np.append(starts, t.size))
+    width = np.append(steps, interval)  # the last run: one median interval
+    spacing = np.minimum(width / counts, interval)
+    rank = np.arange(t.size) - starts[group]
+    return t[starts][group] + spacing[group] * rank
+
+
+def low_pass(x: Array, dt: float, cutoff: float) -> Array:
+    """``x`` (rows every ``dt`` s) through the zero-phase low-pass of :func:`recorded_velocity`:
+    the magnitude of a :data:`FILTER_ORDER` Butterworth filter run forwards and backwards,
+    ``1 / (1 + (f / cutoff)^(2·order))``, applied by FFT (O(n log n); scipy.signal would cost
+    a second to import). Each end is extended by point reflection over three cut-off periods
+    (the end velocities kept) and the straight line through the extended ends taken out before
+    the transform, so that nothing wraps around. Unchanged if the rows are too few or the grid
+    too coarse for the cut-off (its Nyquist frequency at or below it)."""
+    x = np.asarray(x, dtype=float)
+    n = len(x)
+    if not 0.0 < 2.0 * cutoff * dt < 1.0 or n < 4:
+        return x
+    pad = min(n - 1, max(3, round(3.0 / (cutoff * dt))))  # three cut-off periods
+    ext = np.concatenate([2.0 * x[0] - x[pad:0:-1], x, 2.0 * x[-1] - x[-2 : -pad - 2 : -1]])
+    m = len(ext)
+    line = ext[0] + np.linspace(0.0, 1.0, m)[:, None] * (ext[-1] - ext[0])
+    size = 1 << int(np.ceil(np.log2(2 * m)))
+    f = np.fft.rfftfreq(size, dt) / cutoff
+    gain = 1.0 / (1.0 + f ** (2 * FILTER_ORDER))
+    y = np.fft.irfft(np.fft.rfft(ext - line, size, axis=0) * gain[:, None], size, axis=0)[:m]
+    return (y + line)[pad : pad + n]
 
 
 @dataclass(frozen=True)
@@ -650,18 +752,28 @@ class StrokeFigures:
 
 
 def clock_velocity_snr(
-    t: ArrayLike, xy: ArrayLike, model_t: ArrayLike, model_v: ArrayLike
+    t: ArrayLike,
+    xy: ArrayLike,
+    model_t: ArrayLike,
+    model_v: ArrayLike,
+    cutoff: float | None = VELOCITY_CUTOFF,
 ) -> float:
     """Velocity SNR in dB of a model sharing the recording's clock (scale 1, offset 0): a lower
-    bound of :func:`velocity_snr`'s best mapping, exact for timed fits."""
-    grid, v = recorded_velocity(t, xy)
+    bound of :func:`velocity_snr`'s best mapping, exact for timed fits. ``cutoff`` as there."""
+    grid, v = recorded_velocity(t, xy, cutoff=cutoff)
     model_t, model_v = np.asarray(model_t, dtype=float), np.asarray(model_v, dtype=float)
     vm = np.column_stack([np.interp(grid, model_t, model_v[:, i], 0.0, 0.0) for i in (0, 1)])
     return _db(float(np.sum(v * v)), float(np.sum((v - vm) ** 2)))
 
 
-def stroke_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> list[StrokeFigures]:
-    """Per stroke of ``tag`` (one plan per trace), its shape error and velocity SNR.
+def stroke_report(
+    traces: Sequence[object],
+    tag: Tag,
+    dt: float = 0.005,
+    cutoff: float | None = VELOCITY_CUTOFF,
+) -> list[StrokeFigures]:
+    """Per stroke of ``tag`` (one plan per trace), its shape error and velocity SNR (against the
+    recording low-passed at ``cutoff`` Hz, as :func:`velocity_snr`).
 
     Each recorded point and each instant of the recording's velocity grid
     (:func:`recorded_velocity`) belongs to the stroke whose speed ``D·Λ`` is largest at the
@@ -690,9 +802,9 @@ def stroke_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> list
         t = getattr(trace, "t", None)
         if t is not None and len(mt) >= 2:
             try:
-                grid, v = recorded_velocity(t, xy)
-                shared = clock_velocity_snr(t, xy, mt, mv)
-                best, scale, offset = velocity_snr(t, xy, mt, mv)
+                grid, v = recorded_velocity(t, xy, cutoff=cutoff)
+                shared = clock_velocity_snr(t, xy, mt, mv, cutoff)
+                best, scale, offset = velocity_snr(t, xy, mt, mv, cutoff=cutoff)
             except ValueError:  # too short to compare
                 grid = None
             if grid is not None:
@@ -719,7 +831,9 @@ def compare_with_recording(
     """How the executed speed follows the *recorded* one: per pen-down run (the ``k``-th run
     drew plan ``plans[k]``, fitted from ``traces[plans[k]]``), the speed SNR in dB after the
     best uniform time scale and offset (:func:`velocity_snr` on the arc-length speed), the
-    recording's speed scaled by the ratio of path lengths (machine mm per input mm).
+    recording's speed (low-passed at :data:`VELOCITY_CUTOFF`, the writer's speed as the velocity
+    SNR takes it) scaled by the ratio of path lengths (machine mm per input mm); the executed
+    run's speed by raw differences (a machine's samples carry no digitiser noise).
 
     Returns ``recorded_speed_snr_db`` (energy-weighted over runs, None if no run has a timed
     recording) and ``recorded_runs`` (per run: plan, SNR, time scale: machine s per recorded s).
@@ -738,14 +852,14 @@ def compare_with_recording(
         if not (length_e > 0 and length_r > 0):
             continue
         try:
-            grid, v = recorded_velocity(t, xy)
+            grid, v = recorded_velocity(t, xy, cutoff=VELOCITY_CUTOFF)
             arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(run[:, 1:3], axis=0).T))])
             speed = np.hypot(v[:, 0], v[:, 1]) * (length_e / length_r)
             # The executed run is the "recording" here and the recording the "model": time
             # maps as t_exec = offset + scale·(t_rec − t_rec[0]).
             db, scale, _ = velocity_snr(
                 run[:, 0], np.column_stack([arc, np.zeros_like(arc)]), grid,
-                np.column_stack([speed, np.zeros_like(speed)]),
+                np.column_stack([speed, np.zeros_like(speed)]), cutoff=None,
             )  # fmt: skip
             _, mine = recorded_velocity(run[:, 0], np.column_stack([arc, np.zeros_like(arc)]))
         except ValueError:  # too short to compare

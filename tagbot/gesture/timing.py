@@ -118,8 +118,10 @@ class TimingOptions:
     stall: float = 0.5
     """Gaps between samples longer than this (or 4 kernel widths) hold no grid instants: the
     pen rested or the capture dropped out, and nothing there is fitted."""
-    iterations: int = 20
-    """Levenberg-Marquardt steps per trace and stage at most."""
+    iterations: int = 40
+    """Levenberg-Marquardt steps per trace and stage at most (20 before: the fits were still
+    improving; 40 gain 0.1-0.3 dB median velocity SNR on the development data for 1.3-2 times
+    the fit time, 80 little more for twice that again; BENCHMARKS.md, issue 16)."""
     stages: tuple[tuple[bool, float], ...] = ((False, 1.0), (True, 0.2), (True, 1.0))
     """Successive solver stages: (whether targets and tangents move, the velocity residuals'
     weight relative to the positions'). The timing alone first (the geometric fit's shape is
@@ -127,7 +129,7 @@ class TimingOptions:
     (a wider basin), then velocities in full."""
     tolerance: float = 1e-4
     """Stop once a step lowers the cost by less than this fraction."""
-    work: float = 2e8
+    work: float = 4e8
     """Floating-point operations a solver stage may spend, about: traces whose strokes overlap
     so much that the normal equations' band is wide get fewer iterations (at least one)."""
     max_stroke_ratio: float = 1.5

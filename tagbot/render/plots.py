@@ -155,6 +155,8 @@ def speed_curves(
 ) -> SpeedCurves:
     """The speed plot of a tag, with the recorded speed of ``traces`` (one per plan, with
     timing) mapped onto the model's clock when given."""
+    from tagbot.metrics import VELOCITY_CUTOFF
+
     motion = tag.sample(dt)
     speed = np.where(motion.pen == 1, motion.speed, np.nan)
     measured = []
@@ -168,18 +170,25 @@ def speed_curves(
         speed=Curve(motion.t, speed),
         strokes=_stroke_curves(tag, motion.t),
         measured=measured,
-        measured_label="recorded (scaled and aligned)",
+        measured_label=f"recorded, {VELOCITY_CUTOFF:g} Hz low-pass (scaled and aligned)",
         lifts=_lifts(motion.t, motion.pen),
         units=tag.units,
     )
 
 
 def recorded_speed(trace: Any, model_t: Array, model_v: Array) -> Curve | None:
-    """A timed trace's speed on the model's clock (None without timing or too short), by the
-    time scale and offset that best match the model's velocity
+    """A timed trace's speed on the model's clock (None without timing or too short): the
+    reference the velocity SNR is measured against (low-passed at
+    :data:`tagbot.metrics.VELOCITY_CUTOFF`), by the time scale and offset that best match the
+    model's velocity
     (:func:`tagbot.metrics.velocity_snr`), or unmapped when the model shares the recording's
     clock and matches better so (a fit with ``timing="match"``)."""
-    from tagbot.metrics import clock_velocity_snr, recorded_velocity, velocity_snr
+    from tagbot.metrics import (
+        VELOCITY_CUTOFF,
+        clock_velocity_snr,
+        recorded_velocity,
+        velocity_snr,
+    )
 
     t = getattr(trace, "t", None)
     if t is None:
@@ -187,7 +196,7 @@ def recorded_speed(trace: Any, model_t: Array, model_v: Array) -> Curve | None:
     xy = np.asarray(trace.xy, dtype=float)
     try:
         best, scale, offset = velocity_snr(t, xy, model_t, model_v)
-        grid, v = recorded_velocity(t, xy)
+        grid, v = recorded_velocity(t, xy, cutoff=VELOCITY_CUTOFF)
         if clock_velocity_snr(t, xy, model_t, model_v) >= best:
             scale, offset = 1.0, float(model_t[0])
     except ValueError:
