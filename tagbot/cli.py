@@ -378,6 +378,14 @@ cli.add_command(studio_command)
     is_flag=True,
     help="Confirm the machine's position is right (homed or checked) for --resume-from.",
 )
+@click.option(
+    "--recording",
+    metavar="FILE",
+    type=click.Path(dir_okay=False, exists=True),
+    default=None,
+    help="The timed capture a PLAN was fitted from (one trace per plan): the report compares "
+    "the executed speed with it. A trace file given as INPUT is its own recording.",
+)
 @click.option("--no-pictures", is_flag=True, help="Do not render pictures into the run folder.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary.")
 def draw_command(
@@ -391,6 +399,7 @@ def draw_command(
     unlock: str | None,
     resume_from: int | None,
     position_known: bool,
+    recording: str | None,
     no_pictures: bool,
     quiet: bool,
 ) -> None:
@@ -427,6 +436,8 @@ def draw_command(
     elif send_and_wait or unlock or resume_from:
         raise InputError("--send-and-wait, --unlock, --home and --resume-from are Grbl options")
     tag, traces = load_source(source)  # a trace file's traces: the report compares with them
+    if recording is not None:
+        traces = _recording(recording, len(tag.plans))
     job = prepare(tag, device=device, port=port, profile=profile, overrides=overrides, **options)
     if out is None:
         stem = Path(source).name.split(".")[0]
@@ -461,6 +472,22 @@ def draw_command(
             raise
     if not quiet:
         click.echo(_draw_summary(result.report, out), err=True)
+
+
+def _recording(path: str, plans: int) -> list[Any]:
+    """The timed traces of ``path`` to compare a run of ``plans`` plans with, checked first."""
+    from tagbot.errors import InputError
+    from tagbot.inputs import load_traces
+
+    traces = load_traces(path)
+    if len(traces) != plans:
+        raise InputError(
+            f"{path}: has {len(traces)} trace{'s' * (len(traces) != 1)} for a tag of {plans} "
+            f"plan{'s' * (plans != 1)} (--recording needs the capture the plan was fitted from)"
+        )
+    if all(getattr(trace, "t", None) is None for trace in traces):
+        raise InputError(f"{path}: has no time stamps to compare the executed speed with")
+    return traces
 
 
 class _PauseKeys:

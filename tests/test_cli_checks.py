@@ -113,3 +113,23 @@ def test_drawing_a_timed_capture_compares_with_the_recording(tmp_path, capsys):
     assert code == 0 and "speed against the recording" in err
     report = json.loads((out / "report.json").read_text())
     assert report["recorded_speed_snr_db"] > 10  # the writer's rhythm, up to the run's scale
+
+
+def test_a_plan_drawn_with_its_recording_is_compared_with_it(tmp_path, capsys):
+    plan = tmp_path / "plan.json"
+    assert run(capsys, "fit", TRACES, "-o", str(plan), "--no-report")[0] == 0
+    out = tmp_path / "run"
+    code, err = run(
+        capsys, "draw", str(plan), "--recording", TRACES, "--out", str(out), "--no-pictures"
+    )
+    assert code == 0 and "speed against the recording" in err
+    assert json.loads((out / "report.json").read_text())["recorded_speed_snr_db"] > 10
+
+
+def test_a_recording_that_does_not_match_the_plan_is_refused_before_drawing(tmp_path, capsys):
+    other = tmp_path / "points.csv"
+    other.write_text("0,0\n10,0\n10,10\n")
+    out = tmp_path / "run"
+    code, err = run(capsys, "draw", TRACES, "--recording", str(other), "--out", str(out))
+    assert code == 2 and f"{other}: has 1 trace for a tag of" in one_line(err)
+    assert not out.exists()
