@@ -96,7 +96,7 @@ def _add_kernel_cache(wheel: Path, module: str = "tagbot.warmup") -> None:
         env = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_", "TAGBOT_"))}
         # The build environment's own path entries stay (pip's isolation lives in PYTHONPATH).
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tree), env.get("PYTHONPATH")]))
-        print("tagbot: compiling the kernels for this machine (about a minute)", file=sys.stderr)
+        print("tagbot: compiling the kernels for this machine (a minute or two)", file=sys.stderr)
         try:
             done = subprocess.run(
                 [sys.executable, "-m", module],
@@ -107,9 +107,7 @@ def _add_kernel_cache(wheel: Path, module: str = "tagbot.warmup") -> None:
                 timeout=WARM_UP_TIMEOUT,
             )
         except (OSError, subprocess.TimeoutExpired) as error:
-            print(
-                f"tagbot: warm-up skipped ({error}); kernels compile on first use", file=sys.stderr
-            )
+            print(f"tagbot: warm-up skipped ({error}); kernels compile on use", file=sys.stderr)
             return
         if done.returncode != 0:
             last = (done.stderr.strip().splitlines() or ["no output"])[-1]
