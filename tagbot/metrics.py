@@ -234,9 +234,9 @@ def velocity_snr(
     model_t[0])`` (velocities divide by ``scale``). Returns ``(snr_db, scale, offset)`` for the
     scale and offset maximising ``10·log10(Σ|v|² / Σ|v − v̂|²)``: for each of 41 scales from ¼
     to 4 times the span ratio, and 1, every offset on the ``dt`` grid at once (a
-    cross-correlation by FFT), then a local search around the best pair and around the shared
-    clock (scale 1, offset ``model_t[0]``: a timed fit's own mapping, which the grid of offsets
-    can miss by a fraction of a step), so the result is never below
+    cross-correlation by FFT), then a local search from the better of the best pair and the
+    shared clock (scale 1, offset ``model_t[0]``: a timed fit's own mapping, which the grid of
+    offsets can miss by a fraction of a step), so the result is never below
     :func:`clock_velocity_snr`'s. Cost O(n log n) in the samples.
     """
     snr_db, scale, offset, _ = _velocity_snr(t, xy, model_t, model_v, dt, cutoff)
