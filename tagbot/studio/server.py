@@ -965,6 +965,9 @@ class StudioServer:
             self.socket.close()
             raise InputError(f"--port {port}: cannot listen on 127.0.0.1 ({e.strerror})") from e
         self.port = int(self.socket.getsockname()[1])
+        # Listening from now on: a browser opened on the printed URL before uvicorn has started
+        # waits in the backlog instead of being refused.
+        self.socket.listen(128)
         config = uvicorn.Config(
             create_app(studio, self.port),
             log_level="warning",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -13,6 +14,7 @@ import httpx
 
 from tagbot.cli import main
 from tagbot.io.planfile import load_plan, save_plan, tag_from_dict
+from tagbot.studio.server import Studio, StudioServer
 from tests.studio.conftest import PLAN
 
 
@@ -69,3 +71,18 @@ def test_studio_serves_a_plan_and_stops_on_ctrl_c(tmp_path: Path) -> None:
             process.stderr.close()
     assert load_plan(plan).plans[0].targets[0].tolist() == [1.0, 2.0]
     assert "[1.0, 2.0]" in autosave.read_text()  # written on the way out
+
+
+def test_a_browser_opened_before_the_server_runs_is_served(tmp_path: Path) -> None:
+    # The URL is printed and the browser opened before uvicorn starts: the port already listens.
+    studio = Studio(tag=tag_from_dict(PLAN), autosave=tmp_path / "a.json", runs=tmp_path / "runs")
+    server = StudioServer(studio)
+    early = socket.create_connection(("127.0.0.1", server.port), timeout=10)
+    try:
+        server.start()
+        host = f"127.0.0.1:{server.port}"
+        early.sendall(f"GET /static/studio.js HTTP/1.1\r\nHost: {host}\r\n\r\n".encode())
+        assert early.recv(64).startswith(b"HTTP/1.1 200 ")
+    finally:
+        early.close()
+        server.stop()
