@@ -183,3 +183,20 @@ def test_reference_velocity_keeps_uniform_motion_to_its_ends() -> None:
     xy = np.column_stack([120.0 * t + 3.0, -40.0 * t])
     _, v = recorded_velocity(t, xy, cutoff=VELOCITY_CUTOFF)
     assert np.allclose(v, [120.0, -40.0], rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_fastest_stroke_is_the_dense_argmax_over_all_strokes(seed):
+    from tagbot.metrics import _fastest_stroke
+    from tagbot.model.motion import sample_plan
+    from tagbot.model.plan import Tag, random_plan
+
+    plan = random_plan(np.random.default_rng(seed))
+    tag = Tag((plan,))
+    t, _, _ = sample_plan(tag, 0, 0.005)
+    # The oracle: every stroke's speed D·Λ at every instant (samples × strokes).
+    elapsed = np.maximum(t[:, None] - plan.onsets[None, :], np.finfo(float).tiny)
+    z = (np.log(elapsed) - plan.mu) / plan.sigma
+    speed = plan.geometry.length * np.exp(-0.5 * z * z) / (plan.sigma * elapsed)
+    speed[t[:, None] <= plan.onsets[None, :]] = 0.0
+    np.testing.assert_array_equal(_fastest_stroke(plan, t, tag.size), np.argmax(speed, axis=1))
