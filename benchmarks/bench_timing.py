@@ -238,38 +238,12 @@ DIGITISERS = {
 position noise mm, pixel mm), on tags about 100 mm across."""
 
 
-def _synthetic_plan(rng: np.random.Generator):
-    """A random plan with random per-stroke timing, as tests/gesture/test_timing.py draws them:
-    onsets 0.08-0.3 s apart, median delays 0.12-0.35 s, sigma 0.15-0.45."""
-    from tagbot.model.plan import Plan, random_plan
-
-    p = random_plan(rng)
-    n = p.n_strokes
-    dt = np.r_[0.0, rng.uniform(0.08, 0.3, n - 1)]
-    mu = rng.uniform(np.log(0.12), np.log(0.35), n)
-    return Plan(p.targets, dt, mu, rng.uniform(0.15, 0.45, n), p.phi1, p.phi2)
-
-
-def _digitise(plan, rng, rate=100.0, jitter=0.0, noise=0.02, pixel=0.0):
-    """``plan``'s trajectory as a digitiser records it (see :data:`DIGITISERS`)."""
-    from tagbot.inputs import Trace
-    from tagbot.model.plan import Tag
-
-    motion = Tag((plan,)).sample(0.001)
-    t = np.arange(motion.t[0], motion.t[-1], 1.0 / rate)
-    xy = np.column_stack([np.interp(t, motion.t, motion.xy[:, i]) for i in (0, 1)])
-    xy += rng.normal(0.0, noise, xy.shape)
-    if pixel > 0:
-        xy = np.round(xy / pixel) * pixel
-    stamps = np.maximum.accumulate(np.round((t + rng.normal(0.0, jitter, t.size)) / 1e-3) * 1e-3)
-    return Trace(xy, stamps)
-
-
 def calibrate(plans: int = 16, seed: int = 16) -> None:
     """How close each reference comes to the *true* velocity: synthetic timed plans recorded by
     simulated digitisers, the median SNR of :func:`recorded_velocity` at each cut-off against
     the plan's exact velocity (the shared clock: the digitiser's clock is the plan's)."""
-    from tagbot.model.plan import Tag
+    from tagbot.gesture.timing import simulated_capture
+    from tagbot.model.plan import Tag, random_timed_plan
 
     print(f"median SNR (dB) of the reference against the true velocity, {plans} plans each")
     print(f"{'digitiser':32s}" + "".join(f"{'raw' if c is None else f'{c:g} Hz':>8s}"
@@ -278,8 +252,8 @@ def calibrate(plans: int = 16, seed: int = 16) -> None:
         rng = np.random.default_rng(seed)
         scores: dict[float | None, list[float]] = {c: [] for c in CALIBRATION_CUTOFFS}
         for _ in range(plans):
-            plan = _synthetic_plan(rng)
-            trace = _digitise(plan, rng, **kind)
+            plan = random_timed_plan(rng)
+            trace = simulated_capture(plan, rng, **kind)
             t, _, v = sample_plan(Tag((plan,)), 0, 0.001)
             for cutoff in CALIBRATION_CUTOFFS:
                 scores[cutoff].append(clock_velocity_snr(trace.t, trace.xy, t, v, cutoff))

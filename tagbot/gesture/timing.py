@@ -149,6 +149,32 @@ class TimingOptions:
     """A round of splits is kept only if it lowers the cost by at least this fraction."""
 
 
+def simulated_capture(
+    plan: Plan,
+    rng: np.random.Generator,
+    rate: float = 100.0,
+    jitter: float = 0.0,
+    noise: float = 0.02,
+    tick: float = 0.001,
+    pixel: float = 0.0,
+) -> Any:
+    """``plan`` as a digitiser records it, a :class:`~tagbot.inputs.Trace` on the plan's own
+    clock: ``rate`` Hz, each time stamp off by ``jitter`` (s, standard deviation) and rounded to
+    the clock's ``tick`` (so stamps repeat), positions with ``noise`` (mm) added and rounded to
+    ``pixel`` (mm, if any). Synthetic data for tests and benchmarks."""
+    from tagbot.inputs.trace import Trace
+    from tagbot.model.plan import Tag
+
+    motion = Tag((plan,)).sample(0.001)
+    t = np.arange(motion.t[0], motion.t[-1], 1.0 / rate)
+    xy = np.column_stack([np.interp(t, motion.t, motion.xy[:, i]) for i in (0, 1)])
+    xy += rng.normal(0.0, noise, xy.shape)
+    if pixel > 0:
+        xy = np.round(xy / pixel) * pixel
+    stamps = np.maximum.accumulate(np.round((t + rng.normal(0.0, jitter, t.size)) / tick) * tick)
+    return Trace(xy, stamps)
+
+
 def usable(trace: Any) -> bool:
     """Whether ``trace`` has plausible timestamps for ``timing="auto"``: at least
     :data:`MIN_SAMPLES` distinct times, a median sampling interval of at most
@@ -662,5 +688,6 @@ __all__ = [
     "match",
     "match_trace",
     "resample",
+    "simulated_capture",
     "usable",
 ]

@@ -21,6 +21,7 @@ from tagbot.model.plan import (
     Plan,
     Tag,
     random_plan,
+    random_timed_plan,
     sequence,
 )
 
@@ -42,6 +43,7 @@ __all__ = [
     "lognormal_cdf",
     "lognormal_time",
     "random_plan",
+    "random_timed_plan",
     "sample",
     "sequence",
 ]

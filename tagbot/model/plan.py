@@ -404,3 +404,15 @@ def random_plan(
     if sigma_model:
         return Plan.sigma_model(points, delays, mu, sigma, rng.uniform(-phi, phi, n))
     return Plan(points, delays, mu, sigma, rng.uniform(-phi, phi, n), rng.uniform(-phi, phi, n))
+
+
+def random_timed_plan(rng: np.random.Generator) -> Plan:
+    """:func:`random_plan`'s shape with random per-stroke timing, as a recorded hand has: onsets
+    0.08-0.3 s apart, median delays ``exp(mu)`` of 0.12-0.35 s, sigma 0.15-0.45. Synthetic data
+    for the timing-aware fit's tests and benchmarks."""
+    p = random_plan(rng)
+    n = p.n_strokes
+    dt = np.r_[0.0, rng.uniform(0.08, 0.3, n - 1)]
+    mu = rng.uniform(np.log(0.12), np.log(0.35), n)
+    sigma = rng.uniform(0.15, 0.45, n)
+    return Plan(p.targets, dt, mu, sigma, p.phi1, p.phi2)

@@ -9,7 +9,7 @@ import pytest
 
 from tagbot.errors import PlanError
 from tagbot.gesture import fit
-from tagbot.gesture.timing import TimingOptions, resample, usable
+from tagbot.gesture.timing import TimingOptions, resample, simulated_capture, usable
 from tagbot.inputs import Trace, load_traces, read_gml
 from tagbot.metrics import (
     clock_velocity_snr,
@@ -18,7 +18,7 @@ from tagbot.metrics import (
     velocity_snr,
 )
 from tagbot.model.motion import sample_plan
-from tagbot.model.plan import Plan, Tag, random_plan
+from tagbot.model.plan import Plan, Tag, random_timed_plan
 
 
 def gml(*strokes: list[tuple[float, float, float]]) -> bytes:
@@ -30,38 +30,6 @@ def gml(*strokes: list[tuple[float, float, float]]) -> bytes:
         for points in strokes
     )
     return f"<gml><tag>{drawings}</tag></gml>".encode()
-
-
-def timed_plan(rng: np.random.Generator) -> Plan:
-    """A random plan with random per-stroke mu, sigma and onsets."""
-    p = random_plan(rng)
-    n = p.n_strokes
-    dt = np.r_[0.0, rng.uniform(0.08, 0.3, n - 1)]
-    mu = rng.uniform(np.log(0.12), np.log(0.35), n)
-    sigma = rng.uniform(0.15, 0.45, n)
-    return Plan(p.targets, dt, mu, sigma, p.phi1, p.phi2)
-
-
-def record(
-    plan: Plan,
-    rng: np.random.Generator,
-    rate: float = 100.0,
-    jitter: float = 0.0,
-    noise: float = 0.02,
-    tick: float = 0.001,
-    pixel: float = 0.0,
-) -> Trace:
-    """``plan`` sampled as a digitiser would: ``rate`` Hz, each sample's time stamp off by
-    ``jitter`` (s, standard deviation) and rounded to the clock's ``tick`` (repeated stamps),
-    positions with ``noise`` (mm) added and rounded to ``pixel`` (mm, if any)."""
-    motion = Tag((plan,)).sample(0.001)
-    t = np.arange(motion.t[0], motion.t[-1], 1.0 / rate)
-    xy = np.column_stack([np.interp(t, motion.t, motion.xy[:, i]) for i in (0, 1)])
-    xy += rng.normal(0.0, noise, xy.shape)
-    if pixel > 0:
-        xy = np.round(xy / pixel) * pixel
-    stamps = np.maximum.accumulate(np.round((t + rng.normal(0.0, jitter, t.size)) / tick) * tick)
-    return Trace(xy, stamps - stamps[0])
 
 
 def figures(traces: list[Trace], tag: Tag) -> tuple[float, float]:
@@ -84,7 +52,7 @@ def test_synthetic_timed_plans_are_matched() -> None:
     rng = np.random.default_rng(16)
     snr, snr_ignored, shape = [], [], []
     for _ in range(8):
-        trace = record(timed_plan(rng), rng)
+        trace = simulated_capture(random_timed_plan(rng), rng)
         matched = fit([trace], timing="match")
         db, error = figures([trace], matched)
         snr.append(db)
@@ -98,7 +66,7 @@ def test_synthetic_timed_plans_are_matched() -> None:
 def test_ignore_is_the_geometric_fit_exactly() -> None:
     """``ignore`` (and ``auto`` on untimed traces) gives today's result: timestamps unused."""
     rng = np.random.default_rng(3)
-    trace = record(timed_plan(rng), rng)
+    trace = simulated_capture(random_timed_plan(rng), rng)
     today = fit([Trace(trace.xy)])
     for tag in (fit([trace], timing="ignore"), fit([Trace(trace.xy)], timing="auto")):
         assert len(tag.plans) == len(today.plans)
@@ -110,7 +78,7 @@ def test_ignore_is_the_geometric_fit_exactly() -> None:
 
 def test_auto_matches_plausible_timing_only() -> None:
     rng = np.random.default_rng(5)
-    trace = record(timed_plan(rng), rng)
+    trace = simulated_capture(random_timed_plan(rng), rng)
     assert usable(trace)
     auto = fit([trace])
     matched = fit([trace], timing="match")
@@ -151,8 +119,8 @@ def test_real_clock_quirks(quirk: str) -> None:
     and the velocity is far closer to the recording than the geometric fit's, at 15 dB or
     within 1 dB of the true plan's own SNR (noisy stamps cap what any model scores)."""
     rng = np.random.default_rng(11)
-    plan = timed_plan(rng)
-    trace = _quirky(record(plan, rng), rng, quirk)
+    plan = random_timed_plan(rng)
+    trace = _quirky(simulated_capture(plan, rng), rng, quirk)
     db, error = figures([trace], fit([trace], timing="match"))
     ignored, _ = figures([trace], fit([trace], timing="ignore"))
     truth, _ = figures([trace], Tag((plan,)))
@@ -164,7 +132,7 @@ def test_restarted_clock_in_a_gml_file() -> None:
     """Two strokes, the second's clock restarting at 0 (EyeWriter): chained by the reader, then
     matched; plans start on the recorded clock, one after another."""
     rng = np.random.default_rng(2)
-    first, second = (record(timed_plan(rng), rng) for _ in range(2))
+    first, second = (simulated_capture(random_timed_plan(rng), rng) for _ in range(2))
     strokes = []
     for trace in (first, second):
         xy = trace.xy / 400.0 + 0.3
@@ -197,7 +165,7 @@ def test_resampling_never_trusts_a_single_sample() -> None:
 
 def test_per_stroke_figures_cover_every_stroke() -> None:
     rng = np.random.default_rng(8)
-    trace = record(timed_plan(rng), rng)
+    trace = simulated_capture(random_timed_plan(rng), rng)
     tag = fit([trace], timing="match")
     rows = stroke_report([trace], tag)
     assert [(r.plan, r.stroke) for r in rows] == [(0, j) for j in range(tag.n_strokes)]
@@ -254,7 +222,7 @@ def test_a_timed_fit_keeps_its_rhythm_in_a_plan_file(tmp_path) -> None:
 
 def test_per_stroke_figures_without_timing_have_shape_only() -> None:
     rng = np.random.default_rng(9)
-    trace = record(timed_plan(rng), rng)
+    trace = simulated_capture(random_timed_plan(rng), rng)
     untimed = Trace(trace.xy)
     rows = stroke_report([untimed], fit([untimed]))
     assert rows and all(r.velocity_snr_db is None for r in rows)
@@ -265,7 +233,7 @@ def test_plans_chained_at_zero_lift_still_sample() -> None:
     """A trace recorded right as the previous one ends (a restarted clock chained at zero lift)
     starts a short lift after the previous plan's end, so the tag samples at 10 ms."""
     rng = np.random.default_rng(4)
-    first, second = (record(timed_plan(rng), rng) for _ in range(2))
+    first, second = (simulated_capture(random_timed_plan(rng), rng) for _ in range(2))
     later = Trace(second.xy + 60.0, second.t + first.t[-1])
     tag = fit([first, later], timing="match")
     gap = tag.plans[1].start - tag.plans[0].end(tag.size)
@@ -287,13 +255,13 @@ def _truth_figures(trace: Trace, plan: Plan) -> tuple[float, float]:
 def test_touch_screen_captures_are_matched_against_the_writers_velocity() -> None:
     """Random timed plans recorded as a 60 Hz touch screen does (0.3 mm pixels, 2 ms of stamp
     jitter on a 1 ms clock): the low-pass reference gives the true plans >= 21.5 dB (median
-    22.1; the raw differences 18.1 dB: digitiser noise, not the writer's movement), and the
-    timed fit reaches >= 20 dB against it (23.3), shape error <= 0.5 %."""
+    22.5; the raw differences 18.3 dB: digitiser noise, not the writer's movement), and the
+    timed fit reaches >= 20 dB against it (23.4), shape error <= 0.5 %."""
     rng = np.random.default_rng(60)
     truth_lp, truth_raw, snr = [], [], []
     for _ in range(6):
-        plan = timed_plan(rng)
-        trace = record(plan, rng, rate=60.0, jitter=0.002, noise=0.0, pixel=0.3)
+        plan = random_timed_plan(rng)
+        trace = simulated_capture(plan, rng, rate=60.0, jitter=0.002, noise=0.0, pixel=0.3)
         lp, raw = _truth_figures(trace, plan)
         truth_lp.append(lp)
         truth_raw.append(raw)
