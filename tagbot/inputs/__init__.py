@@ -114,6 +114,11 @@ def _sniff(data: bytes, name: str) -> tuple[str, object]:
             return "gml", obj
         if isinstance(obj, list) or (isinstance(obj, dict) and "traces" in obj):
             return "json", obj
+        if isinstance(obj, dict) and "plans" in obj:
+            raise InputError(
+                f"{name}: a tagbot plan file, not a recording (GML, SVG or points); plans are"
+                " drawn, sampled or rendered as they are, not fitted"
+            )
         keys = ", ".join(sorted(str(k) for k in obj)[:5]) if isinstance(obj, dict) else ""
         what = f"top-level fields: {keys}" if keys else f"a {type(obj).__name__}"
         raise InputError(f"{name}: JSON, but neither #000000book GML nor points ({what})")

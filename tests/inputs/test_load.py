@@ -82,6 +82,8 @@ def test_detect_format(data: bytes, fmt: str) -> None:
         (b"<html><body/></html>", "not a GML, SVG or point file (the XML root is <html>)"),
         (b'{"name": "x", "id": 3}', "JSON, but neither #000000book GML nor points "
          "(top-level fields: id, name)"),
+        (b'{"model": "gamma", "plans": []}', "a tagbot plan file, not a recording (GML, SVG"
+         " or points); plans are drawn, sampled or rendered as they are, not fitted"),
         (b"3", "not a GML, SVG or point file (starts with '3')"),
         (b"hello world\n", "not a GML, SVG or point file (starts with 'hello')"),
         (b"{oops", "not JSON (line 1, column 2: Expecting property name enclosed"),
