@@ -31,8 +31,9 @@ timed capture therefore moves at the paper's default rhythm, not the writer's. W
    the normal equations are banded and an iteration costs time linear in the grid and the
    strokes. Stages (:attr:`TimingOptions.stages`): the timing alone, then everything.
 4. **Added strokes** (:func:`_split`): where the recorded speed dips between two peaks inside a
-   stroke and the plan misses much of the velocity there, that stroke is split in two and the
-   fit repeated, kept only if the cost drops by :attr:`TimingOptions.split_gain` (up to
+   stroke, or the velocity the plan misses peaks (a bump the plan does not explain), and the
+   plan misses much of the velocity there, that stroke is split in two and the fit repeated,
+   kept only if the cost drops by :attr:`TimingOptions.split_gain` (up to
    :attr:`TimingOptions.max_stroke_ratio` times the geometric stroke count).
 
 Bounds (:class:`TimingOptions`): onsets within ``onset_slack`` (0.5 s) of the initial timing,
@@ -137,9 +138,9 @@ class TimingOptions:
     split_rounds: int = 3
     """Rounds of stroke splitting at most (each followed by a new fit; 0: none)."""
     split_energy: float = 0.01
-    """A stroke is split where the recorded speed dips (``dip_depth``) and the velocity the plan
-    misses within ``dip_reach`` of the dip is at least this fraction of the recording's
-    velocity energy."""
+    """A stroke is split where the recorded speed dips (``dip_depth``) or the missed velocity
+    peaks, if the velocity the plan misses within ``dip_reach`` of there is at least this
+    fraction of the recording's velocity energy."""
     dip_depth: float = 0.75
     """A dip: the recorded speed's local minimum below this fraction of the lower of its peaks
     within ``dip_reach`` on either side."""
@@ -469,9 +470,10 @@ def _split(
     strokes: Strokes, rec: Recording, size: float, options: TimingOptions, room: int
 ) -> Strokes | None:
     """``strokes`` with strokes split in two (a new target between) where the recorded speed
-    dips between two peaks and the plan misses much of the recorded velocity around the dip:
-    the stroke split is the fastest there among those whose 10-90 % interval holds the dip
-    (at most ``room`` splits, one per stroke), or None if there is none."""
+    dips between two peaks or the velocity the plan misses peaks, and the plan misses much of
+    the recorded velocity around there: the stroke split is the fastest there among those
+    whose 10-90 % interval holds the instant (at most ``room`` splits, one per stroke), or None
+    if there is none."""
     _, v = strokes.evaluate(np.zeros(len(rec.t), dtype=np.intp), rec.t, size)
     speed = np.hypot(rec.v[:, 0], rec.v[:, 1])
     miss = np.sum((rec.v - v) ** 2, axis=1) * rec.weight
@@ -480,12 +482,17 @@ def _split(
         return None
     step = float(rec.t[1] - rec.t[0])
     reach = max(2, round(options.dip_reach / step))
-    dips = _dips(speed, reach, options.dip_depth, 0.1 * float(speed.max()))
+    cumulative = np.concatenate([[0.0], np.cumsum(miss)])
+    index = np.arange(len(miss))
+    missed = cumulative[np.minimum(index + reach + 1, len(miss))]
+    missed -= cumulative[np.maximum(index - reach, 0)]
+    # Candidate instants: the recorded speed's dips, and the peaks of the velocity the plan
+    # misses around each instant (an unexplained bump with no dip of its own).
+    bumps = np.flatnonzero((missed[1:-1] > missed[:-2]) & (missed[1:-1] >= missed[2:])) + 1
+    dips = np.union1d(_dips(speed, reach, options.dip_depth, 0.1 * float(speed.max())), bumps)
     if dips.size == 0:
         return None
-    cumulative = np.concatenate([[0.0], np.cumsum(miss)])
-    lo_i, hi_i = np.maximum(dips - reach, 0), np.minimum(dips + reach + 1, len(miss))
-    energy = (cumulative[hi_i] - cumulative[lo_i]) / total
+    energy = missed[dips] / total
     lo = strokes.onsets + np.exp(strokes.mu + strokes.sigma * _Z10)
     hi = strokes.onsets + np.exp(strokes.mu + strokes.sigma * _Z90)
     margin = 0.1 * (hi - lo)

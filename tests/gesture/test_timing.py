@@ -271,3 +271,28 @@ def test_touch_screen_captures_are_matched_against_the_writers_velocity() -> Non
     assert np.median(truth_lp) >= 21.5, truth_lp
     assert np.median(truth_lp) >= np.median(truth_raw) + 3.0, (truth_lp, truth_raw)
     assert np.median(snr) >= 20.0, snr
+
+
+def test_a_stroke_is_added_where_the_plan_misses_a_bump_without_a_dip() -> None:
+    """Two overlapping strokes along a line make one speed hump with a shoulder, no dip: a plan
+    of one stroke misses the shoulder, and the stroke is split there, a new target between."""
+    from tagbot.gesture.strokes import Strokes
+    from tagbot.gesture.timing import _dips, _split
+
+    mu, sigma = np.log([0.2, 0.15]), np.array([0.3, 0.25])
+    true = Plan([[0.0, 0.0], [50.0, 0.0], [80.0, 0.0]], [0.0, 0.1], mu, sigma, [0, 0], [0, 0])
+    options = TimingOptions()
+    rec = resample(*_stamped(true), options)
+    speed = np.hypot(*rec.v.T)
+    reach = max(2, round(options.dip_reach / float(rec.t[1] - rec.t[0])))
+    assert _dips(speed, reach, options.dip_depth, 0.1 * float(speed.max())).size == 0
+    one = Plan([[0.0, 0.0], [80.0, 0.0]], [0.0], [np.log(0.3)], [0.35], [0.0], [0.0])
+    split = _split(Strokes.of([one]), rec, 80.0, options, room=2)
+    assert split is not None and len(split.onsets) == 2
+    assert 30.0 < split.targets[1, 0] < 75.0 and abs(split.targets[1, 1]) < 1.0
+
+
+def _stamped(plan: Plan) -> tuple[np.ndarray, np.ndarray]:
+    """``plan`` sampled every 10 ms: times and positions."""
+    t, xy, _ = sample_plan(Tag((plan,)), 0, 0.01)
+    return t, xy
