@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from tagbot import metrics_kernels as kernels
-from tagbot.model.motion import Motion, sample_plans
+from tagbot.model.motion import Motion, sample_ink, sample_plans
 from tagbot.model.plan import Plan, Tag
 
 Array = NDArray[np.float64]
@@ -36,6 +36,13 @@ _NEIGHBOURS = 4
 GRID_PER_POINT = 4
 """A recording is resampled at most this many times per recorded point (velocity SNR)."""
 
+_SCALES = np.geomspace(0.25, 4.0, 41)
+"""The velocity SNR's time scales, relative to the ratio of the recording's and model's spans."""
+_POLISH_STEPS = np.linspace(-1.0, 1.0, 7)
+_POLISH_WIDTHS = np.array([0.1, 0.03, 0.01, 0.003, 0.001])
+"""The polish's pattern: each pair of ``steps`` (scale relative, offset in recording spans) at each
+of the shrinking widths."""
+
 
 @dataclass(frozen=True)
 class ShapeError:
@@ -49,38 +56,44 @@ class ShapeError:
     """The input's bounding-box diagonal the figures are divided by."""
 
 
+def _kernel_array(a: ArrayLike) -> Array:
+    """``a`` as a C-contiguous, writeable float array: one compiled signature for every caller
+    (slices and read-only :class:`~tagbot.model.motion.Motion` arrays among them)."""
+    return np.require(a, dtype=float, requirements=["C", "W"])
+
+
 def densify(polyline: ArrayLike, spacing: float) -> Array:
     """The polyline with points inserted so consecutive points are at most ``spacing`` apart."""
     xy = np.asarray(polyline, dtype=float)
-    if len(xy) < 2:
-        return xy
-    seg = np.hypot(*np.diff(xy, axis=0).T)
-    pieces = np.maximum(1, np.ceil(seg / spacing).astype(np.intp))
-    start = np.repeat(xy[:-1], pieces, axis=0)
-    delta = np.repeat(np.diff(xy, axis=0) / pieces[:, None], pieces, axis=0)
-    offset = np.arange(int(pieces.sum())) - np.repeat(np.cumsum(pieces) - pieces, pieces)
-    return np.vstack([start + delta * offset[:, None], xy[-1:]])
+    return _densified([xy], spacing)[0] if len(xy) >= 2 else xy
+
+
+def _densified(
+    polylines: Sequence[Array], spacing: float
+) -> tuple[Array, NDArray[np.intp], NDArray[np.intp], Array]:
+    """Non-empty polylines densified (:func:`densify`), one after the other: the samples, each
+    one's previous and next sample on its polyline, and the segments between distinct ones
+    (:func:`tagbot.metrics_kernels.densified`)."""
+    return kernels.densified(*_joined(polylines), float(spacing))
+
+
+def _joined(polylines: Sequence[ArrayLike]) -> tuple[Array, NDArray[np.intp]]:
+    """Polylines one after the other, ``(N, 2)``, and where each ends."""
+    parts = [np.asarray(p, dtype=float).reshape(-1, 2) for p in polylines]
+    points = _kernel_array(np.concatenate(parts) if parts else np.empty((0, 2)))
+    return points, np.cumsum([len(p) for p in parts], dtype=np.intp)
 
 
 class _Polylines:
     """Polylines sampled at ``spacing``, with the segments that lead to and from each sample."""
 
     def __init__(self, polylines: list[Array], spacing: float) -> None:
-        pieces = [densify(p, spacing) for p in polylines]
-        self.points = np.concatenate(pieces)
-        ends = np.cumsum([len(p) for p in pieces])
-        # The previous and next sample of each sample, itself at a polyline's ends.
-        index = np.arange(len(self.points))
-        self.before = index - 1
-        self.after = index + 1
-        self.before[ends[:-1]] = ends[:-1]
-        self.before[0] = 0
-        self.after[ends - 1] = ends - 1
+        self.points, self.before, self.after, self.segments = _densified(polylines, spacing)
         self.spacing = spacing
         # Cells about two samples wide along a curve, narrower where the samples crowd an area
         # (a scribble over itself), so that a cell holds a few samples whatever the drawing.
-        extent = np.ptp(self.points, axis=0)
-        area = float(extent[0] * extent[1])
+        width, height = kernels.extent(self.points)
+        area = width * height
         crowded = 2.0 * math.sqrt(area / len(self.points))
         self.cell = min(2.0 * spacing, max(0.25 * spacing, crowded)) if crowded > 0 else spacing
         # Where many long segments pass near every point (thousands of strokes over one another,
@@ -92,21 +105,20 @@ class _Polylines:
             else None
         )
         if self.tree is None:
-            self.fine = kernels.grid_of(self.points, self.cell)
-            self.coarse = kernels.grid_of(self.points, kernels.COARSE * self.cell)
+            self.fine, self.coarse = kernels.grids_of(
+                self.segments, self.cell, kernels.COARSE * self.cell
+            )
 
     def distance(self, query: Array) -> Array:
         """Each query point's distance to the polylines (their own segments, cut at the
-        samples): exact, through grids of the samples (:mod:`tagbot.metrics_kernels`), or for a
+        samples): exact, through grids of the segments (:mod:`tagbot.metrics_kernels`), or for a
         crowded scribble to the segments next to its :data:`_NEIGHBOURS` nearest samples."""
-        query = np.ascontiguousarray(query, dtype=np.float64)
+        query = _kernel_array(query)
         if self.tree is not None:
             return self._near_segments(query)
         return kernels.distances(
             query,
-            self.points,
-            self.before,
-            self.after,
+            self.segments,
             self.fine,
             self.cell,
             self.coarse,
@@ -131,23 +143,11 @@ class _Polylines:
 
     def farthest(self, other: _Polylines, coarse: Array, fine: float) -> float:
         """The largest distance from these polylines (not only their samples) to ``other``,
-        within ``fine``: the sample intervals that could hold it are resampled at ``fine``."""
+        within ``fine``: the sample intervals that could hold it are resampled at ``fine``
+        (:func:`tagbot.metrics_kernels.refinement`)."""
         top = float(coarse.max())
-        i = np.flatnonzero(self.after != np.arange(len(self.points)))
-        gap = np.hypot(*(self.points[self.after[i]] - self.points[i]).T)
-        # Along an interval the distance changes no faster than the arc length.
-        maybe = i[np.maximum(coarse[i], coarse[self.after[i]]) + 0.5 * gap > top + 0.5 * fine]
-        if not maybe.size:
-            return top
-        lengths = gap[np.searchsorted(i, maybe)]
-        fine = max(fine, float(lengths.sum()) / MAX_SAMPLES)  # bounded, like the samples
-        pieces = np.maximum(1, np.ceil(lengths / fine).astype(np.intp))
-        start = np.repeat(self.points[maybe], pieces, axis=0)
-        step = np.repeat(
-            (self.points[self.after[maybe]] - self.points[maybe]) / pieces[:, None], pieces, axis=0
-        )
-        offset = np.arange(int(pieces.sum())) - np.repeat(np.cumsum(pieces) - pieces, pieces)
-        return max(top, float(other.distance(start + step * offset[:, None]).max()))
+        query = kernels.refinement(self.points, self.after, coarse, fine, MAX_SAMPLES)
+        return max(top, float(other.distance(query).max())) if len(query) else top
 
 
 def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) -> ShapeError:
@@ -163,12 +163,10 @@ def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) 
     cand = [np.asarray(p, dtype=float) for p in candidate if len(p)]
     if not ref or not cand:
         raise ValueError("shape_error: both drawings need at least one point")
-    points = np.concatenate(ref)
-    size = float(np.hypot(*np.ptp(points, axis=0))) or 1.0
+    size = float(np.hypot(*kernels.extent(_joined(ref)[0]))) or 1.0
     spacing = size / MEAN_DENSITY
     for drawing in (ref, cand):
-        length = sum(float(np.hypot(*np.diff(p, axis=0).T).sum()) for p in drawing)
-        spacing = max(spacing, length / MAX_SAMPLES)
+        spacing = max(spacing, kernels.path_length(*_joined(drawing)) / MAX_SAMPLES)
     a, b = _Polylines(ref, spacing), _Polylines(cand, spacing)
     a_to_b = b.distance(a.points)
     b_to_a = a.distance(b.points)
@@ -185,16 +183,7 @@ def pen_down_paths(motion: Motion) -> list[Array]:
 
 def turning_of(polylines: Sequence[ArrayLike]) -> float:
     """Total absolute turning of polylines, in half turns (180°)."""
-    total = 0.0
-    for p in polylines:
-        d = np.diff(np.asarray(p, dtype=float), axis=0)
-        d = d[np.hypot(*d.T) > 0]
-        if len(d) < 2:
-            continue
-        cross = d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0]
-        dot = np.einsum("ij,ij->i", d[:-1], d[1:])
-        total += float(np.sum(np.abs(np.arctan2(cross, dot))))
-    return total / np.pi
+    return kernels.turning(*_joined(polylines)) / np.pi
 
 
 VELOCITY_CUTOFF = 15.0
@@ -233,11 +222,12 @@ def velocity_snr(
     ``model_t``) is mapped to the recording's clock by ``t = offset + scale·(t_model −
     model_t[0])`` (velocities divide by ``scale``). Returns ``(snr_db, scale, offset)`` for the
     scale and offset maximising ``10·log10(Σ|v|² / Σ|v − v̂|²)``: for each of 41 scales from ¼
-    to 4 times the span ratio, and 1, every offset on the ``dt`` grid at once (a
-    cross-correlation by FFT), then a local search from the better of the best pair and the
-    shared clock (scale 1, offset ``model_t[0]``: a timed fit's own mapping, which the grid of
-    offsets can miss by a fraction of a step), so the result is never below
-    :func:`clock_velocity_snr`'s. Cost O(n log n) in the samples.
+    to 4 times the span ratio, and 1, every offset on the ``dt`` grid (a cross-correlation by
+    direct sums or FFT, whichever costs less for the scale), then a local search from the
+    better of the best pair and the shared clock (scale 1, offset ``model_t[0]``: a timed fit's
+    own mapping, which the grid of offsets can miss by a fraction of a step), so the result is
+    never below :func:`clock_velocity_snr`'s; compiled
+    (:func:`tagbot.metrics_kernels.best_mapping`). Cost O(n log n) in the samples.
     """
     snr_db, scale, offset, _ = _velocity_snr(t, xy, model_t, model_v, dt, cutoff)
     return snr_db, scale, offset
@@ -252,79 +242,24 @@ def _velocity_snr(
     cutoff: float | None,
 ) -> tuple[float, float, float, float]:
     """:func:`velocity_snr`, and the recorded velocity's energy ``Σ|v|²`` it is relative to."""
-    model_t, model_v = np.asarray(model_t, dtype=float), np.asarray(model_v, dtype=float)
+    model_t = np.asarray(model_t, dtype=float)
+    model_v = _kernel_array(model_v)
     if len(model_t) < 2:
         raise ValueError("velocity_snr: the model needs at least 2 samples")
     shared = float(model_t[0])  # the offset of the shared clock
     model_t = model_t - model_t[0]  # the mapping's offset is from the model's first sample
     grid, v = recorded_velocity(t, xy, dt, cutoff)
-    dt = float(grid[1] - grid[0])
-    rec = v[:, 0] + 1j * v[:, 1]
-    model = model_v[:, 0] + 1j * model_v[:, 1]
-    energy = float(np.sum(rec.real**2 + rec.imag**2))
+    energy = float(np.vdot(v, v))
     if not energy > 0:
         raise ValueError("velocity_snr: the recording does not move")
     model_span = float(model_t[-1])
     span = float(grid[-1] - grid[0])
-
-    def errors(scales: Array, offsets: Array) -> Array:
-        """Σ|v − v̂|² for each (scale, offset) pair, all pairs at once."""
-        tm = (grid[None, :] - offsets[:, None]) / scales[:, None]
-        vm = np.interp(tm.ravel(), model_t, model, 0.0, 0.0)
-        err = rec[None, :] - vm.reshape(tm.shape) / scales[:, None]
-        return np.sum(err.real**2 + err.imag**2, axis=1)
-
-    n = len(rec)
     ratio = span / model_span if model_span > 0 else 1.0
     # Scale 1 (the model on the recording's own clock, as a timed fit is) is always tried too.
-    scales = np.append(np.geomspace(0.25, 4.0, 41) * ratio, 1.0)
-    # The model on the recording's grid spacing for every scale at once: scale i's sample k is
-    # at model time k·dt/scale_i, and an offset of m grid steps puts it on recording sample k + m.
-    lengths = (model_span * scales / dt).astype(np.intp) + 1
-    k = int(lengths.max())
-    times = np.arange(k)[None, :] * dt / scales[:, None]
-    inside = np.arange(k)[None, :] < lengths[:, None]
-    w = np.where(
-        inside,
-        np.interp(times.ravel(), model_t, model).reshape(times.shape) / scales[:, None],
-        0.0,
+    scales = np.append(_SCALES * ratio, 1.0)
+    best, scale, offset = kernels.best_mapping(
+        grid, v, model_t, model_v, scales, shared, energy, _POLISH_STEPS, _POLISH_WIDTHS
     )
-    size = 1 << int(np.ceil(np.log2(n + k + 1)))
-    # cross[i, m] = Σ_j rec[j]·conj(w[i, j − m]) (negative m wrap around the padded length).
-    cross = np.fft.ifft(np.fft.fft(rec, size)[None, :] * np.conj(np.fft.fft(w, size, axis=1)))
-    slack = (span - scales * model_span) / dt
-    lo = int(np.floor(min(0.0, float(slack.min()))))
-    hi = int(np.ceil(max(0.0, float(slack.max()))))
-    m = np.arange(lo, hi + 1)
-    # Σ |w[i, j − m]|² over the overlap 0 ≤ j < n, 0 ≤ j − m < lengths[i].
-    cum = np.concatenate([np.zeros((len(scales), 1)), np.cumsum(np.abs(w) ** 2, axis=1)], axis=1)
-    first = np.clip(-m[None, :], 0, lengths[:, None])
-    last = np.clip(n - m[None, :], 0, lengths[:, None])
-    rows = np.arange(len(scales))[:, None]
-    overlap = cum[rows, np.maximum(last, first)] - cum[rows, first]
-    err = energy - 2.0 * cross[:, m % size].real + overlap
-    # Each scale's offsets stay within its own slack (the model inside the recording's span, or
-    # the recording inside the model's).
-    own = (m[None, :] >= np.floor(np.minimum(0.0, slack))[:, None]) & (
-        m[None, :] <= np.ceil(np.maximum(0.0, slack))[:, None]
-    )
-    err = np.where(own, err, np.inf)
-    i, j = np.unravel_index(int(np.argmin(err)), err.shape)
-    # Polish from the better of the grid's best pair and the shared clock, so that the result is
-    # never below the shared clock's, on a shrinking pattern (scale relative, offset in
-    # seconds), 7×7 pairs at a time.
-    starts = np.array([float(scales[i]), 1.0]), np.array([float(grid[0] + m[j] * dt), shared])
-    e = errors(*starts)
-    pick = int(np.argmin(e))
-    best, scale, offset = float(e[pick]), float(starts[0][pick]), float(starts[1][pick])
-    steps = np.linspace(-1.0, 1.0, 7)
-    for width in (0.1, 0.03, 0.01, 0.003, 0.001):
-        s_try = np.repeat(scale * (1 + width * steps), 7)
-        o_try = np.tile(offset + steps * width * max(span, dt), 7)
-        e = errors(s_try, o_try)
-        pick = int(np.argmin(e))
-        if e[pick] < best:
-            best, scale, offset = float(e[pick]), float(s_try[pick]), float(o_try[pick])
     return 10.0 * np.log10(energy / max(best, 1e-300)), scale, offset, energy
 
 
@@ -369,7 +304,12 @@ def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitRepo
     polylines = [np.asarray(getattr(tr, "xy", tr), dtype=float) for tr in traces]
     # Each plan sampled on its own grid: a pen lift shorter than dt cannot make the report fail.
     motions = sample_plans(tag, dt)
-    shape = shape_error(polylines, [xy for _, xy, _ in motions])
+    # The shape is what the plans ink: a plan that touches down moving only within its window.
+    drawn = [xy for _, xy, _ in motions]
+    lifted = [k for k, plan in enumerate(tag.plans) if plan.ink is not None]
+    for k, (_, xy, _) in zip(lifted, sample_ink(tag, dt, lifted), strict=True):
+        drawn[k] = xy
+    shape = shape_error(polylines, drawn)
     turning = turning_of(polylines)
     snr = None
     timed = [tr for tr in traces if getattr(tr, "t", None) is not None]
@@ -423,18 +363,18 @@ def recorded_velocity(
     t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
     if cutoff is not None:
         t = _spread_stamps(t)
-    keep = np.concatenate([[True], np.diff(t) > 0])
-    t, xy = t[keep], xy[keep]
+    if len(t) > 1 and not np.all(t[1:] > t[:-1]):
+        keep = np.concatenate([[True], np.diff(t) > 0])
+        t, xy = t[keep], xy[keep]
     if len(t) >= 3:
         dt = max(dt, float(t[-1] - t[0]) / (GRID_PER_POINT * len(t)))
     if len(t) < 3 or t[-1] - t[0] < 3 * dt:
         raise ValueError("velocity: the recording needs at least 3 samples over 3·dt")
-    grid = t[0] + dt * np.arange(int((t[-1] - t[0]) / dt) + 1)
-    grid = grid[grid <= t[-1]]
-    rec = np.column_stack([np.interp(grid, t, xy[:, 0]), np.interp(grid, t, xy[:, 1])])
-    if cutoff is not None:
-        rec = low_pass(rec, dt, cutoff)
-    return grid, np.gradient(rec, dt, axis=0)
+    count = int((t[-1] - t[0]) / dt) + 1
+    reach = _filter_reach(dt, cutoff) if cutoff is not None else 0
+    return kernels.grid_velocity(
+        _kernel_array(t), _kernel_array(xy), dt, count, float(cutoff or 0.0), FILTER_ORDER, reach
+    )
 
 
 def _spread_stamps(t: Array) -> Array:
@@ -464,18 +404,18 @@ def low_pass(x: Array, dt: float, cutoff: float) -> Array:
     the transform, so that nothing wraps around. Unchanged if the rows are too few or the grid
     too coarse for the cut-off (its Nyquist frequency at or below it)."""
     x = np.asarray(x, dtype=float)
-    n = len(x)
-    if not 0.0 < 2.0 * cutoff * dt < 1.0 or n < 4:
+    reach = _filter_reach(dt, cutoff)
+    if not reach or len(x) < 4:
         return x
-    pad = min(n - 1, max(3, round(3.0 / (cutoff * dt))))  # three cut-off periods
-    ext = np.concatenate([2.0 * x[0] - x[pad:0:-1], x, 2.0 * x[-1] - x[-2 : -pad - 2 : -1]])
-    m = len(ext)
-    line = ext[0] + np.linspace(0.0, 1.0, m)[:, None] * (ext[-1] - ext[0])
-    size = 1 << int(np.ceil(np.log2(2 * m)))
-    f = np.fft.rfftfreq(size, dt) / cutoff
-    gain = 1.0 / (1.0 + f ** (2 * FILTER_ORDER))
-    y = np.fft.irfft(np.fft.rfft(ext - line, size, axis=0) * gain[:, None], size, axis=0)[:m]
-    return (y + line)[pad : pad + n]
+    rows = np.array(x.reshape(len(x), -1), dtype=float, order="C")
+    kernels.low_pass_into(rows, dt, cutoff, FILTER_ORDER, reach)
+    return rows.reshape(x.shape)
+
+
+def _filter_reach(dt: float, cutoff: float) -> int:
+    """Rows of three cut-off periods every ``dt`` s, how far :func:`low_pass` reflects each end
+    (at most the rows less one); 0 where the grid is too coarse for the cut-off."""
+    return max(3, round(3.0 / (cutoff * dt))) if 0.0 < 2.0 * cutoff * dt < 1.0 else 0
 
 
 @dataclass(frozen=True)

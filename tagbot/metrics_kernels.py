@@ -1,9 +1,12 @@
-"""Compiled loops of the shape error (numba): each query point's exact distance to a set of
-polylines, found through a uniform grid of their samples (see :func:`tagbot.metrics.shape_error`).
+"""Compiled loops of the metrics (numba): each query point's exact distance to a set of
+polylines, found through a uniform grid of their segments (see
+:func:`tagbot.metrics.shape_error`), and the velocity SNR's recorded velocity and search (see
+:func:`tagbot.metrics.velocity_snr`).
 
-The polylines are given as samples ``points`` (N, 2) with, per sample, the indices of the
-samples before and after it on its polyline (itself at a polyline's ends); the segments between
-consecutive samples are the polylines' own, cut at the samples, each at most ``spacing`` long.
+The polylines are given as their segments ``(ax, ay, bx − ax, by − ay, 1 / length²)`` (K, 5; 0
+for a point), the polylines' own cut at their samples, each at most ``spacing`` long (a polyline
+of one point: one segment of length 0); the grid holds each segment in the cell of its
+midpoint.
 """
 
 from __future__ import annotations
@@ -13,9 +16,25 @@ import math
 import numpy as np
 
 from tagbot.gesture.refine_kernels import buckets
-from tagbot.model.kernels import compiled
+from tagbot.model.kernels import compiled, inlined
 
-__all__ = ["COARSE", "distances", "grid_of"]
+__all__ = [
+    "COARSE",
+    "DIRECT",
+    "best_mapping",
+    "densified",
+    "distances",
+    "extent",
+    "fft",
+    "grid_of",
+    "grid_velocity",
+    "grids_of",
+    "low_pass_into",
+    "path_length",
+    "refinement",
+    "turning",
+    "twiddles",
+]
 
 COARSE = 16
 """Coarse cells are this many fine cells wide."""
@@ -30,25 +49,177 @@ def grid_of(points: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np
 
 
 @compiled
-def _segment_d2(qx: float, qy: float, ax: float, ay: float, bx: float, by: float) -> float:
-    """Squared distance from ``(qx, qy)`` to the segment from a to b."""
-    ux, uy = bx - ax, by - ay
-    length2 = ux * ux + uy * uy
-    u = 0.0
-    if length2 > 0.0:
-        u = min(max(((qx - ax) * ux + (qy - ay) * uy) / length2, 0.0), 1.0)
-    dx, dy = qx - ax - u * ux, qy - ay - u * uy
-    return dx * dx + dy * dy
+def extent(points: np.ndarray) -> tuple[float, float]:
+    """The width and height of the points' bounding box (numpy's reductions along the short
+    axis of ``(N, 2)`` cost more than the points)."""
+    x0 = x1 = points[0, 0]
+    y0 = y1 = points[0, 1]
+    for i in range(1, points.shape[0]):
+        x0, x1 = min(x0, points[i, 0]), max(x1, points[i, 0])
+        y0, y1 = min(y0, points[i, 1]), max(y1, points[i, 1])
+    return x1 - x0, y1 - y0
 
 
 @compiled
+def path_length(points: np.ndarray, ends: np.ndarray) -> float:
+    """The total length of the polylines ``points[ends[k − 1]:ends[k]]``."""
+    total = 0.0
+    begin = 0
+    for k in range(ends.size):
+        for i in range(begin, ends[k] - 1):
+            dx, dy = points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1]
+            total += math.sqrt(dx * dx + dy * dy)
+        begin = ends[k]
+    return total
+
+
+@compiled
+def turning(points: np.ndarray, ends: np.ndarray) -> float:
+    """The total absolute turning (radians) of the polylines ``points[ends[k − 1]:ends[k]]``:
+    between each step and the next of non-zero length, on each polyline."""
+    total = 0.0
+    begin = 0
+    for k in range(ends.size):
+        px = py = 0.0
+        have = False
+        for i in range(begin, ends[k] - 1):
+            dx, dy = points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1]
+            if dx == 0.0 and dy == 0.0:
+                continue
+            if have:
+                total += abs(math.atan2(px * dy - py * dx, px * dx + py * dy))
+            px, py, have = dx, dy, True
+        begin = ends[k]
+    return total
+
+
+@compiled
+def densified(
+    points: np.ndarray, ends: np.ndarray, spacing: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The polylines ``points[ends[k − 1]:ends[k]]`` (each non-empty) with points inserted so
+    that consecutive ones are at most ``spacing`` apart (:func:`tagbot.metrics.densify`), and
+    per sample the previous and next sample on its polyline (itself at its ends); then the
+    segments (as the module describes them) between distinct consecutive samples (a polyline
+    at rest in one place: one of length 0 there)."""
+    pieces = np.ones(points.shape[0], np.intp)  # samples from each point to the next
+    begin = 0
+    for k in range(ends.size):
+        for i in range(begin, ends[k] - 1):
+            gap = math.hypot(points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1])
+            pieces[i] = max(1, math.ceil(gap / spacing))
+        begin = ends[k]
+    total = int(pieces.sum())
+    samples = np.empty((total, 2))
+    before = np.arange(-1, total - 1)
+    after = np.arange(1, total + 1)
+    moving = np.zeros(total, np.bool_)
+    row = begin = 0
+    for k in range(ends.size):
+        first = row
+        for i in range(begin, ends[k] - 1):
+            dx = (points[i + 1, 0] - points[i, 0]) / pieces[i]
+            dy = (points[i + 1, 1] - points[i, 1]) / pieces[i]
+            for j in range(pieces[i]):
+                samples[row, 0], samples[row, 1] = points[i, 0] + dx * j, points[i, 1] + dy * j
+                row += 1
+        samples[row] = points[ends[k] - 1]
+        before[first], after[row] = first, row
+        row += 1
+        for i in range(first, row - 1):
+            moving[i] = samples[i + 1, 0] != samples[i, 0] or samples[i + 1, 1] != samples[i, 1]
+        if not moving[first:row].any():
+            moving[first] = True
+        begin = ends[k]
+    segments = np.empty((int(moving.sum()), 5))
+    e = 0
+    for i in range(total):
+        if moving[i]:
+            j = after[i]
+            ux, uy = samples[j, 0] - samples[i, 0], samples[j, 1] - samples[i, 1]
+            length2 = ux * ux + uy * uy
+            segments[e, 0], segments[e, 1] = samples[i, 0], samples[i, 1]
+            segments[e, 2], segments[e, 3] = ux, uy
+            segments[e, 4] = 1.0 / length2 if length2 > 0.0 else 0.0
+            e += 1
+    return samples, before, after, segments
+
+
+@compiled
+def grids_of(
+    segments: np.ndarray, cell: float, coarse_cell: float
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The fine and coarse grids of the segments' midpoints (:func:`grid_of`)."""
+    middle = np.empty((segments.shape[0], 2))
+    for e in range(segments.shape[0]):
+        middle[e, 0] = segments[e, 0] + 0.5 * segments[e, 2]
+        middle[e, 1] = segments[e, 1] + 0.5 * segments[e, 3]
+    return grid_of(middle, cell), grid_of(middle, coarse_cell)
+
+
+@compiled
+def refinement(
+    samples: np.ndarray,
+    after: np.ndarray,
+    near: np.ndarray,
+    fine: float,
+    max_samples: int,
+) -> np.ndarray:
+    """Where the largest distance from these polylines to others could exceed the largest at
+    their samples (``near``, each sample's distance) by more than ``fine / 2``: every interval
+    between consecutive samples for which it could (along it the distance changes no faster
+    than the arc length), resampled every ``fine`` (coarser if that would give more than
+    ``max_samples`` points)."""
+    limit = near.max() + 0.5 * fine
+    chosen = np.empty(samples.shape[0], np.intp)
+    gaps = np.empty(samples.shape[0])
+    count = 0
+    total = 0.0
+    for i in range(samples.shape[0]):
+        j = after[i]
+        if j == i:
+            continue
+        dx, dy = samples[j, 0] - samples[i, 0], samples[j, 1] - samples[i, 1]
+        slack = limit - max(near[i], near[j])
+        if slack > 0 and 0.25 * (dx * dx + dy * dy) < (1.0 - 1e-9) * slack * slack:
+            continue  # clearly not (without the exact length's cost)
+        gap = math.hypot(dx, dy)
+        if max(near[i], near[j]) + 0.5 * gap > limit:
+            chosen[count], gaps[count] = i, gap
+            count += 1
+            total += gap
+    fine = max(fine, total / max_samples)
+    pieces = np.empty(count, np.intp)
+    for c in range(count):
+        pieces[c] = max(1, math.ceil(gaps[c] / fine))
+    out = np.empty((int(pieces.sum()), 2))
+    row = 0
+    for c in range(count):
+        i, j = chosen[c], after[chosen[c]]
+        dx = (samples[j, 0] - samples[i, 0]) / pieces[c]
+        dy = (samples[j, 1] - samples[i, 1]) / pieces[c]
+        for k in range(pieces[c]):
+            out[row, 0], out[row, 1] = samples[i, 0] + dx * k, samples[i, 1] + dy * k
+            row += 1
+    return out
+
+
+@inlined
+def _segment_d2(qx: float, qy: float, segments: np.ndarray, i: int) -> float:
+    """Squared distance from ``(qx, qy)`` to segment ``i`` (the module's layout)."""
+    px, py = qx - segments[i, 0], qy - segments[i, 1]
+    ux, uy = segments[i, 2], segments[i, 3]
+    u = min(max((px * ux + py * uy) * segments[i, 4], 0.0), 1.0)
+    dx, dy = px - u * ux, py - u * uy
+    return dx * dx + dy * dy
+
+
+@inlined
 def _search(
     x: float,
     y: float,
     best: float,
-    points: np.ndarray,
-    before: np.ndarray,
-    after: np.ndarray,
+    segments: np.ndarray,
     header: np.ndarray,
     start: np.ndarray,
     order: np.ndarray,
@@ -58,8 +229,8 @@ def _search(
 ) -> tuple[float, bool]:
     """Improve ``best``, the distance from ``(x, y)`` to the polylines, over the cells of one
     grid, ring by ring outwards, at most ``rings`` rings; and whether no segment left can be
-    nearer. Every point of a segment (at most ``spacing`` long) is within ``spacing / 2`` of one
-    of its end samples, so a ring farther than the best distance plus that ends the search."""
+    nearer. Every point of a segment (at most ``spacing`` long) is within ``spacing / 2`` of its
+    midpoint, so a ring farther than the best distance plus that ends the search."""
     x0, y0 = header[0, 0], header[0, 1]
     nx, ny = int(header[0, 2]), int(header[0, 3])
     cx = min(max(math.floor((x - x0) / cell), 0), nx - 1)
@@ -77,11 +248,9 @@ def _search(
                         c = iy * nx + ix
                         for e in range(start[c], start[c + 1]):
                             i = order[e]
-                            px, py = points[i, 0], points[i, 1]
-                            for j in (before[i], after[i]):
-                                d2 = _segment_d2(x, y, px, py, points[j, 0], points[j, 1])
-                                if d2 < best * best:
-                                    best = math.sqrt(d2)
+                            d2 = _segment_d2(x, y, segments, i)
+                            if d2 < best * best:
+                                best = math.sqrt(d2)
                 ix += 1 if edge else max(2 * ring, 1)
         # Cells beyond this ring are at least ``ring`` cells away from the query.
         if ring * cell >= best + 0.5 * spacing:
@@ -92,9 +261,7 @@ def _search(
 @compiled
 def distances(
     query: np.ndarray,
-    points: np.ndarray,
-    before: np.ndarray,
-    after: np.ndarray,
+    segments: np.ndarray,
     fine: tuple[np.ndarray, np.ndarray, np.ndarray],
     fine_cell: float,
     coarse: tuple[np.ndarray, np.ndarray, np.ndarray],
@@ -105,14 +272,381 @@ def distances(
     """Each query point's exact distance to the polylines: searched in the fine grid for
     ``fine_rings`` rings (enough for points near the polylines, the usual case), then, if that
     could not settle it, in the coarse one (far points cost a few coarse rings, not thousands of
-    fine ones)."""
+    fine ones). A point repeating the one before it (a pen at rest) has its distance."""
     out = np.empty(query.shape[0])
     for q in range(query.shape[0]):
         x, y = query[q, 0], query[q, 1]
-        best, done = _search(x, y, np.inf, points, before, after, fine[0], fine[1], fine[2],
-                             fine_cell, spacing, fine_rings)  # fmt: skip
+        if q > 0 and x == query[q - 1, 0] and y == query[q - 1, 1]:
+            out[q] = out[q - 1]
+            continue
+        best, done = _search(x, y, np.inf, segments, fine[0], fine[1], fine[2], fine_cell,
+                             spacing, fine_rings)  # fmt: skip
         if not done:
-            best, done = _search(x, y, best, points, before, after, coarse[0], coarse[1],
-                                 coarse[2], coarse_cell, spacing, 1 << 30)  # fmt: skip
+            best, done = _search(x, y, best, segments, coarse[0], coarse[1], coarse[2],
+                                 coarse_cell, spacing, 1 << 30)  # fmt: skip
         out[q] = best
     return out
+
+
+# --- the velocity SNR ---------------------------------------------------------------------------
+
+
+@compiled
+def twiddles(size: int) -> np.ndarray:
+    """``exp(−2πik/size)`` for ``k < size/2``: the factors of :func:`fft` up to ``size`` (the
+    second quarter turn from the first: ``−i`` times)."""
+    table = np.empty(max(size // 2, 1), dtype=np.complex128)
+    quarter = size // 4
+    for k in range(table.size):
+        if quarter and k >= quarter:
+            table[k] = -1j * table[k - quarter]
+        else:
+            angle = -2.0 * math.pi * k / size
+            table[k] = complex(math.cos(angle), math.sin(angle))
+    return table
+
+
+@compiled
+def fft(x: np.ndarray, table: np.ndarray, inverse: bool) -> None:
+    """In place, the discrete Fourier transform of ``x`` (a power of 2 long, at most twice
+    ``table``'s length; radix 2), or its inverse unscaled (no division by the length)."""
+    n = x.size
+    j = 0
+    for i in range(1, n):
+        bit = n >> 1
+        while j & bit:
+            j ^= bit
+            bit >>= 1
+        j |= bit
+        if i < j:
+            x[i], x[j] = x[j], x[i]
+    sign = -1.0 if inverse else 1.0  # the inverse's factors are the conjugates
+    length = 2
+    while length <= n:
+        half = length >> 1
+        stride = 2 * table.size // length
+        if half <= n // length:  # more blocks than factors: each factor once, for every block
+            for k in range(half):
+                wr, wi = table[k * stride].real, sign * table[k * stride].imag
+                for first in range(k, n, length):
+                    _butterfly(x, first, first + half, wr, wi)
+        else:
+            for first in range(0, n, length):
+                for k in range(half):
+                    wr, wi = table[k * stride].real, sign * table[k * stride].imag
+                    _butterfly(x, first + k, first + k + half, wr, wi)
+        length <<= 1
+
+
+@inlined
+def _butterfly(x: np.ndarray, i: int, j: int, wr: float, wi: float) -> None:
+    """``x[i], x[j] = x[i] + w·x[j], x[i] − w·x[j]`` with ``w = wr + i·wi``."""
+    a, b = x[i], x[j]
+    br = b.real * wr - b.imag * wi
+    bi = b.real * wi + b.imag * wr
+    x[i] = complex(a.real + br, a.imag + bi)
+    x[j] = complex(a.real - br, a.imag - bi)
+
+
+@compiled
+def low_pass_into(x: np.ndarray, dt: float, cutoff: float, order: int, reach: int) -> None:
+    """In place, the zero-phase low-pass of :func:`tagbot.metrics.low_pass` of the rows of
+    ``x`` (n ≥ 4, c) (``min(reach, n − 1)`` rows of point reflection at each end), two columns
+    per complex transform."""
+    n, columns = x.shape
+    pad = min(n - 1, reach)
+    m = n + 2 * pad
+    size = 1
+    while size < 2 * m:
+        size <<= 1
+    table = twiddles(size)
+    gain = np.empty(size)
+    for k in range(size):
+        f = min(k, size - k) / (size * dt) / cutoff
+        gain[k] = 1.0 / (1.0 + f ** (2 * order))
+    ext = np.empty(m)
+    line = np.empty((m, 2))
+    z = np.empty(size, dtype=np.complex128)
+    for c0 in range(0, columns, 2):
+        pair = min(2, columns - c0)
+        for c in range(pair):
+            col = c0 + c
+            for k in range(pad):
+                ext[k] = 2.0 * x[0, col] - x[pad - k, col]
+                ext[pad + n + k] = 2.0 * x[n - 1, col] - x[n - 2 - k, col]
+            ext[pad : pad + n] = x[:, col]
+            for k in range(m):
+                line[k, c] = ext[0] + (k / (m - 1)) * (ext[m - 1] - ext[0])
+                if c == 0:
+                    z[k] = ext[k] - line[k, 0]
+                else:
+                    z[k] += 1j * (ext[k] - line[k, 1])
+        z[m:] = 0.0
+        fft(z, table, False)
+        for k in range(size):
+            z[k] *= gain[k] / size
+        fft(z, table, True)
+        for k in range(n):
+            x[k, c0] = z[pad + k].real + line[pad + k, 0]
+            if pair == 2:
+                x[k, c0 + 1] = z[pad + k].imag + line[pad + k, 1]
+
+
+@compiled
+def grid_velocity(
+    t: np.ndarray,
+    xy: np.ndarray,
+    dt: float,
+    count: int,
+    cutoff: float,
+    order: int,
+    reach: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`tagbot.metrics.recorded_velocity` once its stamps are clean (distinct, rising):
+    the grid ``t[0] + k·dt`` (``count`` steps, those within the recording), the positions
+    interpolated linearly on it, low-passed by :func:`low_pass_into` unless ``reach`` is 0,
+    and their central differences (one-sided at the ends)."""
+    last = t[t.size - 1]
+    grid = t[0] + dt * np.arange(count)
+    while count > 0 and grid[count - 1] > last:
+        count -= 1
+    grid = grid[:count]
+    rec = np.empty((count, 2))
+    j = 0
+    for k in range(count):
+        while j + 2 < t.size and t[j + 1] <= grid[k]:
+            j += 1
+        if grid[k] >= last:
+            rec[k, 0], rec[k, 1] = xy[t.size - 1, 0], xy[t.size - 1, 1]
+            continue
+        u = (grid[k] - t[j]) / (t[j + 1] - t[j])
+        for c in range(2):
+            rec[k, c] = xy[j, c] + u * (xy[j + 1, c] - xy[j, c])
+    if reach > 0 and count >= 4:
+        low_pass_into(rec, dt, cutoff, order, reach)
+    v = np.empty((count, 2))
+    for c in range(2):
+        v[0, c] = (rec[1, c] - rec[0, c]) / dt
+        v[count - 1, c] = (rec[count - 1, c] - rec[count - 2, c]) / dt
+        for k in range(1, count - 1):
+            v[k, c] = (rec[k + 1, c] - rec[k - 1, c]) / (2.0 * dt)
+    return grid, v
+
+
+@compiled
+def _uniform_step(xp: np.ndarray) -> float:
+    """``1 / step`` if the rising ``xp`` is so evenly spaced that ``(x − xp[0]) / step`` falls
+    in the interval of ``x`` or next to it, else 0."""
+    last = xp.size - 1
+    span = xp[last] - xp[0]
+    if not span > 0:
+        return 0.0
+    inv_step = last / span
+    for j in range(xp.size):
+        if abs((xp[j] - xp[0]) * inv_step - j) > 0.25:
+            return 0.0
+    return inv_step
+
+
+@inlined
+def _interpolated(
+    x: float, xp: np.ndarray, fp: np.ndarray, slope: np.ndarray, inv_step: float, outside: bool
+) -> tuple[float, float]:
+    """``fp`` (n, 2) at ``x``, linearly over the rising ``xp`` as ``np.interp`` (``slope``: the
+    (n − 1, 2) slopes between points; beyond the ends 0 if ``outside``, else the end values;
+    at the last point to rounding). The interval is found from ``x``'s position on the even
+    spacing :func:`_uniform_step` finds, or if it found none by bisection."""
+    last = xp.size - 1
+    if x < xp[0] or x > xp[last]:
+        if outside:
+            return 0.0, 0.0
+        x = min(max(x, xp[0]), xp[last])
+    if inv_step > 0:
+        j = int(min((x - xp[0]) * inv_step, last - 1.0))
+        while j < last - 1 and xp[j + 1] <= x:
+            j += 1
+        while j > 0 and xp[j] > x:
+            j -= 1
+    else:
+        j, hi = 0, last  # xp[j] <= x < xp[hi]
+        while hi - j > 1:
+            mid = (j + hi) >> 1
+            if xp[mid] <= x:
+                j = mid
+            else:
+                hi = mid
+    u = x - xp[j]
+    return fp[j, 0] + slope[j, 0] * u, fp[j, 1] + slope[j, 1] * u
+
+
+@compiled
+def _slopes(xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
+    """The slopes of ``fp`` (n, 2) between consecutive points of the rising ``xp`` (0 between
+    repeated points)."""
+    slope = np.empty((xp.size - 1, 2))
+    for j in range(xp.size - 1):
+        gap = xp[j + 1] - xp[j]
+        inv = 1.0 / gap if gap > 0 else 0.0
+        slope[j, 0] = (fp[j + 1, 0] - fp[j, 0]) * inv
+        slope[j, 1] = (fp[j + 1, 1] - fp[j, 1]) * inv
+    return slope
+
+
+@inlined
+def _mapping_error(
+    grid: np.ndarray,
+    v: np.ndarray,
+    model_t: np.ndarray,
+    model_v: np.ndarray,
+    slope: np.ndarray,
+    inv_step: float,
+    s: float,
+    o: float,
+    bound: float,
+) -> float:
+    """``Σ|v − v̂|²`` with the model mapped by scale ``s`` and offset ``o``: ``v̂(t) =
+    model_v((t − o)/s) / s``, zero outside the model's span (``slope`` of :func:`_slopes`,
+    ``inv_step`` of :func:`_uniform_step`); or, as soon as the sum reaches ``bound``, that
+    partial sum (its terms are not negative: the whole would not be below ``bound`` either)."""
+    inv_s = 1.0 / s
+    total = 0.0
+    for k in range(grid.size):
+        mx, my = _interpolated((grid[k] - o) * inv_s, model_t, model_v, slope, inv_step, True)
+        ex, ey = v[k, 0] - mx * inv_s, v[k, 1] - my * inv_s
+        total += ex * ex + ey * ey
+        if total >= bound:
+            break
+    return total
+
+
+DIRECT = 2.0
+"""A scale's offsets are correlated by direct sums when these cost less than this many times
+the transforms' ``N·log2 N``."""
+
+
+@compiled
+def best_mapping(
+    grid: np.ndarray,
+    v: np.ndarray,
+    model_t: np.ndarray,
+    model_v: np.ndarray,
+    scales: np.ndarray,
+    shared: float,
+    energy: float,
+    steps: np.ndarray,
+    widths: np.ndarray,
+) -> tuple[float, float, float]:
+    """The velocity SNR's search (:func:`tagbot.metrics.velocity_snr`): the error ``Σ|v − v̂|²``
+    of the best (scale, offset), and that pair.
+
+    Every offset on the grid of each of ``scales``, the model resampled on the grid's spacing
+    and correlated with ``v`` by direct sums or by FFT (whichever is cheaper for that scale,
+    the transform no longer than its own offsets need), the first smallest error kept; then
+    the polish from the better of that pair and the shared clock (scale 1, offset ``shared``),
+    for each of ``widths`` every pair of ``steps`` around the best pair so far."""
+    n = grid.size
+    dt = grid[1] - grid[0]
+    span = grid[n - 1] - grid[0]
+    model_span = model_t[model_t.size - 1]
+    count = scales.size
+    lengths = np.empty(count, np.intp)
+    low = np.empty(count, np.intp)
+    high = np.empty(count, np.intp)
+    sizes = np.zeros(count, np.intp)
+    top = 1
+    # Scale i's model on the grid's spacing: sample k at model time k·dt/scale (``lengths[i]``
+    # of them); an offset of m steps puts it on recording sample k + m. Each scale's offsets
+    # stay within its own slack (the model inside the recording's span, or the recording
+    # inside the model's), and a circular correlation of ``need`` samples has them unwrapped.
+    for i in range(count):
+        lengths[i] = int(model_span * scales[i] / dt) + 1
+        slack = (span - scales[i] * model_span) / dt
+        low[i], high[i] = math.floor(min(0.0, slack)), math.ceil(max(0.0, slack))
+        overlap = min(n, lengths[i])
+        need = max(n - low[i], high[i] + lengths[i])
+        size = 1
+        while size < need:
+            size <<= 1
+        if (high[i] - low[i] + 1) * overlap > DIRECT * size * math.log2(size):
+            sizes[i] = size
+            top = max(top, size)
+    table = twiddles(top)
+    spectra = np.zeros(2 * top, dtype=np.complex128)  # the recording's, the one of length N at N
+    done = np.zeros(64, np.bool_)
+    buffer = np.empty(top, dtype=np.complex128)
+    w = np.empty((int(lengths.max()), 2))
+    cum = np.empty(w.shape[0] + 1)
+    inv_step = _uniform_step(model_t)
+    slope = _slopes(model_t, model_v)
+    sums = np.empty(int((high - low).max()) + 1)
+    vx, vy = v[:, 0].copy(), v[:, 1].copy()
+    best, pick_scale, pick_offset = np.inf, 1.0, shared
+    z = buffer[:1]
+    for i in range(count):
+        length, s = lengths[i], scales[i]
+        cum[0] = 0.0
+        for k in range(length):
+            wx, wy = _interpolated(k * dt / s, model_t, model_v, slope, inv_step, False)
+            w[k, 0], w[k, 1] = wx / s, wy / s
+            cum[k + 1] = cum[k] + (w[k, 0] * w[k, 0] + w[k, 1] * w[k, 1])
+        size = sizes[i]
+        if size:
+            level = int(math.log2(size) + 0.5)
+            spectrum = spectra[size : 2 * size]
+            if not done[level]:
+                spectrum[:] = 0.0
+                for k in range(n):
+                    spectrum[k] = complex(v[k, 0], v[k, 1])
+                fft(spectrum, table, False)
+                done[level] = True
+            z = buffer[:size]
+            z[:] = 0.0
+            for k in range(length):
+                z[k] = complex(w[k, 0], w[k, 1])
+            fft(z, table, False)
+            for k in range(size):  # conjugated, so that the forward transform inverts it
+                z[k] = spectrum[k].conjugate() * z[k]
+            fft(z, table, False)
+        else:
+            # Every offset's sum at once, model sample by model sample: independent sums over
+            # consecutive recording samples, which the compiler vectorises.
+            sums[: high[i] - low[i] + 1] = 0.0
+            for k in range(length):
+                wx, wy = w[k, 0], w[k, 1]
+                for m in range(max(low[i], -k), min(high[i], n - 1 - k) + 1):
+                    sums[m - low[i]] += vx[k + m] * wx + vy[k + m] * wy
+        # Σ|v − w|² over the overlap = Σ|v|² − 2·Re Σ v·conj(w) + Σ|w|² (outside it, v or 0).
+        for m in range(low[i], high[i] + 1):
+            first = min(max(-m, 0), length)
+            last = min(max(n - m, 0), length)
+            # (By FFT, conj(conj(·)) has the same real part.)
+            cross = z[m % size].real / size if size else sums[m - low[i]]
+            err = energy - 2.0 * cross + (cum[max(last, first)] - cum[first])
+            if err < best:
+                best, pick_scale, pick_offset = err, s, grid[0] + m * dt
+    # The polish starts from the better of the grid's pair and the shared clock, so that the
+    # result is never below the shared clock's (a timed fit's own mapping).
+    at_grid = _mapping_error(
+        grid, v, model_t, model_v, slope, inv_step, pick_scale, pick_offset, np.inf
+    )
+    at_clock = _mapping_error(grid, v, model_t, model_v, slope, inv_step, 1.0, shared, np.inf)
+    if at_clock < at_grid:
+        best, scale, offset = at_clock, 1.0, shared
+    else:
+        best, scale, offset = at_grid, pick_scale, pick_offset
+    reach = max(span, dt)
+    for width in widths:
+        new_best, new_scale, new_offset = best, scale, offset
+        for a in range(steps.size):
+            s_try = scale * (1.0 + width * steps[a])
+            for b in range(steps.size):
+                if steps[a] == 0.0 and steps[b] == 0.0:
+                    continue  # the best pair so far
+                o_try = offset + steps[b] * width * reach
+                err = _mapping_error(
+                    grid, v, model_t, model_v, slope, inv_step, s_try, o_try, new_best
+                )
+                if err < new_best:
+                    new_best, new_scale, new_offset = err, s_try, o_try
+        best, scale, offset = new_best, new_scale, new_offset
+    return best, scale, offset

@@ -277,9 +277,9 @@ ERROR_CASES = [
     (drop((*P1, "strokes", 0, "phi2")), r"^plans\[1\]\.strokes\[0\]\.phi2: missing$"),
     # wrong markers
     (put(("format",), "svg"), r'^format: expected "tagbot-plan", got "svg"$'),
-    (put(("version",), 2), r"^version: unsupported 2 \(this tagbot reads 1\)$"),
-    (put(("version",), "1"), r'^version: unsupported "1" \(this tagbot reads 1\)$'),
-    (put(("version",), True), r"^version: unsupported true \(this tagbot reads 1\)$"),
+    (put(("version",), 3), r"^version: unsupported 3 \(this tagbot reads 1 and 2\)$"),
+    (put(("version",), "1"), r'^version: unsupported "1" \(this tagbot reads 1 and 2\)$'),
+    (put(("version",), True), r"^version: unsupported true \(this tagbot reads 1 and 2\)$"),
     (put(("version",), 1.0), r"^version: unsupported 1\.0 "),
     (put(("model",), "delta"), r'^model: unknown "delta" \(expected "gamma" or "sigma"\)$'),
     (put(("model",), ["gamma"]), r'^model: unknown \["gamma"\]'),
@@ -439,3 +439,44 @@ def test_unreadable_file_names_the_path(tmp_path: Path) -> None:
             load_plan(path)
     finally:
         path.chmod(0o644)
+
+
+def test_ink_windows_round_trip_as_version_2(tmp_path: Path) -> None:
+    """A plan touching down or lifting off moving keeps its window; only such files are version
+    2, so a tagbot reading version 1 refuses them rather than ink the air."""
+    d = doc()
+    d["version"] = 2
+    d["plans"][0]["ink"] = [0.05, 0.4]
+    tag = tag_from_dict(d)
+    assert tag.plans[0].ink == (0.05, 0.4) and tag.plans[1].ink is None
+    path = tmp_path / "ink.json"
+    save_plan(tag, path)
+    saved = json.loads(path.read_text(encoding="utf-8"))
+    assert saved["version"] == 2 and saved["plans"][0]["ink"] == [0.05, 0.4]
+    assert "ink" not in saved["plans"][1]
+    assert load_plan(path).plans[0].ink == (0.05, 0.4)
+    assert tag_to_dict(tag_from_dict(doc()))["version"] == 1  # no window: still version 1
+    d["version"] = 1
+    with pytest.raises(PlanFileError, match=r"^plans\[0\].ink: needs a version 2 plan file"):
+        tag_from_dict(d)
+    d["version"] = 3
+    with pytest.raises(PlanFileError, match=r"^version: unsupported 3 \(this tagbot reads 1 and 2"):
+        tag_from_dict(d)
+
+
+@pytest.mark.parametrize(
+    ("ink", "pattern"),
+    [
+        ([0.1], r"plans\[0\].ink: expected \[down, up\] seconds, got \[0.1\]"),
+        ("soon", r"plans\[0\].ink: expected \[down, up\] seconds"),
+        ([0.1, "x"], r"plans\[0\].ink\[1\]: expected a number"),
+        ([0.4, 0.1], r"plans\[0\].ink: need 0 <= down < up"),
+        ([0.1, 1e300], r"plans\[0\].ink: need 0 <= down < up <= 14400 s"),
+    ],
+)
+def test_bad_ink_windows_name_the_field(ink: Any, pattern: str) -> None:
+    d = doc()
+    d["version"] = 2
+    d["plans"][0]["ink"] = ink
+    with pytest.raises(PlanFileError, match="^" + pattern):
+        tag_from_dict(d)

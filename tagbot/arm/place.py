@@ -62,7 +62,8 @@ from tagbot.arm.profile import ArmProfile, Joint
 from tagbot.errors import PlacementError
 from tagbot.metrics import densify
 from tagbot.model import Plan, Tag
-from tagbot.model.motion import evaluate_plan, sample_plan
+from tagbot.model.easing import RunClock, run_clock
+from tagbot.model.motion import evaluate_plan, sample_ink
 
 __all__ = [
     "ArmProgram",
@@ -135,7 +136,11 @@ class Setpoints:
     run_windows: tuple[tuple[float, float], ...] = ()
     """Each plan's drawn window ``(start_k, end_k)`` on the tag's clock
     (:func:`drawn_window`): its first pen-down sample is the tag at ``start_k``, and machine time
-    ``τ`` after it is tag time ``start_k + τ/s_k``."""
+    ``τ`` after it is tag time ``run_clocks[k].tag_time(τ/s_k)`` (``start_k + τ/s_k`` for a
+    plan drawn from rest to rest)."""
+    run_clocks: tuple[RunClock, ...] = ()
+    """Each plan's run clock (:mod:`tagbot.model.easing`): easing from and to rest where the
+    plan touches down or lifts off moving."""
     run_tracking: tuple[float, ...] = ()
     """Each plan's predicted path deviation (mm) of the servos' follow (the lag of their
     time-based profile, :func:`_tracking`), which ``motion.max_deviation`` bounds."""
@@ -319,7 +324,7 @@ def place(tag: Tag, profile: ArmProfile) -> Placement:
     arm = Arm.from_profile(profile)
     theta = math.radians(profile["place.rotation"])
     rotation = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
-    samples = [sample_plan(tag, k, FINE_STEP) for k in range(len(tag.plans))]
+    samples = sample_ink(tag, FINE_STEP)
     points = np.concatenate([xy for _, xy, _ in samples])
     turned = points @ rotation.T
     # Between two samples a coordinate with |x''| <= A exceeds both by at most A·step²/8 (A
@@ -477,8 +482,19 @@ def drawn_window(
     target) and ends at the first instant where less than that is left to draw (resolution at
     the last target): the lognormal onset and tail below it would only rest the pen on the
     paper. With ``motion.trim_ticks = 0``, the plan's whole span ``start .. end(size)``. A plan
-    shorter than both margins together (a dot) is drawn whole.
+    shorter than both margins together (a dot) is drawn whole. A plan with an ``ink`` window is
+    drawn within it (the pen moves in the air outside it).
     """
+    down, up = tag.plans[k].ink_window(tag.size)
+    first, last = _trimmed(tag, k, placement, profile, arm)
+    first = max(first, down)
+    return first, max(min(last, up), first)
+
+
+def _trimmed(
+    tag: Tag, k: int, placement: Placement, profile: ArmProfile, arm: Arm | None
+) -> tuple[float, float]:
+    """:func:`drawn_window` before the ink window."""
     plan = tag.plans[k]
     start, end = plan.start, plan.end(tag.size)
     ticks = profile["motion.trim_ticks"]
@@ -541,20 +557,20 @@ def _run_limits(
 def _sample_run(
     tag: Tag,
     k: int,
-    window: tuple[float, float],
+    clock: RunClock,
     placement: Placement,
     scale: float,
     profile: ArmProfile,
     arm: Arm,
 ) -> tuple[Array, Array, Array]:
-    """Plan ``k``'s drawn window retimed by ``scale`` at the loop period: angles, positions (mm),
-    velocities (mm/s); the first sample is at the window's start."""
+    """Plan ``k``'s drawn window retimed by ``scale`` at the loop period on its run clock:
+    angles, positions (mm), velocities (mm/s); the first sample is at the window's start."""
     plan, T = tag.plans[k], profile.period
-    start, end = window
-    n = math.ceil((end - start) * scale / T - 1e-9)
-    xy, v = evaluate_plan(plan, start + np.arange(n + 1) * T / scale, tag.size)
+    n = math.ceil(clock.duration * scale / T - 1e-9)
+    u = np.arange(n + 1) * T / scale
+    xy, v = evaluate_plan(plan, clock.tag_time(u), tag.size)
     xy = xy @ placement.matrix.T + placement.offset
-    v = v @ placement.matrix.T / scale
+    v = (v @ placement.matrix.T) * (clock.rate(u) / scale)[:, None]
     return _run_angles(xy, arm, profile.joints), xy, v
 
 
@@ -572,17 +588,17 @@ def _excess(q: Array, T: float, joints: tuple[Joint, Joint]) -> float:
 
 def _retime(
     tag: Tag, placement: Placement, profile: ArmProfile, arm: Arm
-) -> tuple[
-    list[tuple[float, float]], list[float], dict[str, float], list[tuple[Array, ...]], list[float]
-]:
-    """Each run's drawn window and time scale, the scale each limit asks for (the largest over
-    the runs) and the sampled runs.
+) -> tuple[list[RunClock], list[float], dict[str, float], list[tuple[Array, ...]], list[float]]:
+    """Each run's clock (its drawn window, eased where the plan touches down or lifts off moving)
+    and time scale, the scale each limit asks for (the largest over the runs) and the sampled
+    runs.
 
     ``motion.time_scale = "run"``: each run gets the smallest ``s_k ≥ 1`` that keeps it within
     the joint limits; ``"uniform"``: every run gets the largest of those.
     """
     n = len(tag.plans)
     windows = [drawn_window(tag, k, placement, profile, arm) for k in range(n)]
+    clocks = [run_clock(tag.plans[k], *windows[k], tag.size) for k in range(n)]
     limits = {"speed": 1.0, "acceleration": 1.0}
     scales, worst, paths = [], [], []
     for k in range(n):
@@ -613,9 +629,7 @@ def _retime(
     for group in groups:
         s = scales[group[0]]
         for _ in range(40):
-            sampled = {
-                k: _sample_run(tag, k, windows[k], placement, s, profile, arm) for k in group
-            }
+            sampled = {k: _sample_run(tag, k, clocks[k], placement, s, profile, arm) for k in group}
             # The 1 ms grid may miss a peak by a hair: measure the differences the servos see.
             excess = max(_excess(sampled[k][0], T, joints) for k in group)
             if excess > 1.0:
@@ -640,7 +654,7 @@ def _retime(
             scales[k] = s
             runs[k] = sampled[k]
             deviations[k] = found[k]
-    return windows, scales, limits, runs, deviations
+    return clocks, scales, limits, runs, deviations
 
 
 def _tracking(q: Array, path: cKDTree, profile: ArmProfile, arm: Arm) -> float:
@@ -671,7 +685,7 @@ def build_program(tag: Tag, profile: ArmProfile, placement: Placement | None = N
     it."""
     arm = Arm.from_profile(profile)
     placement = placement or place(tag, profile)
-    windows, scales, limits, runs, deviations = _retime(tag, placement, profile, arm)
+    clocks, scales, limits, runs, deviations = _retime(tag, placement, profile, arm)
     T = profile.period
     park = np.array(profile.park)
     b = _Builder(profile, arm, park)
@@ -706,7 +720,8 @@ def build_program(tag: Tag, profile: ArmProfile, placement: Placement | None = N
         limits=limits,
         placement=placement,
         run_scales=tuple(scales),
-        run_windows=tuple(windows),
+        run_windows=tuple((c.on, c.off) for c in clocks),
+        run_clocks=tuple(clocks),
         run_tracking=tuple(deviations),
     )
     program = ArmProgram(

@@ -341,14 +341,14 @@ def placement_of(sp: Setpoints) -> dict[str, Any]:
     """mm per unit, the largest time scale, and each run's clock (``start + scale·(τ −
     tag_start)``), as the plotter reports them."""
     runs = []
-    for k, (scale, window) in enumerate(zip(sp.run_scales, sp.run_windows, strict=True)):
+    for k, (scale, clock) in enumerate(zip(sp.run_scales, sp.run_clocks, strict=True)):
         drawn = np.flatnonzero(sp.plan == k)
         if len(drawn):
             runs.append(
                 {
                     "plan": k,
                     "scale": float(scale),
-                    "tag_start": float(window[0]),
+                    "tag_start": float(clock.tag_start),
                     "start": float(sp.t[drawn[0]]),
                 }
             )

@@ -35,6 +35,15 @@ timed capture therefore moves at the paper's default rhythm, not the writer's. W
    plan misses much of the velocity there, that stroke is split in two and the fit repeated,
    kept only if the cost drops by :attr:`TimingOptions.split_gain` (up to
    :attr:`TimingOptions.max_stroke_ratio` times the geometric stroke count).
+5. **Strokes in the air** (:func:`_in_the_air`, beyond the paper): writers touch down and lift
+   off while moving. Where the recorded speed at a trace's first (last) sample is at least
+   :attr:`TimingOptions.air_speed` of its peak, a stroke in the air is added before (after) the
+   ink, to (from) a target :attr:`TimingOptions.air_lead` of the recorded end velocity beyond
+   the end point; the pad there is not fitted (nothing was recorded) and the end instant weighs
+   :attr:`TimingOptions.air_end_weight`. Refitted from the plan at rest (the last stage), it is
+   kept if its cost on the recorded span is lower; across a tag, :func:`match` gives them to the
+   traces they help most per stroke added, within the same stroke budget. Such a plan has an
+   ``ink`` window (:attr:`~tagbot.model.plan.Plan.ink`) from the first sample to the last.
 
 Bounds (:class:`TimingOptions`): onsets within ``onset_slack`` (0.5 s) of the initial timing,
 ``exp(mu)`` between 10 ms and 1 s, ``sigma`` between 0.05 and 0.6, tangents within ±3 rad; onsets
@@ -53,6 +62,7 @@ lift; each plan's own rhythm is kept.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -63,7 +73,14 @@ from scipy.special import ndtri
 from tagbot.errors import PlanError
 from tagbot.gesture import timing_kernels
 from tagbot.gesture.strokes import Strokes
-from tagbot.model.plan import END_TOLERANCE, MAX_COORDINATE, Model, Plan, unit_strokes
+from tagbot.model.plan import (
+    END_TOLERANCE,
+    MAX_COORDINATE,
+    MAX_DURATION,
+    Model,
+    Plan,
+    unit_strokes,
+)
 
 Array = NDArray[np.float64]
 Timing = Literal["auto", "ignore", "match"]
@@ -111,7 +128,19 @@ class TimingOptions:
     phi_limit: float = 3.0
     """Tangent deviations stay within ± this, radians."""
     pad: float = 0.15
-    """The grid extends this far before the first sample and after the last (pen at rest)."""
+    """The grid extends this far before the first sample and after the last (pen at rest, or
+    free where the pen moves in the air: see ``air_speed``)."""
+    air_speed: float | None = 0.1
+    """A trace whose recorded speed at its first (last) sample is at least this fraction of its
+    peak speed was touched down (lifted off) while moving: its plan gets a stroke in the air
+    before (after) the ink and an ``ink`` window, and the pad there is not fitted. None: never."""
+    air_end_weight: float = 5.0
+    """Where the pen moves in the air, the weight of the first (last) sample's instant: the ink
+    starts (ends) on the recorded point, not merely near it (1: as any instant; 5 scored best
+    on the development data, BENCHMARKS.md)."""
+    air_lead: float = 0.1
+    """The air stroke's far target lies this long at the recorded end speed beyond the end
+    point, seconds (its onset and median delay are set from it too)."""
     min_lift: float = 0.05
     """Shortest pen lift between plans: a plan whose recorded start comes sooner after the
     previous plan's end (a restarted clock chained at zero lift, a long tail) starts this long
@@ -223,7 +252,8 @@ def resample(t: Array, xy: Array, options: TimingOptions) -> Recording:
         options.min_bandwidth, options.bandwidth * interval, options.jitter_bandwidth * jitter
     )
     step = max(options.step, interval / 3.0)
-    grid = _grid(t, step, max(options.stall, 4.0 * width), options.pad)
+    # The first and last samples' instants are grid instants too: where the ink starts and ends.
+    grid = np.union1d(_grid(t, step, max(options.stall, 4.0 * width), options.pad), t[[0, -1]])
     out = timing_kernels.local_quadratic(t, xy[:, 0].copy(), xy[:, 1].copy(), grid, width)
     return Recording(
         grid, out[:, 0:2].copy(), out[:, 2:4].copy(), out[:, 4].copy(), float(grid[-1])
@@ -423,7 +453,17 @@ def match_trace(
 ) -> tuple[Plan, float]:
     """``plan`` (a geometric fit of ``trace``, start 0) refitted to ``trace``'s timing. Returns
     the plan on the trace's clock relative to its first timestamp (``start`` = its first onset,
-    possibly negative) and that first timestamp."""
+    possibly negative) and that first timestamp. With strokes in the air where the pen touched
+    down or lifted off moving, if they help (:func:`match` weighs them across a tag)."""
+    fitted, t0, lifted = _match_trace(plan, trace, size, model, options)
+    return (lifted[0] if lifted is not None else fitted), t0
+
+
+def _match_trace(
+    plan: Plan, trace: Any, size: float, model: Model, options: TimingOptions
+) -> tuple[Plan, float, tuple[Plan, float] | None]:
+    """:func:`match_trace`'s plan without strokes in the air, the first timestamp, and the plan
+    with them with its relative gain (the ink cost it saves), if they help."""
     t = np.asarray(trace.t, dtype=float)
     xy = np.asarray(trace.xy, dtype=float)
     t0 = float(t[0])
@@ -435,11 +475,138 @@ def match_trace(
     except PlanError:  # e.g. a timing beyond a plan's bounds: the geometric plan, at the start
         fallback = plan.at(0.0)
     if distinct < MIN_SAMPLES or len(rec.t) < 8:
-        return fallback, t0
+        return fallback, t0, None
+    last, arcs = float(t[-1] - t0), model == "sigma"
+    initial, _ = _in_the_air(initial, rec, last, (False, False), size, options)
     try:
-        return _as_plan(_refit(initial, rec, size, model == "sigma", plan.n_strokes, options)), t0
+        fitted = _refit(initial, rec, size, arcs, plan.n_strokes, options)
+        rest = _as_plan(fitted)
     except PlanError:  # the refit left a plan's bounds (collapsed targets): keep the first timing
-        return fallback, t0
+        return fallback, t0, None
+    air = _moving_ends(rec, last, options)
+    if not any(air):
+        return rest, t0, None
+    # The same plan with strokes in the air, refitted from there; it must follow the recording
+    # better where it was recorded.
+    lifted, air_rec = _in_the_air(fitted, rec, last, air, size, options)
+    if len(lifted.onsets) == len(fitted.onsets):
+        return rest, t0, None
+    try:
+        lifted, _ = _solve(lifted, air_rec, size, arcs, options, options.stages[-1:])
+        before = _ink_cost(fitted, rec, last, size, arcs, options)
+        gain = 1.0 - _ink_cost(lifted, rec, last, size, arcs, options) / before
+        start = float(lifted.onsets[0])
+        # Pen down from the first sample to the last, on the trace's clock.
+        up = last - start if air[1] else MAX_DURATION  # (until the motion ends)
+        in_air = _as_plan(lifted, (max(-start, 0.0) if air[0] else 0.0, up))
+    except (PlanError, ZeroDivisionError, FloatingPointError):
+        return rest, t0, None
+    return rest, t0, ((in_air, gain) if gain > 0.0 else None)
+
+
+def _ink_cost(
+    strokes: Strokes, rec: Recording, last: float, size: float, arcs: bool, options: TimingOptions
+) -> float:
+    """The fit's cost (velocity and position residuals, full weights) where the trace was
+    recorded, ``0 <= t <= last``: what plans with and without strokes in the air compare by."""
+    weight = np.where((rec.t >= 0.0) & (rec.t <= last), rec.weight, 0.0)
+    inked = Recording(rec.t, rec.xy, rec.v, weight, np.inf)
+    problem = _Fit(strokes, inked, size, arcs, options)
+    r, _ = problem.evaluate(problem.pack(strokes), False)
+    return float(r @ r)
+
+
+def _end_velocities(rec: Recording, last: float) -> tuple[NDArray[np.intp], Array, Array] | None:
+    """The grid instants of the recorded span ``0 .. last`` and the recorded velocity at its
+    first and at its last instant (from the resampled positions over about 40 ms), or None for a
+    span too short."""
+    inside = np.flatnonzero((rec.t >= 0.0) & (rec.t <= last))
+    k = min(4, len(inside) - 1)
+    if k < 1:
+        return None
+    (a, b), (c, d) = inside[[0, k]], inside[[-1 - k, -1]]
+    first = (rec.xy[b] - rec.xy[a]) / (rec.t[b] - rec.t[a])
+    final = (rec.xy[d] - rec.xy[c]) / (rec.t[d] - rec.t[c])
+    return inside, first, final
+
+
+def _moving_ends(rec: Recording, last: float, options: TimingOptions) -> tuple[bool, bool]:
+    """Whether the recorded speed at the first (at 0) and the last (at ``last``) sample is at
+    least :attr:`TimingOptions.air_speed` of the trace's peak: the pen touched down (lifted off)
+    while moving."""
+    ends = _end_velocities(rec, last)
+    if options.air_speed is None or ends is None:
+        return False, False
+    inside, first, final = ends
+    threshold = options.air_speed * float(np.max(np.hypot(*rec.v[inside].T)))
+    first_moving, last_moving = (
+        bool(threshold > 0 and float(np.hypot(*v)) >= threshold) for v in (first, final)
+    )
+    return first_moving, last_moving
+
+
+def _in_the_air(
+    strokes: Strokes,
+    rec: Recording,
+    last: float,
+    air: tuple[bool, bool],
+    size: float,
+    options: TimingOptions,
+) -> tuple[Strokes, Recording]:
+    """``strokes`` with their end targets on the recording's first and last points and, on each
+    side in ``air``, a stroke in the air to or from a target :attr:`TimingOptions.air_lead`
+    ``L`` of the recorded end velocity beyond the end point (straight, σ 0.3, median delay
+    ``L``, starting ``1.5 L`` before the first sample or ``0.7 L`` before the last: moving
+    through the end point about then); the recording with no weight in the pads on those sides
+    (nothing was recorded there, and the pen moved) and the end instant weighing
+    :attr:`TimingOptions.air_end_weight`."""
+    targets = strokes.targets.copy()
+    targets[0], targets[-1] = rec.xy[0], rec.xy[-1]
+    ends = _end_velocities(rec, last)
+    if not any(air) or ends is None:
+        chords = np.hypot(*np.diff(targets, axis=0).T)
+        return (strokes.replace(targets=targets) if np.all(chords > 1e-9 * size) else strokes), rec
+    inside, v_first, v_last = ends
+    lead, mu, sigma = options.air_lead, float(np.log(options.air_lead)), 0.3
+    first, final = rec.xy[inside[0]], rec.xy[inside[-1]]
+    parts = [strokes.targets[1:-1]]
+    onsets, mus, sigmas = [strokes.onsets], [strokes.mu], [strokes.sigma]
+    weight = rec.weight.copy()
+    if air[0]:
+        parts.insert(0, np.array([first - v_first * lead, first]))
+        onsets.insert(0, np.array([-1.5 * lead]))
+        mus.insert(0, np.array([mu]))
+        sigmas.insert(0, np.array([sigma]))
+        weight[rec.t < 0.0] = 0.0
+        weight[inside[0]] *= options.air_end_weight  # the ink starts on the first point
+    else:
+        parts.insert(0, rec.xy[:1])
+    if air[1]:
+        parts.append(np.array([final, final + v_last * lead]))
+        onsets.append(np.array([last - 0.7 * lead]))
+        mus.append(np.array([mu]))
+        sigmas.append(np.array([sigma]))
+        weight[rec.t > last] = 0.0
+        weight[inside[-1]] *= options.air_end_weight
+    else:
+        parts.append(rec.xy[-1:])
+    targets = np.concatenate(parts)
+    if np.any(np.hypot(*np.diff(targets, axis=0).T) <= 1e-9 * size):
+        return strokes, rec  # an end at rest after all: keep the plan as it is
+    count = len(targets) - 1
+    zeros = np.zeros(count - len(strokes.onsets))
+    before = int(air[0])
+    shaped = Strokes(
+        targets=targets,
+        onsets=np.maximum.accumulate(np.concatenate(onsets)),
+        mu=np.concatenate(mus),
+        sigma=np.clip(np.concatenate(sigmas), *options.sigma_bounds),
+        phi1=np.concatenate([zeros[:before], strokes.phi1, zeros[before:]]),
+        phi2=np.concatenate([zeros[:before], strokes.phi2, zeros[before:]]),
+        counts=np.array([count], dtype=np.intp),
+    )
+    deadline = rec.deadline + (lead if air[1] else 0.0)
+    return shaped, Recording(rec.t, rec.xy, rec.v, weight, deadline)
 
 
 def _refit(
@@ -573,11 +740,6 @@ def _solve(
     stages: tuple[tuple[bool, float], ...] | None = None,
 ) -> tuple[Strokes, float]:
     """Levenberg-Marquardt on :class:`_Fit`'s residuals, steps projected onto the bounds."""
-    targets = strokes.targets.copy()
-    targets[0], targets[-1] = rec.xy[0], rec.xy[-1]
-    chords = np.hypot(*np.diff(targets, axis=0).T)
-    if np.all(chords > 1e-9 * size):
-        strokes = strokes.replace(targets=targets)
     anchor = strokes.targets
     cost = np.inf
     for free, velocity in options.stages if stages is None else stages:
@@ -642,11 +804,13 @@ def _levenberg_marquardt(
     return x, cost
 
 
-def _as_plan(strokes: Strokes) -> Plan:
+def _as_plan(strokes: Strokes, ink: tuple[float, float] | None = None) -> Plan:
     onsets = strokes.onsets
     start = float(onsets[0])
     dt = np.diff(onsets, prepend=start)
-    return Plan(strokes.targets, dt, strokes.mu, strokes.sigma, strokes.phi1, strokes.phi2, start)
+    return Plan(
+        strokes.targets, dt, strokes.mu, strokes.sigma, strokes.phi1, strokes.phi2, start, ink
+    )
 
 
 def match(
@@ -666,10 +830,23 @@ def match(
     timed = [getattr(tr, "t", None) is not None for tr in traces]
     if not all(timed) or (timing == "auto" and not any(usable(tr) for tr in traces)):
         return None
-    fitted = [
-        match_trace(plan, trace, size, model, opts)
+    candidates = [
+        _match_trace(plan, trace, size, model, opts)
         for plan, trace in zip(plans, traces, strict=True)
     ]
+    # Strokes in the air where they help most for the strokes they add, within the tag's budget
+    # (max_stroke_ratio times the geometric strokes, less what the splits added).
+    chosen = [rest for rest, _, _ in candidates]
+    budget = math.floor(opts.max_stroke_ratio * sum(p.n_strokes for p in plans))
+    budget -= sum(p.n_strokes for p in chosen)
+    offers = [(gain / (air.n_strokes - chosen[k].n_strokes), k, air)
+              for k, (_, _, lifted) in enumerate(candidates) if lifted is not None
+              for air, gain in [lifted]]  # fmt: skip
+    for _, k, air in sorted(offers, key=lambda offer: -offer[0]):
+        extra = air.n_strokes - chosen[k].n_strokes
+        if extra <= budget:
+            chosen[k], budget = air, budget - extra
+    fitted = [(plan, t0) for plan, (_, t0, _) in zip(chosen, candidates, strict=True)]
     points = np.concatenate([plan.targets for plan, _ in fitted])
     tag_size = float(np.hypot(*np.ptp(points, axis=0)))  # what Tag measures its plans' ends by
     out: list[Plan] = []

@@ -78,5 +78,5 @@ def _instance(tag: Tag, rng: np.random.Generator, v: Variation) -> Tag:
         bend2 = np.where(plan.arcs, bend, 1.0 + rng.normal(0.0, v.phi, plan.n_strokes))
         phi1 = np.clip(plan.phi1 * bend, -np.pi + 1e-6, np.pi - 1e-6)
         phi2 = np.clip(plan.phi2 * bend2, -np.pi + 1e-6, np.pi - 1e-6)
-        plans.append(Plan(targets, dt, plan.mu, plan.sigma, phi1, phi2, plan.start))
+        plans.append(Plan(targets, dt, plan.mu, plan.sigma, phi1, phi2, plan.start, plan.ink))
     return sequence(plans, lifts, tag.model, tag.units)

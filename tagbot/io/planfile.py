@@ -6,8 +6,11 @@ A plan file holds one :class:`~tagbot.model.plan.Tag`::
      "plans": [{"start": 0.0, "targets": [[x, y], ...],
                 "strokes": [{"dt": .., "mu": .., "sigma": .., "phi1": .., "phi2": ..}, ...]}]}
 
-Sigma-model strokes carry one ``"phi"`` instead of ``"phi1"``/``"phi2"``. Unknown extra fields are
-ignored. Every problem raises :class:`~tagbot.errors.PlanFileError` with a one-line message that
+Sigma-model strokes carry one ``"phi"`` instead of ``"phi1"``/``"phi2"``. A plan whose pen touches
+down or lifts off while moving has ``"ink": [down, up]`` (seconds after its start; see
+:attr:`~tagbot.model.plan.Plan.ink`); a file with such a plan is version 2, so that a tagbot that
+reads only version 1 refuses it rather than ink the air. Unknown extra fields are ignored.
+Every problem raises :class:`~tagbot.errors.PlanFileError` with a one-line message that
 names the offending field as a path, e.g. ``plans[0].strokes[1].mu: missing``. Numbers are written
 with ``repr`` so a saved tag loads back bit-exactly.
 """
@@ -39,7 +42,9 @@ __all__ = [
 FORMAT = "tagbot-plan"
 """Value of the ``"format"`` marker field."""
 
-VERSION = 1
+VERSION = 2
+"""The newest version this tagbot reads and writes (1 when no plan has an ``ink`` window)."""
+VERSIONS = (1, 2)
 """The only plan file version this tagbot reads and writes."""
 
 
@@ -86,8 +91,8 @@ def tag_from_dict(d: Any) -> Tag:
     if fmt != FORMAT:
         raise PlanFileError(f'format: expected "{FORMAT}", got {_show(fmt)}')
     version = _field(d, "version", "")
-    if type(version) is not int or version != VERSION:
-        raise PlanFileError(f"version: unsupported {_show(version)} (this tagbot reads {VERSION})")
+    if type(version) is not int or version not in VERSIONS:
+        raise PlanFileError(f"version: unsupported {_show(version)} (this tagbot reads 1 and 2)")
     model = _field(d, "model", "")
     if not isinstance(model, str) or model not in _STROKE_FIELDS:
         raise PlanFileError(f'model: unknown {_show(model)} (expected "gamma" or "sigma")')
@@ -100,18 +105,26 @@ def tag_from_dict(d: Any) -> Tag:
     if not raw_plans:
         raise PlanFileError("plans: empty")
 
-    plans = [_plan_from_dict(p, f"plans[{k}]", model) for k, p in enumerate(raw_plans)]
+    plans = [_plan_from_dict(p, f"plans[{k}]", model, version) for k, p in enumerate(raw_plans)]
     try:
         return Tag(plans, model=model, units=units)
     except ValueError as e:
         raise PlanFileError(str(e)) from (e.__cause__ or e)
 
 
-def _plan_from_dict(p: Any, path: str, model: str) -> Plan:
+def _plan_from_dict(p: Any, path: str, model: str, version: int) -> Plan:
     """Validate one plan object's structure and construct the Plan."""
     if not isinstance(p, Mapping):
         raise PlanFileError(f"{path}: expected an object, got {json_kind(p)}")
     start = _number(_field(p, "start", path), f"{path}.start")
+    ink = None
+    if "ink" in p:
+        if version < 2:
+            raise PlanFileError(f"{path}.ink: needs a version 2 plan file, this one is version 1")
+        raw = p["ink"]
+        if not isinstance(raw, list) or len(raw) != 2:
+            raise PlanFileError(f"{path}.ink: expected [down, up] seconds, got {_show(raw)}")
+        ink = (_number(raw[0], f"{path}.ink[0]"), _number(raw[1], f"{path}.ink[1]"))
 
     raw_targets = _field(p, "targets", path)
     if not isinstance(raw_targets, list):
@@ -145,8 +158,8 @@ def _plan_from_dict(p: Any, path: str, model: str) -> Plan:
     arrays = {name: np.array(values, dtype=float) for name, values in columns.items()}
     try:
         if model == "sigma":
-            return Plan.sigma_model(xy, start=start, **arrays)
-        return Plan(xy, start=start, **arrays)
+            return Plan.sigma_model(xy, start=start, ink=ink, **arrays)
+        return Plan(xy, start=start, ink=ink, **arrays)
     except ValueError as e:
         msg = str(e)
         raise PlanFileError(msg if msg.startswith("plans[") else f"{path}.{msg}") from e
@@ -256,6 +269,7 @@ def tag_to_dict(tag: Tag) -> dict[str, Any]:
         plans.append(
             {
                 "start": float(plan.start),
+                **({"ink": list(plan.ink)} if plan.ink is not None else {}),
                 "targets": targets.tolist(),
                 "strokes": [
                     {name: columns[name][i] for name in names} for i in range(len(columns["dt"]))
@@ -264,7 +278,7 @@ def tag_to_dict(tag: Tag) -> dict[str, Any]:
         )
     return {
         "format": FORMAT,
-        "version": VERSION,
+        "version": VERSION if any(plan.ink is not None for plan in tag.plans) else 1,
         "model": model,
         "units": tag.units,
         "plans": plans,

@@ -472,3 +472,59 @@ def evaluate_runs(
             dx[row], dy[row], tx[row], ty[row] = segment_point(c, s[row])
             row += 1
     return dx, dy, tx, ty
+
+
+@compiled
+def evaluate_plans_into(
+    t: np.ndarray,
+    first_row: np.ndarray,
+    first_stroke: np.ndarray,
+    start: np.ndarray,
+    chords: np.ndarray,
+    t_on: np.ndarray,
+    t_off: np.ndarray,
+    onsets: np.ndarray,
+    mu: np.ndarray,
+    sigma: np.ndarray,
+    length: np.ndarray,
+    constants: np.ndarray,
+    xy: np.ndarray,
+    v: np.ndarray,
+) -> int:
+    """Positions ``xy`` and velocities ``v`` (N, 2, ``v`` zeroed) of plans at their sorted
+    times: plan ``k`` owns rows ``first_row[k]:first_row[k + 1]`` of ``t`` and strokes
+    ``first_stroke[k]:first_stroke[k + 1]``, starts at ``start[k]``; each stroke is evaluated
+    inside its window ``[t_on, t_off]`` (its curve at ``D·W(t)``, velocity ``D·Λ(t)`` along
+    the tangent there), contributes nothing before it and its whole chord after it. Returns the
+    (sample, stroke) pairs evaluated."""
+    begin = np.empty(onsets.size, np.intp)
+    stop = np.empty(onsets.size, np.intp)
+    for k in range(first_row.size - 1):
+        lo, hi = first_row[k], first_row[k + 1]
+        rows = t[lo:hi]
+        # The chords of the strokes complete before each row: differences, then their sums.
+        xy[lo:hi] = 0.0
+        for i in range(first_stroke[k], first_stroke[k + 1]):
+            begin[i] = lo + np.searchsorted(rows, t_on[i], side="left")
+            stop[i] = lo + np.searchsorted(rows, t_off[i], side="right")
+            if stop[i] < hi:
+                xy[stop[i], 0] += chords[i, 0]
+                xy[stop[i], 1] += chords[i, 1]
+        x, y = start[k, 0], start[k, 1]
+        for r in range(lo, hi):
+            x += xy[r, 0]
+            y += xy[r, 1]
+            xy[r, 0], xy[r, 1] = x, y
+    pairs = 0
+    for i in range(onsets.size):
+        c = constants[i]
+        for r in range(begin[i], stop[i]):
+            cdf, density = lognormal_at(t[r], onsets[i], mu[i], sigma[i])
+            dx, dy, tx, ty = segment_point(c, length[i] * cdf)
+            speed = length[i] * density
+            xy[r, 0] += dx
+            xy[r, 1] += dy
+            v[r, 0] += speed * tx
+            v[r, 1] += speed * ty
+        pairs += stop[i] - begin[i]
+    return pairs

@@ -4,7 +4,9 @@ Sample ``i`` is at ``t = tag.start + i·dt``. A plan's samples run from the firs
 ``start`` (on its first target) to the first one at or after its end (on its last target, within
 ``END_TOLERANCE × tag.size``). Between plans the pen is up (``pen = 0``, ``plan = -1``), the speed
 is 0 and the position is where the pen will next go down; each pen lift therefore shows as at least
-one pen-up sample, and a ``dt`` too coarse for a lift is refused.
+one pen-up sample, and a ``dt`` too coarse for a lift is refused. A plan with an ``ink`` window
+moves in the air outside it: those samples follow the plan with the pen up (``pen = 0``,
+``plan = -1``), and its pen-down run is the samples within the window.
 
 Position and velocity are exact: each stroke contributes its curve evaluated at arc length
 ``D·W(t)`` and the velocity ``D·Λ(t)`` along the curve's tangent there (no differencing, no
@@ -21,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import ndtr
 
 from tagbot.errors import PlanError
 from tagbot.model import kernels
@@ -29,10 +30,6 @@ from tagbot.model.plan import END_TOLERANCE, Plan, Tag
 
 MAX_SAMPLES = 50_000_000
 """Refuse to allocate more samples than this (about 2.4 GB of arrays)."""
-
-_INV_SQRT_2PI = 1.0 / float(np.sqrt(2.0 * np.pi))
-_CHUNK = 1 << 14
-"""(sample, stroke) pairs evaluated at once: temporaries stay in the CPU cache."""
 
 Array = NDArray[np.float64]
 
@@ -103,8 +100,15 @@ def sample(tag: Tag, dt: float = 0.01) -> Motion:
     for k, (plan, (p, pv)) in enumerate(zip(tag.plans, drawn, strict=True)):
         xy[lift_start : first[k]] = plan.targets[0]  # pen up, waiting where it goes down next
         xy[rows[k]], v[rows[k]] = p, pv
-        pen[rows[k]] = 1
-        plan_index[rows[k]] = k
+        down = rows[k]
+        if plan.ink is not None:  # in the air before touch-down and after lift-off
+            on, off = plan.ink_window(size)
+            eps = 1e-6 * dt  # a sample on the window's edge is down
+            down = slice(
+                int(np.searchsorted(t, on - eps)), int(np.searchsorted(t, off + eps, "right"))
+            )
+        pen[down] = 1
+        plan_index[down] = k
         lift_start = last[k] + 1
     speed = np.hypot(v[:, 0], v[:, 1])
     for array in (t, xy, v, speed, pen, plan_index):
@@ -133,13 +137,14 @@ def sample_plans(
 ) -> list[tuple[Array, Array, Array]]:
     """:func:`sample_plan` for each of ``plans`` (by default all), evaluated in one pass: each
     plan on its own grid, so that no pen lift is too short for ``step``."""
-    chosen = range(len(tag.plans)) if plans is None else plans
+    chosen = [tag.plans[k] for k in (range(len(tag.plans)) if plans is None else plans)]
+    windows = [plan.windows(tag.size, END_TOLERANCE) for plan in chosen]
     times = []
-    for k in chosen:
-        plan = tag.plans[k]
-        count = math.ceil((plan.end(tag.size) - plan.start) / step - 1e-9) + 1
+    for plan, (_, t_off) in zip(chosen, windows, strict=True):
+        end = float(np.max(t_off))  # Plan.end, from the windows the evaluation needs too
+        count = math.ceil((end - plan.start) / step - 1e-9) + 1
         times.append(plan.start + np.arange(count) * step)
-    drawn = evaluate_plans([tag.plans[k] for k in chosen], times, tag.size)
+    drawn = _evaluate_plans(chosen, times, windows)
     return [(t, xy, v) for t, (xy, v) in zip(times, drawn, strict=True)]
 
 
@@ -160,64 +165,55 @@ def evaluate_plans(
     """:func:`evaluate_plan` of each plan at its own sorted times, all (sample, stroke) pairs of
     all plans in one pass: a tag of many short plans costs what one plan of as many strokes
     does."""
-    ts = [np.asarray(t, dtype=float) for t in times]
-    for t in ts:
-        if t.ndim != 1 or np.any(np.diff(t) < 0) or not np.all(np.isfinite(t)):
-            raise ValueError("t: must be a finite, sorted 1-D array of times")
-    sizes = [len(t) for t in ts]
-    first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.intp)
-    xy = np.empty((int(first[-1]), 2))
-    v = np.zeros((int(first[-1]), 2))
-    begin, stop = [], []
-    for k, (plan, t) in enumerate(zip(plans, ts, strict=True)):
-        t_on, t_off = plan.windows(size, END_TOLERANCE)
-        # Active sample range [begin, stop) of each stroke, in this plan's rows.
-        b = np.searchsorted(t, t_on, side="left")
-        e = np.searchsorted(t, t_off, side="right")
-        # Strokes completed before a sample contribute their whole chord.
-        done = np.zeros((len(t) + 1, 2))
-        np.add.at(done, e, plan.chords)
-        xy[first[k] : first[k + 1]] = plan.targets[0] + np.cumsum(done[: len(t)], axis=0)
-        begin.append(b + first[k])
-        stop.append(e + first[k])
-    if not plans or not len(xy):
-        return [(xy[first[k] : first[k + 1]], v[first[k] : first[k + 1]]) for k in range(len(ts))]
-    t_all = np.concatenate(ts)
-    begin_all, stop_all = np.concatenate(begin), np.concatenate(stop)
-    onsets = np.concatenate([p.onsets for p in plans])
-    mu = np.concatenate([p.mu for p in plans])
-    sigma = np.concatenate([p.sigma for p in plans])
-    length = np.concatenate([p.geometry.length for p in plans])
-    constants = np.concatenate([p.geometry.constants for p in plans])
+    return _evaluate_plans(plans, times, [plan.windows(size, END_TOLERANCE) for plan in plans])
 
-    # Flatten the (sample, active stroke) pairs, processed in cache-sized chunks of consecutive
-    # strokes (a stroke's active samples are consecutive rows of its plan).
-    counts = stop_all - begin_all
-    chunk_of = np.cumsum(counts) // _CHUNK
-    for chunk in np.unique(chunk_of[counts > 0]):
-        strokes = np.flatnonzero(chunk_of == chunk)
-        n = counts[strokes]
-        lo = int(begin_all[strokes].min())
-        row = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n - (begin_all[strokes] - lo), n)
-        span = int(row.max()) + 1
-        inv_sigma = 1.0 / sigma[strokes]
-        elapsed = t_all[lo:][row] - np.repeat(onsets[strokes], n)
-        np.maximum(elapsed, np.finfo(float).tiny, out=elapsed)
-        z = np.log(elapsed)
-        z *= np.repeat(inv_sigma, n)
-        z -= np.repeat(mu[strokes] * inv_sigma, n)
-        dx, dy, tx, ty = kernels.evaluate_runs(
-            constants,
-            np.ascontiguousarray(strokes, dtype=np.intp),
-            np.ascontiguousarray(n, dtype=np.intp),
-            np.repeat(length[strokes], n) * ndtr(z),
+
+def _evaluate_plans(
+    plans: Sequence[Plan], times: Sequence[ArrayLike], windows: Sequence[tuple[Array, Array]]
+) -> list[tuple[Array, Array]]:
+    """:func:`evaluate_plans` with each plan's stroke windows (:meth:`Plan.windows`)."""
+    ts = [np.asarray(t, dtype=float) for t in times]
+    if any(t.ndim != 1 for t in ts):
+        raise ValueError("t: must be a finite, sorted 1-D array of times")
+    first = np.cumsum([0, *(len(t) for t in ts)])
+    t_all = np.concatenate(ts) if ts else np.empty(0)
+    steps = np.diff(t_all)
+    joins = first[1:-1]
+    steps[joins[(joins > 0) & (joins < len(t_all))] - 1] = 0.0  # each plan sorted on its own
+    if np.any(steps < 0) or not np.all(np.isfinite(t_all)):
+        raise ValueError("t: must be a finite, sorted 1-D array of times")
+    xy, v = np.zeros((len(t_all), 2)), np.zeros((len(t_all), 2))
+    if plans:
+        kernels.evaluate_plans_into(
+            t_all,
+            first,
+            np.cumsum([0, *(plan.n_strokes for plan in plans)]),
+            np.array([plan.targets[0] for plan in plans], dtype=float),
+            np.concatenate([plan.chords for plan in plans]),
+            *(np.concatenate(arrays) for arrays in zip(*windows, strict=True)),
+            np.concatenate([plan.onsets for plan in plans]),
+            np.concatenate([plan.mu for plan in plans]),
+            np.concatenate([plan.sigma for plan in plans]),
+            np.concatenate([plan.geometry.length for plan in plans]),
+            np.concatenate([plan.geometry.constants for plan in plans]),
+            xy,
+            v,
         )
-        speed = np.exp(-0.5 * z * z)
-        speed /= elapsed
-        speed *= np.repeat(length[strokes] * inv_sigma * _INV_SQRT_2PI, n)
-        rows = slice(lo, lo + span)
-        xy[rows, 0] += np.bincount(row, weights=dx, minlength=span)
-        xy[rows, 1] += np.bincount(row, weights=dy, minlength=span)
-        v[rows, 0] += np.bincount(row, weights=speed * tx, minlength=span)
-        v[rows, 1] += np.bincount(row, weights=speed * ty, minlength=span)
     return [(xy[first[k] : first[k + 1]], v[first[k] : first[k + 1]]) for k in range(len(ts))]
+
+
+def sample_ink(
+    tag: Tag, step: float, plans: Sequence[int] | None = None
+) -> list[tuple[Array, Array, Array]]:
+    """Times, positions and velocities of each of ``plans`` (by default all) while its pen is
+    down, every ``step`` seconds from its touch-down to its lift-off, both included
+    (:meth:`~tagbot.model.plan.Plan.ink_window`; a plan without an ``ink`` window: its whole
+    motion). What the plan draws, for shape errors and placement."""
+    chosen = range(len(tag.plans)) if plans is None else plans
+    times = []
+    for k in chosen:
+        on, off = tag.plans[k].ink_window(tag.size)
+        count = max(math.ceil((off - on) / step - 1e-9), 1)
+        times.append(np.minimum(on + np.arange(count + 1) * step, off))
+    drawn = evaluate_plans([tag.plans[k] for k in chosen], times, tag.size)
+    return [(t, xy, v) for t, (xy, v) in zip(times, drawn, strict=True)]

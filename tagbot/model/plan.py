@@ -14,6 +14,10 @@ Conventions (fixed so that plans are portable):
 - ``dt[j]`` is the delay of stroke j's onset after stroke j−1's onset, and ``dt[0]`` the delay after
   the plan's ``start``: ``t0[j] = start + dt[0] + … + dt[j]``. All times are seconds on the tag's
   clock.
+- The pen is on the paper for all of a plan's motion, unless the plan has an ``ink`` window
+  ``(down, up)`` (seconds after ``start``): then it moves in the air before ``down`` and after
+  ``up``, as a writer who touches down and lifts off while moving does (beyond the paper, which
+  draws every plan from rest to rest). Only the window leaves ink.
 
 Every stroke travels its whole curve as its lognormal CDF goes from 0 to 1, so once all strokes of
 a plan are complete the pen is exactly on the last target, whatever the overlaps.
@@ -79,7 +83,8 @@ def _vector(name: str, values: ArrayLike, size: int) -> Array:
 
 @dataclass(frozen=True, eq=False)
 class Plan:
-    """One pen-down movement: ``m`` virtual targets and ``m − 1`` lognormal strokes between them.
+    """One pen-down movement (in the air before and after its ``ink`` window, if it has one):
+    ``m`` virtual targets and ``m − 1`` lognormal strokes between them.
 
     Arrays are copied and validated on construction; a :class:`~tagbot.errors.PlanError` names the
     offending field (``strokes[2].sigma: must be > 0, got -1.0``).
@@ -99,6 +104,9 @@ class Plan:
     """End-tangent deviation from the chord, radians."""
     start: float = 0.0
     """The plan's start time, seconds on the tag's clock."""
+    ink: tuple[float, float] | None = None
+    """When the pen touches down and lifts off, seconds after ``start``; None: the pen is down
+    for the whole motion."""
 
     def __post_init__(self) -> None:
         targets = np.array(self.targets, dtype=float)
@@ -159,6 +167,7 @@ class Plan:
         targets.flags.writeable = False
         object.__setattr__(self, "targets", targets)
         object.__setattr__(self, "start", start)
+        object.__setattr__(self, "ink", _ink(self.ink))
         for name, array in fields.items():
             array.flags.writeable = False
             object.__setattr__(self, name, array)
@@ -172,6 +181,7 @@ class Plan:
         sigma: ArrayLike,
         phi: ArrayLike,
         start: float = 0.0,
+        ink: tuple[float, float] | None = None,
     ) -> Plan:
         """A ΣΛ* plan: circular-arc strokes deviating ``phi`` from the chord (|phi| < π)."""
         phi = np.asarray(phi, dtype=float)
@@ -183,7 +193,7 @@ class Plan:
             raise PlanError(
                 f"strokes[{j}].phi: must be finite and in (-pi, pi), got {float(got)!r}"
             )
-        return cls(targets, dt, mu, sigma, -phi, phi, start)
+        return cls(targets, dt, mu, sigma, -phi, phi, start, ink)
 
     @property
     def phi(self) -> Array:
@@ -192,7 +202,9 @@ class Plan:
 
     def at(self, start: float) -> Plan:
         """The same plan starting at ``start`` (its fitted geometry is reused)."""
-        moved = Plan(self.targets, self.dt, self.mu, self.sigma, self.phi1, self.phi2, start)
+        moved = Plan(
+            self.targets, self.dt, self.mu, self.sigma, self.phi1, self.phi2, start, self.ink
+        )
         if "geometry" in self.__dict__:
             moved.__dict__["geometry"] = self.geometry
         return moved
@@ -235,8 +247,38 @@ class Plan:
         """When the plan's motion ends: the path left to travel is below ``tol × size``."""
         return float(np.max(self.windows(size, tol)[1]))
 
+    def ink_window(self, size: float) -> tuple[float, float]:
+        """When the pen is down, ``(touch-down, lift-off)`` on the tag's clock: the ``ink``
+        window within the motion, or the whole motion ``(start, end)``."""
+        end = self.end(size)
+        if self.ink is None:
+            return self.start, end
+        return self.start + self.ink[0], min(self.start + self.ink[1], end)
+
+    def moving_ends(self, size: float) -> tuple[bool, bool]:
+        """Whether the pen touches down after the motion starts, and lifts off before it ends
+        (an ``ink`` window inside the motion)."""
+        if self.ink is None:
+            return False, False
+        return self.ink[0] > 0.0, self.ink_window(size)[1] < self.end(size)
+
 
 _STROKE_FIELDS = ("dt", "mu", "sigma", "phi1", "phi2")
+
+
+def _ink(value: object) -> tuple[float, float] | None:
+    """A checked ``ink`` window: two finite times ``0 <= down < up <= MAX_DURATION``."""
+    if value is None:
+        return None
+    try:
+        down, up = (float(x) for x in value)  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        raise PlanError(f"ink: expected [down, up] seconds after start, got {value!r}") from None
+    if not (np.isfinite(down) and np.isfinite(up) and 0.0 <= down < up <= MAX_DURATION):
+        raise PlanError(
+            f"ink: need 0 <= down < up <= {MAX_DURATION:g} s after start, got [{down!r}, {up!r}]"
+        )
+    return down, up
 
 
 def unit_strokes(phi1: ArrayLike, phi2: ArrayLike) -> Clothoids:
@@ -316,6 +358,12 @@ class Tag:
                     f" phi2={float(plan.phi2[j])!r}"
                 )
         object.__setattr__(self, "plans", plans)
+        for k, plan in enumerate(plans):
+            if plan.ink is not None and plan.start + plan.ink[0] >= plan.end(self.size):
+                raise PlanError(
+                    f"plans[{k}].ink: the pen touches down {plan.ink[0]:.6g} s after the start,"
+                    f" once the motion has ended ({plan.end(self.size) - plan.start:.6g} s)"
+                )
         if plans[-1].end(self.size) - plans[0].start > MAX_DURATION:
             raise PlanError(
                 f"plans: the tag lasts {plans[-1].end(self.size) - plans[0].start:.6g} s, more"

@@ -56,7 +56,7 @@ def placement_of(setpoints: Setpoints, program: Program) -> dict[str, Any]:
         {
             "plan": run.plan,
             "scale": float(run.scale),
-            "tag_start": float(run.span[0]),
+            "tag_start": float(run.clock.tag_start),
             "start": float(planned[0][0]),
         }
         for run, planned in zip(setpoints.runs, program.planned_runs, strict=True)

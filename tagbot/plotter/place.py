@@ -13,6 +13,13 @@ instant its motion first leaves the box of ± one motor step (``1 / limits.x_ste
 around its last point (both found to 1e-9 of the tag's clock by bisection): what is left out
 moves less than one step on every axis, which the machine could not draw anyway.
 
+**Touch-down in motion.** A plan with an ``ink`` window (a writer who touched down or lifted off
+while moving) is drawn over its window only: the pen goes down at rest where the ink starts and
+the run eases from rest to the plan's own speed over :data:`~tagbot.model.easing.EASE` seconds
+of its clock (and back to rest where the ink ends, if it lifts off moving), along the same path
+(:mod:`tagbot.model.easing`); a pen command stops Grbl's motion, so a plotter cannot touch down
+moving.
+
 **Time scale** ``s ≥ 1``: the retimed motion is ``q(τ) = p(τ / s)``, so speeds divide by ``s``
 and accelerations by ``s²`` while the path and the lognormal shape of the speed profile are
 kept. With ``motion.time_scale = "run"`` (default) every run has its own ``s_k``, the smallest
@@ -77,7 +84,8 @@ from numpy.typing import NDArray
 
 from tagbot.errors import PlacementError
 from tagbot.model import Tag
-from tagbot.model.motion import evaluate_plan, sample_plan
+from tagbot.model.easing import RunClock, run_clock
+from tagbot.model.motion import evaluate_plan, sample_ink
 from tagbot.plotter.profile import Profile
 
 __all__ = [
@@ -129,6 +137,9 @@ class Run:
     """The ``s`` each limit alone asks of this run."""
     span: tuple[float, float] = (0.0, 0.0)
     """The tag-clock interval drawn (after trimming the ends within one step)."""
+    clock: RunClock = field(default_factory=lambda: RunClock(0.0, 0.0))
+    """How the run's clock maps to the tag's (easing from and to rest where the plan touches
+    down or lifts off moving): setpoint ``i`` is at ``τ = clock.tag_time(t[i] / scale)``."""
 
     @property
     def duration(self) -> float:
@@ -169,7 +180,7 @@ class Setpoints:
 def place(tag: Tag, profile: Profile) -> Setpoints:
     """Place ``tag`` on the bed of ``profile`` and retime it; see the module docstring."""
     matrix, offset, size = _transform(tag, profile)
-    fine = [sample_plan(tag, k, FINE_STEP) for k in range(len(tag.plans))]
+    fine = sample_ink(tag, FINE_STEP)
     _check_bed(profile, [xy @ matrix.T + offset for _, xy, _ in fine])
     spans = [
         _span(tag, k, t, xy @ matrix.T + offset, matrix, offset, profile)
@@ -206,9 +217,10 @@ def step_box(profile: Profile) -> Array:
 def _span(
     tag: Tag, k: int, t: Array, xy: Array, matrix: Array, offset: Array, profile: Profile
 ) -> tuple[float, float]:
-    """The tag-clock interval of plan ``k`` outside one step of its first and last points."""
+    """The tag-clock interval of plan ``k``'s ink (``t``, ``xy``: its samples) outside one step
+    of its first and last points."""
     plan = tag.plans[k]
-    start, end = float(plan.start), float(plan.end(tag.size))
+    start, end = plan.ink_window(tag.size)
     if not profile["motion.trim"] or len(t) < 2:
         return start, end
     box = step_box(profile)
@@ -238,6 +250,9 @@ def _span(
 
     on = bisect(float(t[i - 1]), float(t[i]), True, p0) if i > 0 else float(t[0])
     off = bisect(float(t[j]), min(float(t[j + 1]), end), False, p1) if j + 1 < len(t) else end
+    # An end where the pen touches down or lifts off moving has no resting tail to trim.
+    touches, lifts = plan.moving_ends(tag.size)
+    on, off = (start if touches else on), (end if lifts else off)
     off = min(max(off, on), end)
     return on, off
 
@@ -289,7 +304,9 @@ def _retime(
         scale *= min(4.0, buffer / held_s) * (1.0 + 1e-3)
     else:  # pragma: no cover - the segments converge within a few rounds
         raise PlacementError("retiming: did not converge")
-    return [Run(r.plan, r.t, r.xy, r.v, scale, r.tag_t, dict(limits), r.span) for r in runs]
+    return [
+        Run(r.plan, r.t, r.xy, r.v, scale, r.tag_t, dict(limits), r.span, r.clock) for r in runs
+    ]
 
 
 def _setpoints(
@@ -305,23 +322,25 @@ def _setpoints(
     plan = tag.plans[k]
     on, off = span
     dt = profile.dt
+    clock = run_clock(plan, on, off, tag.size)
     if off <= on:
-        tag_t = np.array([on])
+        u = np.zeros(1)
     elif profile["motion.setpoints"] == "fixed":
-        count = math.ceil((off - on) * scale / dt - 1e-9) + 1
-        tag_t = np.minimum(on + np.arange(count) * (dt / scale), off)
+        count = math.ceil(clock.duration * scale / dt - 1e-9) + 1
+        u = np.minimum(np.arange(count) * (dt / scale), clock.duration)
     else:
-        tag_t = _adaptive_times(plan, tag.size, on, off, scale, matrix, offset, profile)
+        u = _adaptive_times(plan, tag.size, clock, scale, matrix, offset, profile)
+    tag_t = clock.tag_time(u)
     p, v = evaluate_plan(plan, tag_t, tag.size)
     xy = p @ matrix.T + offset
-    v = v @ matrix.T / scale
+    v = (v @ matrix.T) * (clock.rate(u) / scale)[:, None]
     keep = _moving(xy, profile)
-    tag_t, xy, v = tag_t[keep], xy[keep], v[keep]
-    t = (tag_t - tag_t[0]) * scale
+    u, tag_t, xy, v = u[keep], tag_t[keep], xy[keep], v[keep]
+    t = (u - u[0]) * scale
     if profile["motion.slow_lines"] == "clamp" and len(t) > 1:
         durations = np.minimum(np.diff(t), slowest_durations(xy, profile))
         t = np.concatenate([[0.0], np.cumsum(durations)])
-    return Run(k, t, xy, v, scale, tag_t, {}, span)
+    return Run(k, t, xy, v, scale, tag_t, {}, span, clock)
 
 
 def _moving(xy: Array, profile: Profile) -> NDArray[np.bool_]:
@@ -382,16 +401,17 @@ def interpolation_error(xy: Array, first: int, last: int) -> float:
 
 
 def _adaptive_times(
-    plan, size: float, on: float, off: float, scale: float, matrix, offset, profile: Profile
+    plan, size: float, clock: RunClock, scale: float, matrix, offset, profile: Profile
 ) -> Array:
-    """Setpoint instants (tag clock): each line as long as the tolerance and max_dt allow."""
+    """Setpoint instants (the run's clock ``u``): each line as long as the tolerance and max_dt
+    allow."""
     dt, longest = profile.dt, profile["motion.max_dt"]
     tolerance = profile["motion.tolerance"]
-    duration = (off - on) * scale
+    duration = clock.duration * scale
     count = max(1, math.ceil(duration / (dt / SUBSTEPS) - 1e-9))
-    grid = np.linspace(on, off, count + 1)
+    grid = np.linspace(0.0, clock.duration, count + 1)
     h = duration / count
-    p, _ = evaluate_plan(plan, grid, size)
+    p, _ = evaluate_plan(plan, clock.tag_time(grid), size)
     xy = p @ matrix.T + offset
     shortest = max(1, math.ceil(dt / h - 1e-9))
     most = max(shortest, math.floor(longest / h + 1e-9))
@@ -539,7 +559,7 @@ def _transform(tag: Tag, profile: Profile) -> tuple[Array, Array, float]:
     margin = profile["bed.margin"]
     theta = math.radians(profile["place.rotation"])
     rotation = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
-    points = np.concatenate([sample_plan(tag, k, FINE_STEP)[1] for k in range(len(tag.plans))])
+    points = np.concatenate([xy for _, xy, _ in sample_ink(tag, FINE_STEP)])
     turned = points @ rotation.T
     low, high = turned.min(axis=0), turned.max(axis=0)
     extent = high - low

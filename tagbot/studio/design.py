@@ -61,7 +61,8 @@ PHI_LIMIT = math.pi - 1e-6
 Design = dict[str, Any]
 """``{"model", "units", "dt_min", "dt_max", "mu", "sigma", "plans": [draft...], "gestures":
 [[[x, y], ...], ...]}``; a draft is ``{"targets": [[x, y], ...], "strokes": [{"dt", "mu",
-"sigma", "phi1", "phi2"}, ...], "lift": seconds}`` (``"start"`` on the first)."""
+"sigma", "phi1", "phi2"}, ...], "lift": seconds}`` (``"start"`` on the first, ``"ink"`` on a
+plan whose pen touches down or lifts off moving: :attr:`~tagbot.model.plan.Plan.ink`)."""
 
 
 class StudioError(TagbotError, ValueError):
@@ -118,7 +119,10 @@ def _draft_of(plan: Plan, lift: float) -> dict[str, Any]:
         }
         for j in range(plan.n_strokes)
     ]
-    return {"targets": plan.targets.tolist(), "strokes": strokes, "lift": lift}
+    draft = {"targets": plan.targets.tolist(), "strokes": strokes, "lift": lift}
+    if plan.ink is not None:  # the writer touched down or lifted off moving: kept through edits
+        draft["ink"] = list(plan.ink)
+    return draft
 
 
 def tag_of(design: Design) -> Tag | None:
@@ -139,6 +143,7 @@ def tag_of(design: Design) -> Tag | None:
                     [x["phi1"] for x in s],
                     [x["phi2"] for x in s],
                     float(draft.get("start", 0.0)) if not plans else 0.0,
+                    draft.get("ink"),
                 )
             except PlanError as e:
                 raise StudioError(f"plans[{k}].{e}") from e

@@ -296,3 +296,31 @@ def _stamped(plan: Plan) -> tuple[np.ndarray, np.ndarray]:
     """``plan`` sampled every 10 ms: times and positions."""
     t, xy, _ = sample_plan(Tag((plan,)), 0, 0.01)
     return t, xy
+
+
+def test_a_writer_touching_down_and_lifting_off_moving_is_matched_in_the_air() -> None:
+    """Captures of the middle 80 % of random timed plans' paths (the pen touched down and lifted
+    off moving): the timed fit adds strokes in the air before and after, whose ink window is
+    exactly the recorded span, and follows the recorded speed far better than plans that start
+    and end at rest; the ink keeps to the shape."""
+    rng = np.random.default_rng(21)
+    gains, lifted = [], 0
+    for _ in range(6):
+        full = simulated_capture(random_timed_plan(rng), rng)
+        s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(full.xy, axis=0).T))]
+        keep = (s >= 0.1 * s[-1]) & (s <= 0.9 * s[-1])
+        trace = Trace(full.xy[keep], full.t[keep])
+        air = fit([trace], timing="match")
+        rest = fit([trace], timing="match", timing_options=TimingOptions(air_speed=None))
+        assert all(p.ink is None for p in rest.plans)
+        (db_air, shape), (db_rest, _) = figures([trace], air), figures([trace], rest)
+        assert shape <= 0.005 and db_air >= db_rest - 1e-9
+        gains.append(db_air - db_rest)
+        plan = air.plans[0]
+        if plan.ink is not None:
+            lifted += 1
+            assert plan.moving_ends(air.size)[0]
+            assert plan.ink_window(air.size) == pytest.approx((trace.t[0], trace.t[-1]))
+            motion = air.sample(0.002)
+            assert motion.speed[motion.pen == 1][0] > 0.2 * motion.speed.max()
+    assert lifted >= 4 and np.median(gains) >= 3.0, gains

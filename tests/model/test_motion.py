@@ -205,13 +205,13 @@ def test_strokes_are_evaluated_only_inside_their_windows(monkeypatch):
     """A long plan: evaluated (sample, stroke) pairs stay far below samples × strokes."""
     evaluated = []
     kernels = motion_module.kernels  # what the sampler calls (behind the tests' argument checks)
-    original = kernels.evaluate_runs
+    original = kernels.evaluate_plans_into
 
-    def counting(constants, segments, counts, s):
-        evaluated.append(len(s))
-        return original(constants, segments, counts, s)
+    def counting(*args):
+        evaluated.append(original(*args))  # the pairs it evaluated
+        return evaluated[-1]
 
-    monkeypatch.setattr(kernels, "evaluate_runs", counting)
+    monkeypatch.setattr(kernels, "evaluate_plans_into", counting)
     rng = np.random.default_rng(8)
     m = 200
     targets = np.cumsum(rng.normal(size=(m, 2)) * 20, axis=0)
@@ -249,3 +249,46 @@ def test_plans_evaluated_together_match_each_plan_on_its_own():
         np.testing.assert_allclose(xy, alone_xy, rtol=0, atol=1e-9)
         np.testing.assert_allclose(v, alone_v, rtol=0, atol=1e-7)
     assert evaluate_plans([], [], 1.0) == []
+
+
+def _reference_evaluate(plan: Plan, t: np.ndarray, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """Straightforward arrays: every stroke at every time inside its window, none before it,
+    its whole chord after it."""
+    from scipy.special import ndtr
+
+    from tagbot.model import kernels
+
+    t_on, t_off = plan.windows(size, END_TOLERANCE)
+    xy = np.tile(plan.targets[0], (len(t), 1)).astype(float)
+    v = np.zeros((len(t), 2))
+    for j in range(plan.n_strokes):
+        xy[t > t_off[j]] += plan.chords[j]
+        rows = np.flatnonzero((t >= t_on[j]) & (t <= t_off[j]))
+        elapsed = np.maximum(t[rows] - plan.onsets[j], np.finfo(float).tiny)
+        z = (np.log(elapsed) - plan.mu[j]) / plan.sigma[j]
+        length = plan.geometry.length[j]
+        dx, dy, tx, ty = kernels.evaluate_runs(
+            plan.geometry.constants, np.array([j]), np.array([len(rows)]), length * ndtr(z)
+        )
+        speed = length * np.exp(-0.5 * z * z) / (plan.sigma[j] * elapsed * np.sqrt(2 * np.pi))
+        xy[rows] += np.column_stack([dx, dy])
+        v[rows] += speed[:, None] * np.column_stack([tx, ty])
+    return xy, v
+
+
+@given(st.lists(plans(max_targets=6), min_size=1, max_size=3), st.integers(0, 2**32 - 1))
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_the_compiled_pass_is_the_reference_evaluation(drawn, seed):
+    """All plans in one compiled pass equal each plan evaluated by straightforward arrays, at
+    sorted random times (repeated ones, and before and after the motion, among them)."""
+    rng = np.random.default_rng(seed)
+    times = []
+    for plan in drawn:
+        t = np.sort(rng.uniform(plan.start - 0.2, plan.end(200.0) + 0.2, int(rng.integers(0, 80))))
+        times.append(np.repeat(t, rng.integers(1, 3, len(t))))
+    together = evaluate_plans(drawn, times, 200.0)
+    for plan, t, (xy, v) in zip(drawn, times, together, strict=True):
+        ref_xy, ref_v = _reference_evaluate(plan, t, 200.0)
+        scale = max(1.0, float(np.abs(plan.targets).max()))
+        np.testing.assert_allclose(xy, ref_xy, rtol=0, atol=1e-9 * scale)
+        np.testing.assert_allclose(v, ref_v, rtol=1e-9, atol=1e-9 * scale)

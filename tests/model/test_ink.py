@@ -1,0 +1,108 @@
+"""Plans whose pen touches down and lifts off while moving: the ``ink`` window, its sampling, and
+the run clocks machines draw it with (tagbot.model.easing)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tagbot.errors import PlanError
+from tagbot.model.easing import EASE, RunClock, run_clock
+from tagbot.model.motion import evaluate_plan, sample_ink, sample_plan
+from tagbot.model.plan import Plan, Tag
+
+
+def lifted(ink: tuple[float, float] | None = (0.15, 0.45), start: float = 0.5) -> Plan:
+    """Three strokes along a hook; with ``ink``, the pen is down from 0.15 to 0.45 s in."""
+    return Plan(
+        [[0.0, 0.0], [20.0, 0.0], [40.0, 10.0], [45.0, 30.0]],
+        [0.0, 0.12, 0.12],
+        np.log([0.12, 0.12, 0.12]),
+        [0.3, 0.3, 0.3],
+        [0.2, -0.3, 0.1],
+        [-0.1, 0.2, 0.3],
+        start,
+        ink,
+    )
+
+
+def test_the_ink_window_is_checked() -> None:
+    for bad, message in [
+        ((0.5, 0.2), r"ink: need 0 <= down < up <= 14400 s after start, got \[0.5, 0.2\]"),
+        ((-0.1, 0.2), "ink: need 0 <= down < up"),
+        ((0.1, float("nan")), "ink: need 0 <= down < up"),
+        ("x", "ink: expected \\[down, up\\] seconds after start, got 'x'"),
+    ]:
+        with pytest.raises(PlanError, match=message):
+            lifted(bad)  # type: ignore[arg-type]
+    with pytest.raises(PlanError, match=r"plans\[0\].ink: the pen touches down 100 s after"):
+        Tag((lifted((100.0, 200.0)),))
+
+
+def test_the_pen_is_down_only_within_the_window() -> None:
+    plan = lifted()
+    tag = Tag((plan,))
+    down, up = plan.ink_window(tag.size)
+    assert (down, up) == (0.65, 0.95)
+    motion = tag.sample(0.01)
+    inked = motion.t[motion.pen == 1]
+    assert inked[0] == pytest.approx(down) and inked[-1] == pytest.approx(up)
+    assert [k for k, _ in motion.runs()] == [0]
+    # Outside the window the pen follows the plan in the air: pen up, moving.
+    air = (motion.pen == 0) & (motion.t > plan.start) & (motion.t < plan.end(tag.size))
+    assert np.all(motion.plan[air] == -1) and motion.speed[air].max() > 50.0
+    xy, _ = evaluate_plan(plan, motion.t, tag.size)
+    inside = motion.t <= plan.end(tag.size)
+    assert np.allclose(
+        motion.xy[inside & (motion.t >= plan.start)], xy[inside & (motion.t >= plan.start)]
+    )
+    # The window moves with the plan; without one the whole motion is drawn.
+    assert plan.at(2.0).ink_window(tag.size) == pytest.approx((2.15, 2.45))
+    whole = lifted(None)
+    assert whole.ink_window(tag.size) == (whole.start, whole.end(tag.size))
+
+
+def test_sample_ink_covers_the_window_exactly() -> None:
+    tag = Tag((lifted(), lifted(None, start=2.0)))
+    (t0, xy0, v0), (t1, _, _) = sample_ink(tag, 0.004)
+    assert (t0[0], t0[-1]) == pytest.approx((0.65, 0.95)) and np.all(np.diff(t0) > 0)
+    assert np.allclose(xy0, evaluate_plan(tag.plans[0], t0, tag.size)[0])
+    assert np.hypot(*v0[0]) > 50.0  # touching down moving
+    whole = sample_plan(tag, 1, 0.004)[0]
+    assert (t1[0], t1[-1]) == pytest.approx((whole[0], tag.plans[1].end(tag.size)))
+
+
+def test_a_run_clock_eases_from_and_to_rest_on_the_same_path() -> None:
+    plan = lifted()
+    size = Tag((plan,)).size
+    clock = run_clock(plan, 0.65, 0.95, size)
+    assert (clock.ease_in, clock.ease_out) == (EASE, EASE)
+    assert clock.duration == pytest.approx(0.3 + EASE)
+    assert clock.tag_start == pytest.approx(0.65 - EASE / 2)
+    u = np.linspace(0.0, clock.duration, 40001)
+    tau, rate = clock.tag_time(u), clock.rate(u)
+    assert tau[0] == pytest.approx(0.65) and tau[-1] == pytest.approx(0.95)
+    assert np.all(np.diff(tau) >= 0) and rate[0] == 0.0 and rate[-1] == 0.0
+    assert np.max(np.abs(np.gradient(tau, u) - rate)) < 1e-3  # rate is the clock's derivative
+    assert np.max(np.abs(np.diff(rate))) < 1e-3  # no step in speed ...
+    slope = np.diff(rate) / np.diff(u)
+    assert np.max(np.abs(np.diff(slope))) < 0.1  # ... nor in acceleration
+    middle = (u > EASE) & (u < clock.duration - EASE)
+    assert np.allclose(tau[middle], clock.tag_start + u[middle]) and np.all(rate[middle] == 1.0)
+
+
+def test_runs_at_rest_keep_the_identity_clock() -> None:
+    plan = lifted(None)
+    size = Tag((plan,)).size
+    clock = run_clock(plan, 0.6, 1.2, size)
+    assert clock == RunClock(0.6, 1.2)
+    u = np.array([-0.1, 0.0, 0.3, 0.6, 0.7])
+    assert np.array_equal(clock.tag_time(u), 0.6 + u) and np.all(clock.rate(u) == 1.0)
+    # A window cut inside the ink (a trimmed run) eases only at the ink's moving edges, and a
+    # short run's ramps together never exceed it.
+    moving = lifted()
+    inner = run_clock(moving, 0.7, 0.95, size)
+    assert inner.ease_in == 0.0 and inner.ease_out == EASE
+    short = run_clock(lifted((0.15, 0.2)), 0.65, 0.7, size)
+    assert short.ease_in == short.ease_out == pytest.approx(0.05)
+    assert short.duration == pytest.approx(0.1)
