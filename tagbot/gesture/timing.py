@@ -74,12 +74,9 @@ from tagbot.errors import PlanError
 from tagbot.gesture import timing_kernels
 from tagbot.gesture.strokes import Strokes
 from tagbot.model.plan import (
-    END_TOLERANCE,
-    MAX_COORDINATE,
     MAX_DURATION,
     Model,
     Plan,
-    unit_strokes,
 )
 
 Array = NDArray[np.float64]
@@ -92,7 +89,7 @@ MIN_SAMPLES = 8
 MAX_INTERVAL = 0.1
 """``auto`` matches timing only when the median sampling interval is at most this (10 Hz)."""
 
-_Z90 = float(ndtri(0.9))
+_Z90 = timing_kernels.Z90
 
 
 @dataclass(frozen=True)
@@ -125,6 +122,13 @@ class TimingOptions:
     """Each stroke should be complete (as a plan's end counts it: within ``END_TOLERANCE`` of
     the size) by the recording's end plus ``pad``: beyond, a penalty of this per ``step`` late.
     Long tails would make a plan outlast its recording by far and push the next plan back."""
+    min_extent: float = 3.0
+    """Each stroke's velocity pulse (its 10-90 % interval, ``2·exp(mu)·sinh(z90·sigma)``) lasts
+    at least this many grid steps: a shorter pulse falls between the grid's instants, where the
+    velocity residuals do not see it, and draws as a spike the writer never made. Below it, a
+    penalty of ``extent_weight`` per e-fold short."""
+    extent_weight: float = 10.0
+    """See ``min_extent``."""
     phi_limit: float = 3.0
     """Tangent deviations stay within ± this, radians."""
     pad: float = 0.15
@@ -344,12 +348,17 @@ class _Fit:
         self.wv = velocity * np.sqrt(rec.weight) / self.v_scale
         budget = opts.shape_budget * size
         self.wp = np.sqrt(rec.weight) * opts.position_weight / budget
-        self.pull = opts.target_pull / budget
         self.targets0 = np.ascontiguousarray(strokes.targets, dtype=float)
         self.anchor = self.targets0 if anchor is None else anchor
         self.rec_v = (rec.v * self.wv[:, None]).ravel()
-        self.deadline = rec.deadline
-        self.late = opts.tail_weight / opts.step
+        # No deadline (the ink's cost alone) as the largest float: the kernels see finite input.
+        self.deadline = rec.deadline if math.isfinite(rec.deadline) else float(np.finfo(float).max)
+        step = float(rec.t[1] - rec.t[0]) if len(rec.t) > 1 else opts.step
+        self.log_extent = math.log(opts.min_extent * step)
+        # Penalties' weights: a target's pull, lateness per second, a pulse's shortfall.
+        self.weights = np.array(
+            [opts.target_pull / budget, opts.tail_weight / opts.step, opts.extent_weight]
+        )
         self.rec_xy = (rec.xy * self.wp[:, None]).ravel()
 
     def pack(self, s: Strokes) -> Array:
@@ -401,44 +410,20 @@ class _Fit:
 
     def evaluate(
         self, x: Array, jacobian: bool
-    ) -> tuple[Array, tuple[NDArray[np.intp], NDArray[np.intp], Array] | None]:
-        targets, onsets, mu, sigma, phi1, phi2 = self.arrays(x)
-        if not (np.all(np.isfinite(x)) and np.abs(targets).max() <= MAX_COORDINATE):
+    ) -> tuple[Array, tuple[NDArray[np.intp], NDArray[np.intp], Array, int] | None]:
+        """Residuals at ``x`` (an infinite one where ``x`` is not a valid plan) and, if wanted,
+        the Jacobian as COO and its leading fours
+        (:func:`~tagbot.gesture.timing_kernels.residuals`)."""
+        if not np.all(np.isfinite(x)):
             return np.full(1, np.inf), None
-        if np.any(np.hypot(*np.diff(targets, axis=0).T) <= 1e-9 * self.size):
-            return np.full(1, np.inf), None
-        xy, v, rows, cols, vals = timing_kernels.model_terms(
-            self.rec.t, targets, onsets, mu, sigma, phi1, phi2, self.arcs, self.size,
-            self.wv, self.wp, jacobian, ANGLE_STEP, self.column, self.target_column,
-            JACOBIAN_TAIL,
+        ok, r, rows, cols, vals, groups = timing_kernels.residuals(
+            x, self.column, self.target_column, self.targets0, self.arcs, self.rec.t, self.size,
+            self.wv, self.wp, self.rec_v, self.rec_xy, self.anchor, self.weights, self.deadline,
+            self.log_extent, jacobian, ANGLE_STEP, JACOBIAN_TAIL,
         )  # fmt: skip
-        pull = (targets[1:-1] - self.anchor[1:-1]).ravel() * self.pull
-        chords = np.hypot(*np.diff(targets, axis=0).T)
-        lengths = unit_strokes(phi1, phi2).length * chords
-        budget = np.minimum(END_TOLERANCE * self.size / (self.n * lengths), 1e-2)
-        z_tail = -ndtri(budget)  # where the plan's window ends (Plan.windows)
-        delay = np.exp(mu + sigma * z_tail)
-        late = onsets + delay - self.deadline
-        overdue = late > 0
-        r = np.concatenate([(v * self.wv[:, None]).ravel() - self.rec_v,
-                            (xy * self.wp[:, None]).ravel() - self.rec_xy, pull,
-                            np.where(overdue, late, 0.0) * self.late])  # fmt: skip
-        if not np.all(np.isfinite(r)):
+        if not ok:
             return np.full(1, np.inf), None
-        if not jacobian:
-            return r, None
-        g = len(self.rec.t)
-        k = 2 * self.interior
-        j = np.flatnonzero(overdue)
-        tail_rows = 4 * g + k + j
-        pull_cols = np.column_stack([self.target_column, self.target_column + 1]).ravel()
-        rows = np.r_[rows, 4 * g + np.arange(k), tail_rows, tail_rows, tail_rows]
-        base = self.column[j]
-        cols = np.r_[cols, pull_cols, base, base + 1, base + 2]
-        d = delay[j] * self.late
-        vals = np.r_[vals, np.full(k, self.pull), np.full(j.size, self.late), d, d * z_tail[j]]
-        jac = (rows.astype(np.intp), cols.astype(np.intp), vals)
-        return r, jac
+        return r, ((rows, cols, vals, groups) if jacobian else None)
 
 
 ANGLE_STEP = 1e-6

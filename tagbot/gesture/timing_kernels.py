@@ -15,12 +15,17 @@ from tagbot.model.kernels import (
     TINY,
     compiled,
     lognormal_at,
+    ndtri,
     segment_constants,
     segment_point,
     stroke_window,
     unit_stroke,
 )
-from tagbot.model.plan import END_TOLERANCE
+from tagbot.model.plan import END_TOLERANCE, MAX_COORDINATE
+
+Z90 = 1.2815515655446004
+"""The standard normal's 90 % quantile: a stroke's 10-90 % interval lasts
+``2·exp(mu)·sinh(Z90·sigma)``."""
 
 
 @compiled
@@ -130,10 +135,13 @@ def model_terms(
     column: np.ndarray,
     target_column: np.ndarray,
     tail: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    unit: np.ndarray,
+    extra: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
     """One trace's positions and velocities at the sorted times ``t``, and (if wanted) the
     Jacobian of the weighted residuals ``wv·v`` (rows ``2g, 2g + 1``) and ``wp·xy`` (rows
-    ``2G + 2g, 2G + 2g + 1``) as COO ``(row, col, value)``.
+    ``2G + 2g, 2G + 2g + 1``) as COO ``(row, col, value)``: its first ``q`` entries (returned
+    last), with room for ``extra`` more. Each stroke's unit-chord path length goes to ``unit``.
 
     Columns: stroke ``j``'s ``t0, mu, sigma`` and its angles (``phi`` for arcs, else ``phi1,
     phi2``) from ``column[j]`` on; interior target ``k + 1``'s ``x, y`` at
@@ -148,7 +156,7 @@ def model_terms(
     n, count = onsets.size, t.size
     angles = 1 if arcs else 2
     consts = np.empty((n, N_CONSTANTS))
-    kappa0, dkappa, unit = np.empty(n), np.empty(n), np.empty(n)
+    kappa0, dkappa = np.empty(n), np.empty(n)
     begin, stop = np.empty(n, np.intp), np.empty(n, np.intp)
     cx, cy = np.empty(n), np.empty(n)
     for j in range(n):
@@ -188,7 +196,7 @@ def model_terms(
             pairs[p, 0], pairs[p, 1], pairs[p, 2], pairs[p, 3] = gx, gy, ux, uy
     if not want_jacobian:
         empty = np.empty(0, np.intp)
-        return xy, v, empty, empty.copy(), np.empty(0)
+        return xy, v, empty, empty.copy(), np.empty(0), 0
     jb, js = np.empty(n, np.intp), np.empty(n, np.intp)  # the Jacobian's rows per stroke
     for j in range(n):
         t_on, t_off = stroke_window(onsets[j], mu[j], sigma[j], tail)
@@ -201,7 +209,7 @@ def model_terms(
         lo_t[k] = min(jb[k], jb[k + 1])
         hi_t[k] = max(js[k], js[k + 1])
         span[k] = max(hi_t[k] - lo_t[k], 0)
-    total = 4 * (3 + angles) * int(np.sum(js - jb)) + 8 * int(np.sum(span))
+    total = 4 * (3 + angles) * int(np.sum(js - jb)) + 8 * int(np.sum(span)) + extra
     rows, cols, vals = np.empty(total, np.intp), np.empty(total, np.intp), np.empty(total)
     q = 0
     shape_p = np.empty(N_CONSTANTS)
@@ -263,7 +271,110 @@ def model_terms(
                       ux, uy, gx, gy, wv[i], wp[i])  # fmt: skip
             q = _put4(rows, cols, vals, q, i, count, target_column[k] + 1, 0.0, 1.0,
                       ux, uy, gx, gy, wv[i], wp[i])  # fmt: skip
-    return xy, v, rows[:q], cols[:q], vals[:q]
+    return xy, v, rows, cols, vals, q
+
+
+@compiled
+def residuals(
+    x: np.ndarray,
+    column: np.ndarray,
+    target_column: np.ndarray,
+    targets0: np.ndarray,
+    arcs: bool,
+    t: np.ndarray,
+    size: float,
+    wv: np.ndarray,
+    wp: np.ndarray,
+    rec_v: np.ndarray,
+    rec_xy: np.ndarray,
+    anchor: np.ndarray,
+    weights: np.ndarray,
+    deadline: float,
+    log_extent: float,
+    want_jacobian: bool,
+    h: float,
+    tail: float,
+) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """The timing fit's residuals at parameters ``x`` (laid out by ``column`` and
+    ``target_column``, see :class:`tagbot.gesture.timing._Fit`) and, if wanted, their Jacobian
+    as COO and how many fours lead it (:func:`normal_band`); False (and nothing) where ``x``
+    (finite) is not a valid plan.
+
+    Rows: the weighted velocities and positions less the recording's (``rec_v``, ``rec_xy``:
+    :func:`model_terms`' layout), each interior target's pull to ``anchor``, each stroke's
+    lateness past ``deadline`` (where its window, as :meth:`~tagbot.model.plan.Plan.windows`
+    has it, ends) and its velocity pulse's shortfall below ``exp(log_extent)`` (its 10-90 %
+    interval, in e-folds). ``weights``: pull, lateness per second, shortfall.
+    """
+    n, m, g = column.size, targets0.shape[0], t.size
+    angles = 1 if arcs else 2
+    targets = targets0.copy()
+    onsets, mu, sigma = np.empty(n), np.empty(n), np.empty(n)
+    phi1, phi2 = np.empty(n), np.empty(n)
+    for j in range(n):
+        c = column[j]
+        onsets[j], mu[j], sigma[j] = x[c], x[c + 1], x[c + 2]
+        phi2[j] = x[c + 2 + angles]
+        phi1[j] = -phi2[j] if arcs else x[c + 3]
+    for k in range(m - 2):
+        targets[k + 1, 0], targets[k + 1, 1] = x[target_column[k]], x[target_column[k] + 1]
+    empty = np.empty(0, np.intp)
+    for k in range(m):
+        if abs(targets[k, 0]) > MAX_COORDINATE or abs(targets[k, 1]) > MAX_COORDINATE:
+            return False, np.empty(0), empty, empty.copy(), np.empty(0), 0
+        if k > 0:
+            dx, dy = targets[k, 0] - targets[k - 1, 0], targets[k, 1] - targets[k - 1, 1]
+            if math.hypot(dx, dy) <= 1e-9 * size:
+                return False, np.empty(0), empty, empty.copy(), np.empty(0), 0
+    unit = np.empty(n)
+    xy, v, rows, cols, vals, q = model_terms(
+        t, targets, onsets, mu, sigma, phi1, phi2, arcs, size, wv, wp, want_jacobian, h,
+        column, target_column, tail, unit, 2 * (m - 2) + 5 * n,
+    )  # fmt: skip
+    pull, late, short = weights[0], weights[1], weights[2]
+    groups = q // 4  # model_terms' entries, in fours (see normal_band)
+    interior = 2 * (m - 2)
+    r = np.empty(4 * g + interior + 2 * n)
+    for i in range(g):
+        r[2 * i] = v[i, 0] * wv[i] - rec_v[2 * i]
+        r[2 * i + 1] = v[i, 1] * wv[i] - rec_v[2 * i + 1]
+        r[2 * g + 2 * i] = xy[i, 0] * wp[i] - rec_xy[2 * i]
+        r[2 * g + 2 * i + 1] = xy[i, 1] * wp[i] - rec_xy[2 * i + 1]
+    for k in range(m - 2):
+        r[4 * g + 2 * k] = (targets[k + 1, 0] - anchor[k + 1, 0]) * pull
+        r[4 * g + 2 * k + 1] = (targets[k + 1, 1] - anchor[k + 1, 1]) * pull
+        if want_jacobian:
+            q = _put1(rows, cols, vals, q, 4 * g + 2 * k, target_column[k], pull)
+            q = _put1(rows, cols, vals, q, 4 * g + 2 * k + 1, target_column[k] + 1, pull)
+    for j in range(n):
+        c, tail_row, short_row = column[j], 4 * g + interior + j, 4 * g + interior + n + j
+        chord = math.hypot(targets[j + 1, 0] - targets[j, 0], targets[j + 1, 1] - targets[j, 1])
+        budget = min(END_TOLERANCE * size / (n * max(unit[j] * chord, TINY)), 1e-2)
+        z_tail = -ndtri(budget)
+        delay = math.exp(mu[j] + sigma[j] * z_tail)
+        lateness = onsets[j] + delay - deadline
+        r[tail_row] = lateness * late if lateness > 0.0 else 0.0
+        if lateness > 0.0 and want_jacobian:
+            q = _put1(rows, cols, vals, q, tail_row, c, late)
+            q = _put1(rows, cols, vals, q, tail_row, c + 1, delay * late)
+            q = _put1(rows, cols, vals, q, tail_row, c + 2, delay * late * z_tail)
+        spread = Z90 * sigma[j]
+        shortfall = log_extent - mu[j] - math.log(2.0 * math.sinh(spread))
+        r[short_row] = shortfall * short if shortfall > 0.0 else 0.0
+        if shortfall > 0.0 and want_jacobian:
+            q = _put1(rows, cols, vals, q, short_row, c + 1, -short)
+            q = _put1(rows, cols, vals, q, short_row, c + 2, -short * Z90 / math.tanh(spread))
+    for p in range(r.size):
+        if not math.isfinite(r[p]):
+            return False, np.empty(0), empty, empty.copy(), np.empty(0), 0
+    return True, r, rows[:q], cols[:q], vals[:q], groups
+
+
+@compiled
+def _put1(rows, cols, vals, q, row, col, value):  # type: ignore[no-untyped-def]
+    """One Jacobian entry at ``q``; returns the next free index."""
+    rows[q], cols[q], vals[q] = row, col, value
+    return q + 1
 
 
 @compiled
@@ -279,46 +390,96 @@ def _put4(rows, cols, vals, q, i, count, col, cx, cy, dux, duy, dgx, dgy, wv, wp
 
 
 @compiled
+def _counting_order(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of ``keys`` (integers in ``[0, n)``) grouped by key, stably, and each key's start
+    in them (``start[k]..start[k + 1]``)."""
+    start = np.zeros(n + 1, np.intp)
+    for e in range(keys.size):
+        start[keys[e] + 1] += 1
+    for k in range(n):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    order = np.empty(keys.size, np.intp)
+    for e in range(keys.size):
+        order[fill[keys[e]]] = e
+        fill[keys[e]] += 1
+    return order, start
+
+
+@compiled
+def _add_product(a: np.ndarray, ce: int, cf: int, product: float) -> None:
+    """``product`` into ``(JᵀJ)[ce, cf]`` (and its mirror) in lower band storage."""
+    if cf <= ce:
+        a[ce, ce - cf] += product
+    else:
+        a[cf, cf - ce] += product
+
+
+@compiled
+def _widest(
+    order: np.ndarray, start: np.ndarray, cols: np.ndarray, stride: int, offset: int
+) -> int:
+    """The widest span of columns among the groups ``start[k]..start[k + 1]`` of ``order``
+    (entry ``offset + stride·order[q]``)."""
+    band = 0
+    for k in range(start.size - 1):
+        lo, hi = start[k], start[k + 1]
+        if hi > lo:
+            low = high = cols[offset + stride * order[lo]]
+            for q in range(lo + 1, hi):
+                c = cols[offset + stride * order[q]]
+                low, high = min(low, c), max(high, c)
+            band = max(band, high - low)
+    return band
+
+
+@compiled
 def normal_band(
-    rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, residual: np.ndarray, params: int
+    rows: np.ndarray,
+    cols: np.ndarray,
+    vals: np.ndarray,
+    groups: int,
+    residual: np.ndarray,
+    params: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``JᵀJ`` in lower band storage (``a[c, d] = (JᵀJ)[c, c − d]``) and ``Jᵀr``, from the
-    Jacobian's COO entries (each ``(row, col)`` once), grouped by row with a counting sort."""
+    Jacobian's COO entries (each ``(row, col)`` once). The first ``4·groups`` entries come in
+    fours sharing a column and a grid instant (:func:`_put4`'s rows ``2i, 2i + 1, 2G + 2i,
+    2G + 2i + 1``, which hold the same columns): those are gathered by instant, so each pair of
+    columns costs one product of four; the rest (the penalties' rows) by row."""
     nrows = residual.size
-    count = np.zeros(nrows + 1, np.intp)
-    for e in range(rows.size):
-        count[rows[e] + 1] += 1
-    for r in range(nrows):
-        count[r + 1] += count[r]
-    fill = count[:-1].copy()
-    order = np.empty(rows.size, np.intp)
-    for e in range(rows.size):
-        order[fill[rows[e]]] = e
-        fill[rows[e]] += 1
-    band = 0
-    for r in range(nrows):
-        lo, hi = count[r], count[r + 1]
-        if hi > lo:
-            first = last = cols[order[lo]]
-            for q in range(lo + 1, hi):
-                c = cols[order[q]]
-                first, last = min(first, c), max(last, c)
-            band = max(band, last - first)
+    instant = rows[: 4 * groups : 4] // 2
+    by_instant, first = _counting_order(instant, nrows // 2 + 1)
+    singles = rows[4 * groups :]
+    by_row, start = _counting_order(singles, nrows)
+    band = max(_widest(by_instant, first, cols, 4, 0), _widest(by_row, start, cols, 1, 4 * groups))
     a = np.zeros((params, band + 1))
     g = np.zeros(params)
-    for r in range(nrows):
-        res = residual[r]
-        for q in range(count[r], count[r + 1]):
-            e = order[q]
+    for k in range(first.size - 1):
+        for q in range(first[k], first[k + 1]):
+            e = 4 * by_instant[q]
+            ce = cols[e]
+            v0, v1, v2, v3 = vals[e], vals[e + 1], vals[e + 2], vals[e + 3]
+            g[ce] += (
+                v0 * residual[rows[e]]
+                + v1 * residual[rows[e + 1]]
+                + v2 * residual[rows[e + 2]]
+                + v3 * residual[rows[e + 3]]
+            )
+            for p in range(first[k], q + 1):
+                f = 4 * by_instant[p]
+                product = v0 * vals[f] + v1 * vals[f + 1] + v2 * vals[f + 2] + v3 * vals[f + 3]
+                _add_product(a, ce, cols[f], product)
+    offset = 4 * groups
+    for k in range(start.size - 1):
+        res = residual[k]
+        for q in range(start[k], start[k + 1]):
+            e = offset + by_row[q]
             ce, ve = cols[e], vals[e]
             g[ce] += ve * res
-            for p in range(count[r], q + 1):
-                f = order[p]
-                cf = cols[f]
-                if cf <= ce:
-                    a[ce, ce - cf] += vals[f] * ve
-                else:
-                    a[cf, cf - ce] += vals[f] * ve
+            for p in range(start[k], q + 1):
+                f = offset + by_row[p]
+                _add_product(a, ce, cols[f], vals[f] * ve)
     return a, g
 
 

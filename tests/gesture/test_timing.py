@@ -324,3 +324,61 @@ def test_a_writer_touching_down_and_lifting_off_moving_is_matched_in_the_air() -
             motion = air.sample(0.002)
             assert motion.speed[motion.pen == 1][0] > 0.2 * motion.speed.max()
     assert lifted >= 4 and np.median(gains) >= 3.0, gains
+
+
+def test_the_jacobian_matches_finite_differences_with_every_penalty_active() -> None:
+    """The solver's Jacobian (exact for onsets, mu, sigma and targets; tangents by central
+    differences) equals finite differences of its residuals, with a stroke too short for the
+    grid (the extent floor active) and one outlasting the recording (the tail penalty). Known
+    approximations: entries where a stroke is within ``JACOBIAN_TAIL`` of not started or done
+    are left out (under 1 % of a column's largest), and the penalties' rows hold only the
+    timing's columns (the tail's budget also moves a little with the geometry)."""
+    from tagbot.gesture.strokes import Strokes
+    from tagbot.gesture.timing import _Fit
+
+    true = Plan(
+        [[0.0, 0.0], [40.0, 10.0], [70.0, -5.0], [90.0, 20.0]],
+        [0.0, 0.15, 0.2],
+        np.log([0.2, 0.15, 0.25]),
+        [0.3, 0.25, 0.3],
+        [0.3, -0.2, 0.4],
+        [-0.1, 0.5, 0.2],
+    )
+    rec = resample(*_stamped(true), TimingOptions())
+    # Stroke 1 is a 7 ms pulse (below 3 grid steps); stroke 2 ends long after the recording.
+    guess = Plan(true.targets, [0.0, 0.2, 0.2], np.log([0.2, 0.02, 0.9]), [0.3, 0.1, 0.5],
+                 true.phi1, true.phi2)  # fmt: skip
+    problem = _Fit(Strokes.of([guess]), rec, 95.0, False, TimingOptions())
+    x = problem.pack(Strokes.of([guess]))
+    r, jac = problem.evaluate(x, True)
+    assert jac is not None
+    rows, cols, vals, _ = jac
+    exact = np.zeros((r.size, x.size))
+    np.add.at(exact, (rows, cols), vals)
+    trajectory = 4 * len(rec.t) + 2 * problem.interior  # velocity, position and pull rows
+    tail, short = trajectory + np.arange(problem.n), trajectory + problem.n + np.arange(problem.n)
+    assert r[tail[2]] > 0 and r[short[1]] > 0 and r[short[0]] == 0  # both penalties active
+    timing = np.concatenate([problem.column + k for k in range(3)])
+    for c in range(x.size):
+        step = np.zeros(x.size)
+        step[c] = 1e-6 * max(1.0, abs(x[c]))
+        up, _ = problem.evaluate(x + step, False)
+        down, _ = problem.evaluate(x - step, False)
+        numeric = (up - down) / (2 * step[c])
+        scale = float(np.abs(numeric[:trajectory]).max())
+        assert np.allclose(exact[:trajectory, c], numeric[:trajectory], atol=1e-2 * scale), c
+        if c in timing:
+            assert np.allclose(exact[trajectory:, c], numeric[trajectory:], rtol=1e-5, atol=1e-6)
+
+
+def test_no_fitted_stroke_is_a_pulse_too_short_for_the_grid() -> None:
+    """Strokes whose velocity pulse would fall between the grid's instants (a spike the
+    recording never shows) are held at the extent floor: none ends up much shorter."""
+    rng = np.random.default_rng(7)
+    options = TimingOptions()
+    for _ in range(3):
+        trace = simulated_capture(random_timed_plan(rng), rng)
+        step = float(np.diff(resample(trace.t, trace.xy, options).t[:2])[0])
+        plan = fit([trace], timing="match").plans[0]
+        extent = 2 * np.exp(plan.mu) * np.sinh(1.2815515655446004 * plan.sigma)
+        assert extent.min() >= 0.7 * options.min_extent * step, extent.min()
