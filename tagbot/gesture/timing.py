@@ -5,7 +5,10 @@ The paper (§6) ignores timing, so static and timed traces are fitted alike; a g
 timed capture therefore moves at the paper's default rhythm, not the writer's. With
 ``fit(..., timing="match")`` each trace's geometric plan is refined further:
 
-1. **The recording, resampled by time** (:func:`resample`): positions and velocities on a
+1. **The recording, resampled by time** (:func:`resample`), at the instants its samples were
+   most likely taken at (:func:`~tagbot.inputs.stamps.sample_instants`: stamps that carry a
+   steady sampler's delivery noise are regressed on the sample number, exact ones kept):
+   positions and velocities on a
    regular grid by Gaussian-weighted local-quadratic regression of the samples, the kernel as wide
    as the median sampling interval (at least :attr:`TimingOptions.min_bandwidth`). No single
    sample decides a value: repeated timestamps (zero dt), jittered clocks and noisy points are
@@ -73,6 +76,7 @@ from scipy.special import ndtri
 from tagbot.errors import PlanError
 from tagbot.gesture import timing_kernels
 from tagbot.gesture.strokes import Strokes
+from tagbot.inputs.stamps import sample_instants
 from tagbot.model.plan import (
     MAX_DURATION,
     Model,
@@ -449,10 +453,10 @@ def _match_trace(
 ) -> tuple[Plan, float, tuple[Plan, float] | None]:
     """:func:`match_trace`'s plan without strokes in the air, the first timestamp, and the plan
     with them with its relative gain (the ink cost it saves), if they help."""
-    t = np.asarray(trace.t, dtype=float)
     xy = np.asarray(trace.xy, dtype=float)
+    distinct = int(np.count_nonzero(np.diff(trace.t) > 0)) + 1
+    t, _ = sample_instants(trace.t, xy)  # the instants behind the stamps
     t0 = float(t[0])
-    distinct = int(np.count_nonzero(np.diff(t) > 0)) + 1
     rec = resample(t - t0, xy, options)
     initial = initial_timing(plan, rec, size, options)
     try:
