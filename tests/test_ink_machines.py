@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from model.test_ink import lifted  # the hook (tests/model is the package "model")
 from scipy.spatial import cKDTree
 
 from tagbot import arm, plotter
@@ -17,16 +18,7 @@ from tagbot.model.plan import Plan, Tag
 def lifted_tag() -> Tag:
     """One hook whose pen is down from 0.15 to 0.45 s into its motion (moving at both ends),
     then a plan drawn from rest to rest."""
-    hook = Plan(
-        [[0.0, 0.0], [20.0, 0.0], [40.0, 10.0], [45.0, 30.0]],
-        [0.0, 0.12, 0.12],
-        np.log([0.12, 0.12, 0.12]),
-        [0.3, 0.3, 0.3],
-        [0.2, -0.3, 0.1],
-        [-0.1, 0.2, 0.3],
-        0.0,
-        (0.15, 0.45),
-    )
+    hook = lifted(start=0.0)
     rest = Plan([[10.0, 20.0], [30.0, 25.0]], [0.0], [np.log(0.2)], [0.3], [0.2], [-0.2], 2.0)
     return Tag((hook, rest))
 
