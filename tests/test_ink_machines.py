@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from model.test_ink import lifted  # the hook (tests/model is the package "model")
 from scipy.spatial import cKDTree
 
 from tagbot import arm, plotter
@@ -13,6 +12,7 @@ from tagbot.metrics import densify
 from tagbot.model.easing import EASE
 from tagbot.model.motion import evaluate_plan
 from tagbot.model.plan import Plan, Tag
+from tests.model.test_ink import lifted
 
 
 def lifted_tag() -> Tag:

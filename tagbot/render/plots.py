@@ -72,6 +72,9 @@ __all__ = [
 Array = NDArray[np.float64]
 
 PLOT_KINDS = ("speed", "plan")
+AIR_SPEED = 1e-3
+"""Pen-up samples faster than this fraction of the peak speed are drawn as moving in the air
+(the slower rest of a lognormal's tail is not)."""
 
 EXECUTED_WINDOW = 0.01
 """The executed speed's smallest differencing window, seconds (a 1 ms record of 1/80 mm steps
@@ -110,6 +113,9 @@ class SpeedCurves:
     """Pen-up intervals to shade."""
     units: str = "mm"
     speed_label: str = "speed |v|"
+    air: Curve | None = None
+    """The speed where the pen moves in the air (before a touch-down or after a lift-off in
+    motion, a plan's ``ink`` window); NaN elsewhere. None: nothing moves pen up."""
 
 
 def _stroke_curves(
@@ -159,6 +165,9 @@ def speed_curves(
 
     motion = tag.sample(dt)
     speed = np.where(motion.pen == 1, motion.speed, np.nan)
+    peak = float(np.max(motion.speed, initial=0.0))
+    moving = (motion.pen == 0) & (motion.speed > AIR_SPEED * peak)
+    air = Curve(motion.t, np.where(moving, motion.speed, np.nan)) if moving.any() else None
     measured = []
     if traces is not None:
         runs = list(motion.runs())
@@ -173,6 +182,7 @@ def speed_curves(
         measured_label=f"recorded, {VELOCITY_CUTOFF:g} Hz low-pass (scaled and aligned)",
         lifts=_lifts(motion.t, motion.pen),
         units=tag.units,
+        air=air,
     )
 
 
@@ -411,8 +421,8 @@ def _figure(width: float = 9.0, height: float = 4.0) -> Figure:
 
 
 def speed_figure(curves: SpeedCurves, *, title: str | None = None) -> Figure:
-    """Speed over time: total (red), strokes' lognormals (turquoise), measured (orange, on
-    top)."""
+    """Speed over time: total (red; dashed in the air), strokes' lognormals (turquoise),
+    measured (orange, on top)."""
     figure = _figure()
     ax = figure.add_subplot()
     for k, (a, b) in enumerate(curves.lifts):
@@ -438,6 +448,15 @@ def speed_figure(curves: SpeedCurves, *, title: str | None = None) -> Figure:
     ax.plot(
         curves.speed.t, curves.speed.y, color=SPEED_COLOR, linewidth=2.2, label=curves.speed_label
     )
+    if curves.air is not None:
+        ax.plot(
+            curves.air.t,
+            curves.air.y,
+            color=SPEED_COLOR,
+            linewidth=1.4,
+            linestyle=(0, (3, 2)),
+            label="in the air (pen up, moving)",
+        )
     for k, c in enumerate(curves.measured):  # on top, thinner: visible even where they agree
         ax.plot(
             c.t,
@@ -455,8 +474,10 @@ def speed_figure(curves: SpeedCurves, *, title: str | None = None) -> Figure:
     ax.grid(True, alpha=0.25)
     if title:
         ax.set_title(title)
-    # Outside the axes, above them: a legend never covers a curve.
-    figure.legend(loc="outside upper center", ncols=5, fontsize="small", frameon=False)
+    # Outside the axes, above them: a legend never covers a curve (two rows past four entries).
+    entries = len(ax.get_legend_handles_labels()[0])
+    columns = entries if entries <= 4 else (entries + 1) // 2
+    figure.legend(loc="outside upper center", ncols=columns, fontsize="small", frameon=False)
     return figure
 
 

@@ -22,6 +22,7 @@ from tagbot.render.plots import (
     load_run,
     plan_figure,
     run_speed_curves,
+    save_figure,
     speed_curves,
     speed_figure,
 )
@@ -42,6 +43,26 @@ def assert_not_blank(path: Path) -> np.ndarray:
     pixels = colours(path)
     assert np.count_nonzero(pixels.min(axis=1) < 200) > 0.01 * len(pixels)
     return pixels
+
+
+def test_speed_plot_draws_the_motion_in_the_air(tmp_path: Path) -> None:
+    """A plan touching down and lifting off moving: its speed outside the ink window is the
+    dashed air curve, inside it the solid one; a plan drawn from rest has no air curve."""
+    from tests.model.test_ink import lifted
+
+    plan = lifted(start=0.0)
+    curves = speed_curves(Tag((plan,)))
+    assert curves.air is not None
+    down, up = plan.ink_window(Tag((plan,)).size)
+    t, air, ink = curves.air.t, curves.air.y, curves.speed.y
+    inside = (t > down + 0.002) & (t < up - 0.002)
+    assert np.all(np.isnan(air[inside])) and np.all(np.isfinite(ink[inside]))
+    before = t < down - 0.002
+    assert np.isfinite(air[before]).any() and np.all(np.isnan(ink[before]))
+    assert speed_curves(Tag((lifted(ink=None),))).air is None
+    path = tmp_path / "air.png"
+    save_figure(speed_figure(curves), path)
+    assert has_colour(assert_not_blank(path), "#c62828", count=20)
 
 
 @pytest.mark.parametrize("name", ["cae", "letter_b"])
