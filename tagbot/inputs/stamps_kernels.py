@@ -8,6 +8,9 @@ import numpy as np
 
 from tagbot.model.kernels import compiled
 
+TIE = 1e-9
+"""Roughnesses within this fraction of each other are equal (rounding decides nothing)."""
+
 
 @compiled
 def spread(t: np.ndarray) -> np.ndarray:
@@ -143,7 +146,7 @@ def sample_instants(
         for i in range(s.size):
             candidate[i] = (1.0 - b) * s[i] + b * even[i]
         score = roughness(candidate, xy)
-        if score < best:
+        if score < best * (1.0 - TIE):  # a tie (the instants equal the stamps) keeps the stamps
             best, blend = score, b
             out = candidate.copy()
     return out, blend

@@ -111,7 +111,7 @@ def _ref_sample_instants(t: ArrayLike, xy: ArrayLike) -> tuple[Array, float]:
     for a in BLENDS[1:]:
         candidate = (1.0 - a) * t + a * regular
         score = _ref_roughness(candidate, xy)
-        if score < best:
+        if score < best * (1.0 - 1e-9):
             best, blend, instants = score, a, candidate
     return instants, blend
 
