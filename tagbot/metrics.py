@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from tagbot import metrics_kernels as kernels
+from tagbot.inputs.stamps import sample_instants
 from tagbot.model.motion import Motion, sample_ink, sample_plans
 from tagbot.model.plan import Plan, Tag
 
@@ -58,28 +59,21 @@ class ShapeError:
 
 def _kernel_array(a: ArrayLike) -> Array:
     """``a`` as a C-contiguous, writeable float array: one compiled signature for every caller
-    (slices and read-only :class:`~tagbot.model.motion.Motion` arrays among them)."""
-    return np.require(a, dtype=float, requirements=["C", "W"])
+    (slices and read-only :class:`~tagbot.model.motion.Motion` arrays among them; a copy only
+    for those)."""
+    a = np.asarray(a, dtype=float)
+    return a if a.flags.c_contiguous and a.flags.writeable else np.array(a, order="C")
 
 
 def densify(polyline: ArrayLike, spacing: float) -> Array:
     """The polyline with points inserted so consecutive points are at most ``spacing`` apart."""
     xy = np.asarray(polyline, dtype=float)
-    return _densified([xy], spacing)[0] if len(xy) >= 2 else xy
-
-
-def _densified(
-    polylines: Sequence[Array], spacing: float
-) -> tuple[Array, NDArray[np.intp], NDArray[np.intp], Array]:
-    """Non-empty polylines densified (:func:`densify`), one after the other: the samples, each
-    one's previous and next sample on its polyline, and the segments between distinct ones
-    (:func:`tagbot.metrics_kernels.densified`)."""
-    return kernels.densified(*_joined(polylines), float(spacing))
+    return kernels.densified(*_joined([xy]), float(spacing))[0] if len(xy) >= 2 else xy
 
 
 def _joined(polylines: Sequence[ArrayLike]) -> tuple[Array, NDArray[np.intp]]:
-    """Polylines one after the other, ``(N, 2)``, and where each ends."""
-    parts = [np.asarray(p, dtype=float).reshape(-1, 2) for p in polylines]
+    """The non-empty polylines one after the other, ``(N, 2)``, and where each ends."""
+    parts = [p for p in (np.asarray(p, dtype=float).reshape(-1, 2) for p in polylines) if len(p)]
     points = _kernel_array(np.concatenate(parts) if parts else np.empty((0, 2)))
     return points, np.cumsum([len(p) for p in parts], dtype=np.intp)
 
@@ -87,23 +81,14 @@ def _joined(polylines: Sequence[ArrayLike]) -> tuple[Array, NDArray[np.intp]]:
 class _Polylines:
     """Polylines sampled at ``spacing``, with the segments that lead to and from each sample."""
 
-    def __init__(self, polylines: list[Array], spacing: float) -> None:
-        self.points, self.before, self.after, self.segments = _densified(polylines, spacing)
+    def __init__(self, joined: tuple[Array, NDArray[np.intp]], spacing: float) -> None:
+        *samples, self.cell, crowded = kernels.sampled(*joined, float(spacing), _CROWDED)
+        self.points, self.before, self.after, self.segments = samples
         self.spacing = spacing
-        # Cells about two samples wide along a curve, narrower where the samples crowd an area
-        # (a scribble over itself), so that a cell holds a few samples whatever the drawing.
-        width, height = kernels.extent(self.points)
-        area = width * height
-        crowded = 2.0 * math.sqrt(area / len(self.points))
-        self.cell = min(2.0 * spacing, max(0.25 * spacing, crowded)) if crowded > 0 else spacing
         # Where many long segments pass near every point (thousands of strokes over one another,
         # segments long because of MAX_SAMPLES), the exact search would visit all of them: the
         # KD-tree of the samples then gives distances to the segments of the nearest few.
-        self.tree = (
-            cKDTree(self.points)
-            if area > 0 and len(self.points) * math.pi * (0.5 * spacing) ** 2 > _CROWDED * area
-            else None
-        )
+        self.tree = cKDTree(self.points) if crowded else None
         if self.tree is None:
             self.fine, self.coarse = kernels.grids_of(
                 self.segments, self.cell, kernels.COARSE * self.cell
@@ -124,7 +109,7 @@ class _Polylines:
             self.coarse,
             kernels.COARSE * self.cell,
             self.spacing,
-            math.ceil(0.5 * self.spacing / self.cell) + 2,
+            kernels.fine_rings(self.spacing, self.cell),
         )
 
     def _near_segments(self, query: Array) -> Array:
@@ -159,21 +144,26 @@ def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) 
     arc length); the max is refined where it could be, to within 1/(2·:data:`DENSITY`) of the
     size. Cost linear in the samples for drawings that are close.
     """
-    ref = [np.asarray(p, dtype=float) for p in reference if len(p)]
-    cand = [np.asarray(p, dtype=float) for p in candidate if len(p)]
-    if not ref or not cand:
+    return _shape_error(_joined(reference), _joined(candidate))
+
+
+def _shape_error(
+    reference: tuple[Array, NDArray[np.intp]], candidate: tuple[Array, NDArray[np.intp]]
+) -> ShapeError:
+    """:func:`shape_error` of two drawings joined (:func:`_joined`)."""
+    if not len(reference[1]) or not len(candidate[1]):
         raise ValueError("shape_error: both drawings need at least one point")
-    size = float(np.hypot(*kernels.extent(_joined(ref)[0]))) or 1.0
-    spacing = size / MEAN_DENSITY
-    for drawing in (ref, cand):
-        spacing = max(spacing, kernels.path_length(*_joined(drawing)) / MAX_SAMPLES)
-    a, b = _Polylines(ref, spacing), _Polylines(cand, spacing)
-    a_to_b = b.distance(a.points)
-    b_to_a = a.distance(b.points)
-    mean = (a_to_b.sum() + b_to_a.sum()) / (len(a_to_b) + len(b_to_a))
-    fine = size / DENSITY
-    largest = max(a.farthest(b, a_to_b, fine), b.farthest(a, b_to_a, fine))
-    return ShapeError(mean=float(mean) / size, max=largest / size, size=size)
+    figures = (MEAN_DENSITY, MAX_SAMPLES, DENSITY, _CROWDED)
+    mean, largest, size = kernels.shape_error_of(*reference, *candidate, *figures)
+    if math.isnan(mean):  # a crowded drawing: its distances through a KD-tree
+        _, spacing = kernels.spacing_of(*reference, *candidate, MEAN_DENSITY, MAX_SAMPLES)
+        a, b = _Polylines(reference, spacing), _Polylines(candidate, spacing)
+        a_to_b = b.distance(a.points)
+        b_to_a = a.distance(b.points)
+        mean = (a_to_b.sum() + b_to_a.sum()) / (len(a_to_b) + len(b_to_a)) / size
+        fine = size / DENSITY
+        largest = max(a.farthest(b, a_to_b, fine), b.farthest(a, b_to_a, fine)) / size
+    return ShapeError(mean=float(mean), max=float(largest), size=size)
 
 
 def pen_down_paths(motion: Motion) -> list[Array]:
@@ -307,10 +297,11 @@ def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitRepo
     # The shape is what the plans ink: a plan that touches down moving only within its window.
     drawn = [xy for _, xy, _ in motions]
     lifted = [k for k, plan in enumerate(tag.plans) if plan.ink is not None]
-    for k, (_, xy, _) in zip(lifted, sample_ink(tag, dt, lifted), strict=True):
+    for k, (_, xy, _) in zip(lifted, sample_ink(tag, dt, lifted) if lifted else [], strict=True):
         drawn[k] = xy
-    shape = shape_error(polylines, drawn)
-    turning = turning_of(polylines)
+    reference = _joined(polylines)
+    shape = _shape_error(reference, _joined(drawn))
+    turning = kernels.turning(*reference) / np.pi
     snr = None
     timed = [tr for tr in traces if getattr(tr, "t", None) is not None]
     if timed and len(timed) == len(traces) == len(tag.plans):
@@ -346,9 +337,11 @@ def recorded_velocity(
 
     With ``cutoff`` None (raw differences), repeated time stamps are dropped (the first of each
     kept) and the positions interpolated linearly. With a ``cutoff`` (Hz; the velocity SNR uses
-    :data:`VELOCITY_CUTOFF`), the velocity is an estimate of the writer's: samples sharing a
-    stamp are spread evenly towards the next stamp (at most one median interval apart: events
-    delivered in a burst), the positions interpolated linearly on the grid and low-passed by a
+    :data:`VELOCITY_CUTOFF`), the velocity is an estimate of the writer's: the samples are
+    placed at the instants they were most likely taken at
+    (:func:`tagbot.inputs.stamps.sample_instants`: stamps shared by a burst of events spread,
+    stamps carrying a steady sampler's delivery noise regressed on the sample number, exact
+    stamps kept), the positions interpolated linearly on the grid and low-passed by a
     zero-phase Butterworth filter (:func:`low_pass`; point reflection at the ends, which keeps
     the end velocities), then differentiated. Dropped samples and stalls are bridged by the
     interpolation; no single sample decides a value. O(n log n) in the samples. The
@@ -360,10 +353,10 @@ def recorded_velocity(
     speed by a zero-phase Butterworth at 15 Hz. A grid too coarse for the cut-off (Nyquist at
     or below it) is not filtered.
     """
-    t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
+    t, xy = _kernel_array(t), _kernel_array(xy)
     if cutoff is not None:
-        t = _spread_stamps(t)
-    if len(t) > 1 and not np.all(t[1:] > t[:-1]):
+        t, _ = sample_instants(t, xy)
+    if not kernels.rising(t):
         keep = np.concatenate([[True], np.diff(t) > 0])
         t, xy = t[keep], xy[keep]
     if len(t) >= 3:
@@ -372,27 +365,7 @@ def recorded_velocity(
         raise ValueError("velocity: the recording needs at least 3 samples over 3·dt")
     count = int((t[-1] - t[0]) / dt) + 1
     reach = _filter_reach(dt, cutoff) if cutoff is not None else 0
-    return kernels.grid_velocity(
-        _kernel_array(t), _kernel_array(xy), dt, count, float(cutoff or 0.0), FILTER_ORDER, reach
-    )
-
-
-def _spread_stamps(t: Array) -> Array:
-    """Time stamps with each run of equal (or out-of-order) stamps spread evenly over the
-    interval to the next distinct stamp, at most one median sampling interval apart."""
-    if t.size < 2 or np.all(np.diff(t) > 0):
-        return t
-    t = np.maximum.accumulate(t)
-    new = np.concatenate([[True], np.diff(t) > 0])
-    starts = np.flatnonzero(new)
-    steps = np.diff(t[starts])
-    interval = float(np.median(steps)) if steps.size else 0.0
-    group = np.cumsum(new) - 1
-    counts = np.diff(np.append(starts, t.size))
-    width = np.append(steps, interval)  # the last run: one median interval
-    spacing = np.minimum(width / counts, interval)
-    rank = np.arange(t.size) - starts[group]
-    return t[starts][group] + spacing[group] * rank
+    return kernels.grid_velocity(t, xy, dt, count, float(cutoff or 0.0), FILTER_ORDER, reach)
 
 
 def low_pass(x: Array, dt: float, cutoff: float) -> Array:

@@ -26,12 +26,17 @@ __all__ = [
     "distances",
     "extent",
     "fft",
+    "fine_rings",
     "grid_of",
     "grid_velocity",
     "grids_of",
     "low_pass_into",
     "path_length",
     "refinement",
+    "rising",
+    "sampled",
+    "shape_error_of",
+    "spacing_of",
     "turning",
     "twiddles",
 ]
@@ -288,7 +293,96 @@ def distances(
     return out
 
 
+@compiled
+def spacing_of(
+    ref: np.ndarray,
+    ref_ends: np.ndarray,
+    cand: np.ndarray,
+    cand_ends: np.ndarray,
+    density: float,
+    max_samples: int,
+) -> tuple[float, float]:
+    """The shape error's size (the reference's bounding-box diagonal, 1 if 0) and sample
+    spacing: ``size / density``, or coarser for drawings longer than ``max_samples`` of it."""
+    width, height = extent(ref)
+    size = math.hypot(width, height) or 1.0
+    longest = max(path_length(ref, ref_ends), path_length(cand, cand_ends))
+    return size, max(size / density, longest / max_samples)
+
+
+@compiled
+def sampled(
+    points: np.ndarray, ends: np.ndarray, spacing: float, crowded: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, bool]:
+    """A drawing :func:`densified` at ``spacing``, its grids' cell, and whether it is crowded:
+    more than ``crowded`` samples expected within half a spacing of a point. Cells about two
+    samples wide along a curve, narrower where the samples crowd an area (a scribble over
+    itself), so that a cell holds a few samples whatever the drawing."""
+    samples, before, after, segments = densified(points, ends, spacing)
+    width, height = extent(samples)
+    area = width * height
+    count = samples.shape[0]
+    typical = 2.0 * math.sqrt(area / count)
+    cell = min(2.0 * spacing, max(0.25 * spacing, typical)) if typical > 0 else spacing
+    dense = area > 0 and count * math.pi * (0.5 * spacing) ** 2 > crowded * area
+    return samples, before, after, segments, cell, dense
+
+
+@compiled
+def fine_rings(spacing: float, cell: float) -> int:
+    """The fine grid's rings :func:`distances` searches before the coarse grid."""
+    return math.ceil(0.5 * spacing / cell) + 2
+
+
+@compiled
+def shape_error_of(
+    ref: np.ndarray,
+    ref_ends: np.ndarray,
+    cand: np.ndarray,
+    cand_ends: np.ndarray,
+    density: float,
+    max_samples: int,
+    max_density: float,
+    crowded: float,
+) -> tuple[float, float, float]:
+    """:func:`tagbot.metrics.shape_error` of two drawings (non-empty polylines one after the
+    other, and where each ends) in one call: mean and max over the size (samples ``density``
+    per size, the max refined to ``size / max_density``), and the size; the mean NaN if either
+    drawing is crowded (:func:`sampled`), for the caller's KD-tree."""
+    size, spacing = spacing_of(ref, ref_ends, cand, cand_ends, density, max_samples)
+    a = sampled(ref, ref_ends, spacing, crowded)
+    b = sampled(cand, cand_ends, spacing, crowded)
+    if a[5] or b[5]:
+        return math.nan, math.nan, size
+    a_fine, a_coarse = grids_of(a[3], a[4], COARSE * a[4])
+    b_fine, b_coarse = grids_of(b[3], b[4], COARSE * b[4])
+    a_rings, b_rings = fine_rings(spacing, a[4]), fine_rings(spacing, b[4])
+    a_to_b = distances(a[0], b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
+    b_to_a = distances(b[0], a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
+    mean = (a_to_b.sum() + b_to_a.sum()) / (a_to_b.size + b_to_a.size)
+    # The maximum, refined where it could be (:func:`refinement`) each way.
+    largest = max(a_to_b.max(), b_to_a.max())
+    query = refinement(a[0], a[2], a_to_b, size / max_density, max_samples)
+    if query.shape[0]:
+        far = distances(query, b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
+        largest = max(largest, far.max())
+    query = refinement(b[0], b[2], b_to_a, size / max_density, max_samples)
+    if query.shape[0]:
+        far = distances(query, a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
+        largest = max(largest, far.max())
+    return mean / size, largest / size, size
+
+
 # --- the velocity SNR ---------------------------------------------------------------------------
+
+
+@compiled
+def rising(t: np.ndarray) -> bool:
+    """Whether the stamps ``t`` strictly rise (NaN does not)."""
+    i = 0
+    while i < t.size - 1 and t[i + 1] > t[i]:
+        i += 1
+    return i >= t.size - 1
 
 
 @compiled
@@ -433,19 +527,40 @@ def grid_velocity(
     return grid, v
 
 
+UNIFORM = 1e-9
+"""A model clock counts as evenly spaced when each time is within this many steps of its place
+on the even grid (:func:`_uniform_step`)."""
+
+
 @compiled
 def _uniform_step(xp: np.ndarray) -> float:
-    """``1 / step`` if the rising ``xp`` is so evenly spaced that ``(x − xp[0]) / step`` falls
-    in the interval of ``x`` or next to it, else 0."""
+    """``1 / step`` if the rising ``xp`` is evenly spaced, each point within :data:`UNIFORM` of
+    a step of its place, else 0. Then ``(x − xp[0]) / step`` gives ``x``'s interval, or within
+    that distance of a point the next one, whose line passes through the same point: the
+    interpolated value is the same to rounding (relative ``UNIFORM``)."""
     last = xp.size - 1
     span = xp[last] - xp[0]
     if not span > 0:
         return 0.0
     inv_step = last / span
     for j in range(xp.size):
-        if abs((xp[j] - xp[0]) * inv_step - j) > 0.25:
+        if abs((xp[j] - xp[0]) * inv_step - j) > UNIFORM:
             return 0.0
     return inv_step
+
+
+@inlined
+def _bisect(x: float, xp: np.ndarray) -> int:
+    """The interval ``j`` of the rising ``xp`` with ``xp[j] <= x < xp[j + 1]`` (the last one at
+    its end), for ``x`` within them."""
+    j, hi = 0, xp.size - 1
+    while hi - j > 1:
+        mid = (j + hi) >> 1
+        if xp[mid] <= x:
+            j = mid
+        else:
+            hi = mid
+    return j
 
 
 @inlined
@@ -454,27 +569,14 @@ def _interpolated(
 ) -> tuple[float, float]:
     """``fp`` (n, 2) at ``x``, linearly over the rising ``xp`` as ``np.interp`` (``slope``: the
     (n − 1, 2) slopes between points; beyond the ends 0 if ``outside``, else the end values;
-    at the last point to rounding). The interval is found from ``x``'s position on the even
-    spacing :func:`_uniform_step` finds, or if it found none by bisection."""
+    at the last point to rounding). The interval is ``x``'s place on the even spacing
+    :func:`_uniform_step` finds (no search), or if it found none, found by bisection."""
     last = xp.size - 1
     if x < xp[0] or x > xp[last]:
         if outside:
             return 0.0, 0.0
         x = min(max(x, xp[0]), xp[last])
-    if inv_step > 0:
-        j = int(min((x - xp[0]) * inv_step, last - 1.0))
-        while j < last - 1 and xp[j + 1] <= x:
-            j += 1
-        while j > 0 and xp[j] > x:
-            j -= 1
-    else:
-        j, hi = 0, last  # xp[j] <= x < xp[hi]
-        while hi - j > 1:
-            mid = (j + hi) >> 1
-            if xp[mid] <= x:
-                j = mid
-            else:
-                hi = mid
+    j = int(min((x - xp[0]) * inv_step, last - 1.0)) if inv_step > 0 else _bisect(x, xp)
     u = x - xp[j]
     return fp[j, 0] + slope[j, 0] * u, fp[j, 1] + slope[j, 1] * u
 
@@ -493,33 +595,69 @@ def _slopes(xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
 
 
 @inlined
-def _mapping_error(
+def _mapping_errors(
     grid: np.ndarray,
-    v: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
     model_t: np.ndarray,
     model_v: np.ndarray,
     slope: np.ndarray,
     inv_step: float,
     s: float,
-    o: float,
+    offsets: np.ndarray,
     bound: float,
-) -> float:
-    """``Σ|v − v̂|²`` with the model mapped by scale ``s`` and offset ``o``: ``v̂(t) =
-    model_v((t − o)/s) / s``, zero outside the model's span (``slope`` of :func:`_slopes`,
-    ``inv_step`` of :func:`_uniform_step`); or, as soon as the sum reaches ``bound``, that
-    partial sum (its terms are not negative: the whole would not be below ``bound`` either)."""
+    out: np.ndarray,
+) -> None:
+    """``Σ|v − v̂|²`` of scale ``s`` with each of ``offsets`` into ``out``: the model mapped as
+    ``v̂(t) = model_v((t − o)/s) / s``, zero outside the model's span (``slope`` of
+    :func:`_slopes`, ``inv_step`` of :func:`_uniform_step`, as :func:`_interpolated`, written
+    out: the polish's inner loop), all offsets in one pass over the recording (a row of the
+    polish's pattern); or, once every sum has reached ``bound``, the partial sums (their terms
+    are not negative: no whole sum would be below ``bound`` either)."""
     inv_s = 1.0 / s
-    total = 0.0
+    last = model_t.size - 1
+    out[:] = 0.0
     for k in range(grid.size):
-        mx, my = _interpolated((grid[k] - o) * inv_s, model_t, model_v, slope, inv_step, True)
-        ex, ey = v[k, 0] - mx * inv_s, v[k, 1] - my * inv_s
-        total += ex * ex + ey * ey
-        if total >= bound:
+        below = False
+        for b in range(offsets.size):
+            x = (grid[k] - offsets[b]) * inv_s
+            ex, ey = vx[k], vy[k]
+            if model_t[0] <= x <= model_t[last]:
+                if inv_step > 0:
+                    j = int(min((x - model_t[0]) * inv_step, last - 1.0))
+                else:
+                    j = _bisect(x, model_t)
+                u = x - model_t[j]
+                ex -= (model_v[j, 0] + slope[j, 0] * u) * inv_s
+                ey -= (model_v[j, 1] + slope[j, 1] * u) * inv_s
+            out[b] += ex * ex + ey * ey
+            below |= out[b] < bound
+        if not below:
             break
-    return total
 
 
-DIRECT = 2.0
+@inlined
+def _correlate_into(
+    sums: np.ndarray, vx: np.ndarray, vy: np.ndarray, w: np.ndarray, length: int, lo: int, hi: int
+) -> None:
+    """``sums[m − lo] = Σ_k vx[k + m]·w[k, 0] + vy[k + m]·w[k, 1]`` for every offset ``lo ≤ m ≤
+    hi`` at once, over the model's first ``length`` samples and the recording's: model sample by
+    model sample, independent sums over consecutive recording samples (slices, so that the
+    compiler vectorises them: no bound reloaded through a possible alias)."""
+    n = vx.size
+    sums[: hi - lo + 1] = 0.0
+    for k in range(length):
+        wx, wy = w[k, 0], w[k, 1]
+        first, last = max(lo, -k), min(hi, n - 1 - k) + 1
+        if last <= first:
+            continue
+        out = sums[first - lo : last - lo]
+        xs, ys = vx[k + first : k + last], vy[k + first : k + last]
+        for j in range(out.size):
+            out[j] += xs[j] * wx + ys[j] * wy
+
+
+DIRECT = 16.0
 """A scale's offsets are correlated by direct sums when these cost less than this many times
 the transforms' ``N·log2 N``."""
 
@@ -608,13 +746,7 @@ def best_mapping(
                 z[k] = spectrum[k].conjugate() * z[k]
             fft(z, table, False)
         else:
-            # Every offset's sum at once, model sample by model sample: independent sums over
-            # consecutive recording samples, which the compiler vectorises.
-            sums[: high[i] - low[i] + 1] = 0.0
-            for k in range(length):
-                wx, wy = w[k, 0], w[k, 1]
-                for m in range(max(low[i], -k), min(high[i], n - 1 - k) + 1):
-                    sums[m - low[i]] += vx[k + m] * wx + vy[k + m] * wy
+            _correlate_into(sums, vx, vy, w, length, low[i], high[i])
         # Σ|v − w|² over the overlap = Σ|v|² − 2·Re Σ v·conj(w) + Σ|w|² (outside it, v or 0).
         for m in range(low[i], high[i] + 1):
             first = min(max(-m, 0), length)
@@ -626,27 +758,33 @@ def best_mapping(
                 best, pick_scale, pick_offset = err, s, grid[0] + m * dt
     # The polish starts from the better of the grid's pair and the shared clock, so that the
     # result is never below the shared clock's (a timed fit's own mapping).
-    at_grid = _mapping_error(
-        grid, v, model_t, model_v, slope, inv_step, pick_scale, pick_offset, np.inf
-    )
-    at_clock = _mapping_error(grid, v, model_t, model_v, slope, inv_step, 1.0, shared, np.inf)
+    starts = np.array([pick_offset, shared])
+    at = np.empty(2)
+    _mapping_errors(grid, vx, vy, model_t, model_v, slope, inv_step, pick_scale, starts[:1],
+                    np.inf, at[:1])  # fmt: skip
+    _mapping_errors(grid, vx, vy, model_t, model_v, slope, inv_step, 1.0, starts[1:], np.inf,
+                    at[1:])  # fmt: skip
+    at_grid, at_clock = at[0], at[1]
     if at_clock < at_grid:
         best, scale, offset = at_clock, 1.0, shared
     else:
         best, scale, offset = at_grid, pick_scale, pick_offset
     reach = max(span, dt)
+    o_try = np.empty(steps.size)
+    errors = np.empty(steps.size)
     for width in widths:
         new_best, new_scale, new_offset = best, scale, offset
         for a in range(steps.size):
             s_try = scale * (1.0 + width * steps[a])
             for b in range(steps.size):
+                o_try[b] = offset + steps[b] * width * reach
+            _mapping_errors(
+                grid, vx, vy, model_t, model_v, slope, inv_step, s_try, o_try, new_best, errors
+            )
+            for b in range(steps.size):
                 if steps[a] == 0.0 and steps[b] == 0.0:
                     continue  # the best pair so far
-                o_try = offset + steps[b] * width * reach
-                err = _mapping_error(
-                    grid, v, model_t, model_v, slope, inv_step, s_try, o_try, new_best
-                )
-                if err < new_best:
-                    new_best, new_scale, new_offset = err, s_try, o_try
+                if errors[b] < new_best:
+                    new_best, new_scale, new_offset = errors[b], s_try, o_try[b]
         best, scale, offset = new_best, new_scale, new_offset
     return best, scale, offset

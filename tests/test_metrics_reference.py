@@ -14,13 +14,13 @@ from hypothesis import strategies as st
 
 from tagbot import metrics_kernels
 from tagbot.gesture.timing import simulated_capture
+from tagbot.inputs.stamps import sample_instants
 from tagbot.metrics import (
     DENSITY,
     FILTER_ORDER,
     MAX_SAMPLES,
     MEAN_DENSITY,
     VELOCITY_CUTOFF,
-    _spread_stamps,
     densify,
     fit_report,
     low_pass,
@@ -52,7 +52,7 @@ def _low_pass(x: np.ndarray, dt: float, cutoff: float) -> np.ndarray:
 def _recorded_velocity(t, xy, dt=0.01, cutoff=None):
     t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
     if cutoff is not None:
-        t = _spread_stamps(t)
+        t, _ = sample_instants(t, xy)
     keep = np.concatenate([[True], np.diff(t) > 0])
     t, xy = t[keep], xy[keep]
     dt = max(dt, float(t[-1] - t[0]) / (4 * len(t)))
@@ -242,6 +242,18 @@ def test_velocity_snr_is_the_array_codes(seed):
     assert db == pytest.approx(db_ref, rel=0, abs=1e-9)
     assert scale == pytest.approx(scale_ref, rel=1e-9)
     assert offset == pytest.approx(offset_ref, rel=0, abs=1e-9)
+
+
+def test_velocity_snr_of_a_long_recording_is_the_array_codes():
+    """A recording long enough that the longest scales are correlated by FFT (the others by
+    direct sums) and a model on another clock."""
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 24.0, 0.008)
+    xy = np.cumsum(np.cumsum(rng.normal(size=(len(t), 2)), axis=0), axis=0) * 1e-3
+    model_t = 0.3 + 1.2 * t[::2]
+    model_v = np.gradient(xy[::2], model_t, axis=0)
+    got = velocity_snr(t, xy, model_t, model_v)
+    np.testing.assert_allclose(got, _velocity_snr(t, xy, model_t, model_v), rtol=1e-9, atol=1e-9)
 
 
 def test_velocity_snr_on_an_uneven_model_clock_is_the_array_codes():

@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tagbot.errors import PlanError
 from tagbot.model import kernels
-from tagbot.model.plan import END_TOLERANCE, Plan, Tag
+from tagbot.model.plan import END_TOLERANCE, Plan, Tag, stroke_windows
 
 MAX_SAMPLES = 50_000_000
 """Refuse to allocate more samples than this (about 2.4 GB of arrays)."""
@@ -138,13 +138,14 @@ def sample_plans(
     """:func:`sample_plan` for each of ``plans`` (by default all), evaluated in one pass: each
     plan on its own grid, so that no pen lift is too short for ``step``."""
     chosen = [tag.plans[k] for k in (range(len(tag.plans)) if plans is None else plans)]
-    windows = [plan.windows(tag.size, END_TOLERANCE) for plan in chosen]
+    strokes = _Strokes(chosen, tag.size)
     times = []
-    for plan, (_, t_off) in zip(chosen, windows, strict=True):
-        end = float(np.max(t_off))  # Plan.end, from the windows the evaluation needs too
+    for k, plan in enumerate(chosen):
+        # Plan.end, from the windows the evaluation needs too.
+        end = float(strokes.t_off[strokes.first[k] : strokes.first[k + 1]].max())
         count = math.ceil((end - plan.start) / step - 1e-9) + 1
         times.append(plan.start + np.arange(count) * step)
-    drawn = _evaluate_plans(chosen, times, windows)
+    drawn = strokes.evaluate(times)
     return [(t, xy, v) for t, (xy, v) in zip(times, drawn, strict=True)]
 
 
@@ -165,41 +166,59 @@ def evaluate_plans(
     """:func:`evaluate_plan` of each plan at its own sorted times, all (sample, stroke) pairs of
     all plans in one pass: a tag of many short plans costs what one plan of as many strokes
     does."""
-    return _evaluate_plans(plans, times, [plan.windows(size, END_TOLERANCE) for plan in plans])
+    return _Strokes(plans, size).evaluate(times)
 
 
-def _evaluate_plans(
-    plans: Sequence[Plan], times: Sequence[ArrayLike], windows: Sequence[tuple[Array, Array]]
-) -> list[tuple[Array, Array]]:
-    """:func:`evaluate_plans` with each plan's stroke windows (:meth:`Plan.windows`)."""
-    ts = [np.asarray(t, dtype=float) for t in times]
-    if any(t.ndim != 1 for t in ts):
-        raise ValueError("t: must be a finite, sorted 1-D array of times")
-    first = np.cumsum([0, *(len(t) for t in ts)])
-    t_all = np.concatenate(ts) if ts else np.empty(0)
-    steps = np.diff(t_all)
-    joins = first[1:-1]
-    steps[joins[(joins > 0) & (joins < len(t_all))] - 1] = 0.0  # each plan sorted on its own
-    if np.any(steps < 0) or not np.all(np.isfinite(t_all)):
-        raise ValueError("t: must be a finite, sorted 1-D array of times")
-    xy, v = np.zeros((len(t_all), 2)), np.zeros((len(t_all), 2))
-    if plans:
-        kernels.evaluate_plans_into(
-            t_all,
-            first,
-            np.cumsum([0, *(plan.n_strokes for plan in plans)]),
-            np.array([plan.targets[0] for plan in plans], dtype=float),
-            np.concatenate([plan.chords for plan in plans]),
-            *(np.concatenate(arrays) for arrays in zip(*windows, strict=True)),
-            np.concatenate([plan.onsets for plan in plans]),
-            np.concatenate([plan.mu for plan in plans]),
-            np.concatenate([plan.sigma for plan in plans]),
-            np.concatenate([plan.geometry.length for plan in plans]),
-            np.concatenate([plan.geometry.constants for plan in plans]),
-            xy,
-            v,
-        )
-    return [(xy[first[k] : first[k + 1]], v[first[k] : first[k + 1]]) for k in range(len(ts))]
+_NONE = np.empty(0)
+
+
+class _Strokes:
+    """The strokes of plans one after the other (plan ``k``'s: ``first[k]:first[k + 1]``),
+    with their windows (:meth:`Plan.windows` at ``END_TOLERANCE × size``, all in one call)."""
+
+    def __init__(self, plans: Sequence[Plan], size: float) -> None:
+        self.plans = plans
+        counts = [plan.n_strokes for plan in plans]
+        self.first = np.cumsum([0, *counts])
+        fields = [(plan.onsets, plan.mu, plan.sigma, plan.geometry.length) for plan in plans]
+        joined = [np.concatenate(a) for a in zip(*fields, strict=True)] if plans else [_NONE] * 4
+        self.onsets, self.mu, self.sigma, self.length = joined
+        # Plan.windows's budget, stroke by stroke: the same arithmetic.
+        budget = END_TOLERANCE * size / (np.repeat(counts, counts) * self.length)
+        self.t_on, self.t_off = stroke_windows(self.onsets, self.mu, self.sigma, budget)
+
+    def evaluate(self, times: Sequence[ArrayLike]) -> list[tuple[Array, Array]]:
+        """Positions and velocities of each plan at its own sorted times."""
+        ts = [np.asarray(t, dtype=float) for t in times]
+        if any(t.ndim != 1 for t in ts):
+            raise ValueError("t: must be a finite, sorted 1-D array of times")
+        first = np.cumsum([0, *(len(t) for t in ts)])
+        t_all = np.concatenate(ts) if ts else np.empty(0)
+        steps = np.diff(t_all)
+        joins = first[1:-1]
+        steps[joins[(joins > 0) & (joins < len(t_all))] - 1] = 0.0  # each plan sorted on its own
+        if np.any(steps < 0) or not np.all(np.isfinite(t_all)):
+            raise ValueError("t: must be a finite, sorted 1-D array of times")
+        xy, v = np.zeros((len(t_all), 2)), np.zeros((len(t_all), 2))
+        plans = self.plans
+        if plans:
+            kernels.evaluate_plans_into(
+                t_all,
+                first,
+                self.first,
+                np.array([plan.targets[0] for plan in plans], dtype=float),
+                np.concatenate([plan.chords for plan in plans]),
+                self.t_on,
+                self.t_off,
+                self.onsets,
+                self.mu,
+                self.sigma,
+                self.length,
+                np.concatenate([plan.geometry.constants for plan in plans]),
+                xy,
+                v,
+            )
+        return [(xy[first[k] : first[k + 1]], v[first[k] : first[k + 1]]) for k in range(len(ts))]
 
 
 def sample_ink(
