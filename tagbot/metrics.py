@@ -14,8 +14,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from tagbot import metrics_kernels as kernels
-from tagbot.inputs.stamps import sample_instants
-from tagbot.model.motion import Motion, sample_ink, sample_plans
+from tagbot.inputs.stamps import BLENDS, GAP, REGULAR, SMOOTHING
+from tagbot.model.motion import Motion, sample_ink, sampled_plans
 from tagbot.model.plan import Plan, Tag
 
 Array = NDArray[np.float64]
@@ -40,9 +40,12 @@ GRID_PER_POINT = 4
 _SCALES = np.geomspace(0.25, 4.0, 41)
 """The velocity SNR's time scales, relative to the ratio of the recording's and model's spans."""
 _POLISH_STEPS = np.linspace(-1.0, 1.0, 7)
-_POLISH_WIDTHS = np.array([0.1, 0.03, 0.01, 0.003, 0.001])
+POLISH_WIDTHS = np.array([0.1, 0.03])
 """The polish's pattern: each pair of ``steps`` (scale relative, offset in recording spans) at each
-of the shrinking widths."""
+of the shrinking widths..."""
+POLISH_ITERATIONS = 20
+"""... then at most this many Levenberg-Marquardt steps on the scale and offset together."""
+_SEARCH = (_SCALES, _POLISH_STEPS, POLISH_WIDTHS, POLISH_ITERATIONS)
 
 
 @dataclass(frozen=True)
@@ -79,12 +82,18 @@ def _joined(polylines: Sequence[ArrayLike]) -> tuple[Array, NDArray[np.intp]]:
 
 
 class _Polylines:
-    """Polylines sampled at ``spacing``, with the segments that lead to and from each sample."""
+    """Polylines cut into segments at most ``spacing`` long (with the segments that lead to and
+    from each of their points), and sampled evenly along their arc length at most ``spacing``
+    apart (the queries of :func:`shape_error`)."""
 
     def __init__(self, joined: tuple[Array, NDArray[np.intp]], spacing: float) -> None:
         *samples, self.cell, crowded = kernels.sampled(*joined, float(spacing), _CROWDED)
         self.points, self.before, self.after, self.segments = samples
         self.spacing = spacing
+        self.joined, self.lengths = joined, kernels.arc_lengths(*joined)
+        self.queries, self.first, self.step = kernels.arc_samples(
+            *joined, self.lengths, float(spacing)
+        )
         # Where many long segments pass near every point (thousands of strokes over one another,
         # segments long because of MAX_SAMPLES), the exact search would visit all of them: the
         # KD-tree of the samples then gives distances to the segments of the nearest few.
@@ -127,22 +136,27 @@ class _Polylines:
         return best
 
     def farthest(self, other: _Polylines, coarse: Array, fine: float) -> float:
-        """The largest distance from these polylines (not only their samples) to ``other``,
-        within ``fine``: the sample intervals that could hold it are resampled at ``fine``
+        """The largest distance from these polylines (not only their queries, whose distances
+        are ``coarse``) to ``other``, within ``fine``: the intervals between queries that could
+        hold it are resampled along the path at ``fine``
         (:func:`tagbot.metrics_kernels.refinement`)."""
         top = float(coarse.max())
-        query = kernels.refinement(self.points, self.after, coarse, fine, MAX_SAMPLES)
+        query = kernels.refinement(
+            *self.joined, self.lengths, self.first, self.step, coarse, fine, MAX_SAMPLES
+        )
         return max(top, float(other.distance(query).max())) if len(query) else top
 
 
 def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) -> ShapeError:
     """Mean and max closest-point distance between two drawings, over the reference's size.
 
-    Both are lists of polylines ``(N, 2)``. Each is sampled :data:`MEAN_DENSITY` points per
-    diagonal (at most :data:`MAX_SAMPLES` per drawing) and each sample measured exactly against
-    the other drawing's segments (a grid search, compiled): the mean is over these samples (by
-    arc length); the max is refined where it could be, to within 1/(2·:data:`DENSITY`) of the
-    size. Cost linear in the samples for drawings that are close.
+    Both are lists of polylines ``(N, 2)``. Each is sampled evenly along its arc length,
+    :data:`MEAN_DENSITY` points per diagonal (at most :data:`MAX_SAMPLES` per drawing; both ends
+    of each polyline included), and each sample measured exactly against the other drawing's
+    segments (a grid search, compiled): the mean is over these samples, so by arc length (a pen
+    at rest, hundreds of points in one place, weighs nothing); the max is refined along the
+    path where it could be, to within 1/(2·:data:`DENSITY`) of the size. Cost linear in the
+    samples for drawings that are close.
     """
     return _shape_error(_joined(reference), _joined(candidate))
 
@@ -158,8 +172,8 @@ def _shape_error(
     if math.isnan(mean):  # a crowded drawing: its distances through a KD-tree
         _, spacing = kernels.spacing_of(*reference, *candidate, MEAN_DENSITY, MAX_SAMPLES)
         a, b = _Polylines(reference, spacing), _Polylines(candidate, spacing)
-        a_to_b = b.distance(a.points)
-        b_to_a = a.distance(b.points)
+        a_to_b = b.distance(a.queries)
+        b_to_a = a.distance(b.queries)
         mean = (a_to_b.sum() + b_to_a.sum()) / (len(a_to_b) + len(b_to_a)) / size
         fine = size / DENSITY
         largest = max(a.farthest(b, a_to_b, fine), b.farthest(a, b_to_a, fine)) / size
@@ -232,25 +246,20 @@ def _velocity_snr(
     cutoff: float | None,
 ) -> tuple[float, float, float, float]:
     """:func:`velocity_snr`, and the recorded velocity's energy ``Σ|v|²`` it is relative to."""
-    model_t = np.asarray(model_t, dtype=float)
-    model_v = _kernel_array(model_v)
-    if len(model_t) < 2:
-        raise ValueError("velocity_snr: the model needs at least 2 samples")
-    shared = float(model_t[0])  # the offset of the shared clock
-    model_t = model_t - model_t[0]  # the mapping's offset is from the model's first sample
-    grid, v = recorded_velocity(t, xy, dt, cutoff)
-    energy = float(np.vdot(v, v))
-    if not energy > 0:
-        raise ValueError("velocity_snr: the recording does not move")
-    model_span = float(model_t[-1])
-    span = float(grid[-1] - grid[0])
-    ratio = span / model_span if model_span > 0 else 1.0
-    # Scale 1 (the model on the recording's own clock, as a timed fit is) is always tried too.
-    scales = np.append(_SCALES * ratio, 1.0)
-    best, scale, offset = kernels.best_mapping(
-        grid, v, model_t, model_v, scales, shared, energy, _POLISH_STEPS, _POLISH_WIDTHS
-    )
-    return 10.0 * np.log10(energy / max(best, 1e-300)), scale, offset, energy
+    status, db, scale, offset, energy = kernels.velocity_snr_of(
+        _kernel_array(t), _kernel_array(xy), _kernel_array(model_t), _kernel_array(model_v),
+        float(dt), float(cutoff or 0.0), cutoff is not None, *_RECORDING, *_SEARCH,
+    )  # fmt: skip
+    if status != kernels.OK:
+        raise ValueError(_NO_SNR[status])
+    return db, scale, offset, energy
+
+
+_NO_SNR = {
+    kernels.SHORT_MODEL: "velocity_snr: the model needs at least 2 samples",
+    kernels.SHORT_RECORDING: "velocity: the recording needs at least 3 samples over 3·dt",
+    kernels.AT_REST: "velocity_snr: the recording does not move",
+}
 
 
 @dataclass(frozen=True)
@@ -293,28 +302,29 @@ def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitRepo
     """
     polylines = [np.asarray(getattr(tr, "xy", tr), dtype=float) for tr in traces]
     # Each plan sampled on its own grid: a pen lift shorter than dt cannot make the report fail.
-    motions = sample_plans(tag, dt)
+    model_t, model_xy, model_v, first = sampled_plans(tag, dt)
     # The shape is what the plans ink: a plan that touches down moving only within its window.
-    drawn = [xy for _, xy, _ in motions]
+    drawn = (model_xy, first[1:])
     lifted = [k for k, plan in enumerate(tag.plans) if plan.ink is not None]
-    for k, (_, xy, _) in zip(lifted, sample_ink(tag, dt, lifted) if lifted else [], strict=True):
-        drawn[k] = xy
+    if lifted:
+        parts = np.split(model_xy, first[1:-1])
+        for k, (_, xy, _) in zip(lifted, sample_ink(tag, dt, lifted), strict=True):
+            parts[k] = xy
+        drawn = _joined(parts)
     reference = _joined(polylines)
-    shape = _shape_error(reference, _joined(drawn))
+    shape = _shape_error(reference, drawn)
     turning = kernels.turning(*reference) / np.pi
     snr = None
     timed = [tr for tr in traces if getattr(tr, "t", None) is not None]
     if timed and len(timed) == len(traces) == len(tag.plans):
-        signal = noise = 0.0
-        for trace, (model_t, _, model_v) in zip(traces, motions, strict=True):
-            t, xy = np.asarray(trace.t), np.asarray(trace.xy)
-            try:
-                db, _, _, energy = _velocity_snr(t, xy, model_t, model_v, 0.01, VELOCITY_CUTOFF)
-            except ValueError:  # too short to compare
-                continue
-            signal += energy
-            noise += energy / 10 ** (db / 10)
-        snr = 10 * np.log10(signal / noise) if noise > 0 else None
+        status, db, energy = kernels.velocity_snrs(
+            _kernel_array(np.concatenate([np.asarray(tr.t, dtype=float) for tr in traces])),
+            reference[0], np.concatenate([[0], reference[1]]), model_t, model_v, first,
+            0.01, VELOCITY_CUTOFF, *_RECORDING, *_SEARCH,
+        )  # fmt: skip
+        compared = status == kernels.OK  # the others too short to compare
+        signal, noise = energy[compared].sum(), (energy / 10 ** (db / 10))[compared].sum()
+        snr = float(10 * np.log10(signal / noise)) if noise > 0 else None
     return FitReport(
         traces=len(polylines),
         points=sum(len(p) for p in polylines),
@@ -353,19 +363,20 @@ def recorded_velocity(
     speed by a zero-phase Butterworth at 15 Hz. A grid too coarse for the cut-off (Nyquist at
     or below it) is not filtered.
     """
-    t, xy = _kernel_array(t), _kernel_array(xy)
-    if cutoff is not None:
-        t, _ = sample_instants(t, xy)
-    if not kernels.rising(t):
-        keep = np.concatenate([[True], np.diff(t) > 0])
-        t, xy = t[keep], xy[keep]
-    if len(t) >= 3:
-        dt = max(dt, float(t[-1] - t[0]) / (GRID_PER_POINT * len(t)))
-    if len(t) < 3 or t[-1] - t[0] < 3 * dt:
+    grid, v, ok = kernels.recording_velocity(
+        _kernel_array(t), _kernel_array(xy), float(dt), float(cutoff or 0.0), cutoff is not None,
+        *_RECORDING,
+    )  # fmt: skip
+    if not ok:
         raise ValueError("velocity: the recording needs at least 3 samples over 3·dt")
-    count = int((t[-1] - t[0]) / dt) + 1
-    reach = _filter_reach(dt, cutoff) if cutoff is not None else 0
-    return kernels.grid_velocity(t, xy, dt, count, float(cutoff or 0.0), FILTER_ORDER, reach)
+    return grid, v
+
+
+_RECORDING = (FILTER_ORDER, float(GRID_PER_POINT), np.array([SMOOTHING, GAP, REGULAR]),
+              np.array(BLENDS))  # fmt: skip
+"""How :func:`recorded_velocity` treats a recording, for the compiled kernels: the filter's
+order, the grid's samples per point, the stamps' treatment
+(:func:`tagbot.inputs.stamps.sample_instants`)."""
 
 
 def low_pass(x: Array, dt: float, cutoff: float) -> Array:
@@ -388,7 +399,7 @@ def low_pass(x: Array, dt: float, cutoff: float) -> Array:
 def _filter_reach(dt: float, cutoff: float) -> int:
     """Rows of three cut-off periods every ``dt`` s, how far :func:`low_pass` reflects each end
     (at most the rows less one); 0 where the grid is too coarse for the cut-off."""
-    return max(3, round(3.0 / (cutoff * dt))) if 0.0 < 2.0 * cutoff * dt < 1.0 else 0
+    return int(kernels.filter_reach(float(dt), float(cutoff)))
 
 
 @dataclass(frozen=True)

@@ -16,22 +16,27 @@ import math
 import numpy as np
 
 from tagbot.gesture.refine_kernels import buckets
+from tagbot.inputs import stamps_kernels
 from tagbot.model.kernels import compiled, inlined
 
 __all__ = [
     "COARSE",
     "DIRECT",
+    "arc_lengths",
+    "arc_samples",
     "best_mapping",
     "densified",
     "distances",
     "extent",
     "fft",
+    "filter_reach",
     "fine_rings",
     "grid_of",
     "grid_velocity",
     "grids_of",
     "low_pass_into",
     "path_length",
+    "recording_velocity",
     "refinement",
     "rising",
     "sampled",
@@ -39,10 +44,13 @@ __all__ = [
     "spacing_of",
     "turning",
     "twiddles",
+    "velocity_snr_of",
+    "velocity_snrs",
 ]
 
 COARSE = 16
 """Coarse cells are this many fine cells wide."""
+CELL = float(__import__("os").environ.get("CELL", "2"))
 
 
 @compiled
@@ -163,48 +171,110 @@ def grids_of(
 
 
 @compiled
+def arc_lengths(points: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Per point of the polylines ``points[ends[k − 1]:ends[k]]``, the arc length from its
+    polyline's first point."""
+    out = np.empty(points.shape[0])
+    begin = 0
+    for k in range(ends.size):
+        total = 0.0
+        out[begin] = 0.0
+        for i in range(begin + 1, ends[k]):
+            dx, dy = points[i, 0] - points[i - 1, 0], points[i, 1] - points[i - 1, 1]
+            total += math.sqrt(dx * dx + dy * dy)
+            out[i] = total
+        begin = ends[k]
+    return out
+
+
+@inlined
+def _point_along(
+    points: np.ndarray, lengths: np.ndarray, last: int, s: float, i: int
+) -> tuple[float, float, int]:
+    """The point at arc length ``s`` of the polyline whose points run from ``i`` (or before)
+    to ``last``, and the index of the segment it is on (a search from ``i``, so that rising
+    ``s`` cost one pass)."""
+    while i < last - 1 and lengths[i + 1] < s:
+        i += 1
+    if i >= last:
+        return points[last, 0], points[last, 1], last
+    gap = lengths[i + 1] - lengths[i]
+    u = min(max((s - lengths[i]) / gap, 0.0), 1.0) if gap > 0 else 0.0
+    x = points[i, 0] + u * (points[i + 1, 0] - points[i, 0])
+    y = points[i, 1] + u * (points[i + 1, 1] - points[i, 1])
+    return x, y, i
+
+
+@compiled
+def arc_samples(
+    points: np.ndarray, ends: np.ndarray, lengths: np.ndarray, spacing: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The polylines ``points[ends[k − 1]:ends[k]]`` (each non-empty; ``lengths`` of
+    :func:`arc_lengths`) sampled evenly along their arc length, both ends included, at most
+    ``spacing`` apart: polyline ``k``'s samples are ``first[k]:first[k + 1]``, ``step[k]``
+    apart along it (one sample, step 0, for a polyline of length 0)."""
+    pieces = np.zeros(ends.size, np.intp)
+    first = np.zeros(ends.size + 1, np.intp)
+    step = np.zeros(ends.size)
+    for k in range(ends.size):
+        total = lengths[ends[k] - 1]
+        if total > 0:
+            pieces[k] = max(1, math.ceil(total / spacing))
+            step[k] = total / pieces[k]
+        first[k + 1] = first[k] + pieces[k] + 1
+    out = np.empty((first[ends.size], 2))
+    begin = 0
+    for k in range(ends.size):
+        last, i = ends[k] - 1, begin
+        for j in range(pieces[k]):
+            x, y, i = _point_along(points, lengths, last, j * step[k], i)
+            out[first[k] + j, 0], out[first[k] + j, 1] = x, y
+        out[first[k + 1] - 1] = points[last]
+        begin = ends[k]
+    return out, first, step
+
+
+@compiled
 def refinement(
-    samples: np.ndarray,
-    after: np.ndarray,
+    points: np.ndarray,
+    ends: np.ndarray,
+    lengths: np.ndarray,
+    first: np.ndarray,
+    step: np.ndarray,
     near: np.ndarray,
     fine: float,
     max_samples: int,
 ) -> np.ndarray:
-    """Where the largest distance from these polylines to others could exceed the largest at
-    their samples (``near``, each sample's distance) by more than ``fine / 2``: every interval
-    between consecutive samples for which it could (along it the distance changes no faster
-    than the arc length), resampled every ``fine`` (coarser if that would give more than
-    ``max_samples`` points)."""
+    """Where the largest distance from the polylines to others could exceed the largest at
+    their samples (:func:`arc_samples`: ``first``, ``step``; ``near``, each sample's distance)
+    by more than ``fine / 2``: every interval between consecutive samples for which it could
+    (along the path the distance changes no faster than the arc length), resampled along the
+    path every ``fine`` (coarser if that would give more than ``max_samples`` points)."""
     limit = near.max() + 0.5 * fine
-    chosen = np.empty(samples.shape[0], np.intp)
-    gaps = np.empty(samples.shape[0])
+    chosen = np.empty(near.size, np.intp)
+    owner = np.empty(near.size, np.intp)
     count = 0
     total = 0.0
-    for i in range(samples.shape[0]):
-        j = after[i]
-        if j == i:
-            continue
-        dx, dy = samples[j, 0] - samples[i, 0], samples[j, 1] - samples[i, 1]
-        slack = limit - max(near[i], near[j])
-        if slack > 0 and 0.25 * (dx * dx + dy * dy) < (1.0 - 1e-9) * slack * slack:
-            continue  # clearly not (without the exact length's cost)
-        gap = math.hypot(dx, dy)
-        if max(near[i], near[j]) + 0.5 * gap > limit:
-            chosen[count], gaps[count] = i, gap
-            count += 1
-            total += gap
+    for k in range(ends.size):
+        for j in range(first[k], first[k + 1] - 1):
+            if max(near[j], near[j + 1]) + 0.5 * step[k] > limit:
+                chosen[count], owner[count] = j, k
+                count += 1
+                total += step[k]
     fine = max(fine, total / max_samples)
     pieces = np.empty(count, np.intp)
     for c in range(count):
-        pieces[c] = max(1, math.ceil(gaps[c] / fine))
+        pieces[c] = max(1, math.ceil(step[owner[c]] / fine))
     out = np.empty((int(pieces.sum()), 2))
-    row = 0
+    row, i, k_last = 0, 0, -1
     for c in range(count):
-        i, j = chosen[c], after[chosen[c]]
-        dx = (samples[j, 0] - samples[i, 0]) / pieces[c]
-        dy = (samples[j, 1] - samples[i, 1]) / pieces[c]
-        for k in range(pieces[c]):
-            out[row, 0], out[row, 1] = samples[i, 0] + dx * k, samples[i, 1] + dy * k
+        k = owner[c]
+        if k != k_last:
+            i, k_last = ends[k - 1] if k > 0 else 0, k
+        start = (chosen[c] - first[k]) * step[k]
+        for p in range(pieces[c]):
+            s = start + p * step[k] / pieces[c]
+            out[row, 0], out[row, 1], i = _point_along(points, lengths, ends[k] - 1, s, i)
             row += 1
     return out
 
@@ -240,6 +310,10 @@ def _search(
     nx, ny = int(header[0, 2]), int(header[0, 3])
     cx = min(max(math.floor((x - x0) / cell), 0), nx - 1)
     cy = min(max(math.floor((y - y0) / cell), 0), ny - 1)
+    # How far the query is inside its own cell: every cell beyond ring r is farther than
+    # r cells plus this (0 for a query outside the grid).
+    left, bottom = x - (x0 + cx * cell), y - (y0 + cy * cell)
+    margin = max(min(left, cell - left, bottom, cell - bottom), 0.0)
     for ring in range(min(max(nx, ny), rings) + 1):
         for iy in range(max(cy - ring, 0), min(cy + ring, ny - 1) + 1):
             edge = iy == cy - ring or iy == cy + ring
@@ -257,8 +331,8 @@ def _search(
                             if d2 < best * best:
                                 best = math.sqrt(d2)
                 ix += 1 if edge else max(2 * ring, 1)
-        # Cells beyond this ring are at least ``ring`` cells away from the query.
-        if ring * cell >= best + 0.5 * spacing:
+        # Cells beyond this ring are farther than ``ring`` cells and the margin.
+        if ring * cell + margin >= best + 0.5 * spacing:
             return best, True
     return best, max(nx, ny) <= rings
 
@@ -323,7 +397,7 @@ def sampled(
     area = width * height
     count = samples.shape[0]
     typical = 2.0 * math.sqrt(area / count)
-    cell = min(2.0 * spacing, max(0.25 * spacing, typical)) if typical > 0 else spacing
+    cell = min(CELL * spacing, max(0.25 * spacing, typical)) if typical > 0 else spacing
     dense = area > 0 and count * math.pi * (0.5 * spacing) ** 2 > crowded * area
     return samples, before, after, segments, cell, dense
 
@@ -357,16 +431,21 @@ def shape_error_of(
     a_fine, a_coarse = grids_of(a[3], a[4], COARSE * a[4])
     b_fine, b_coarse = grids_of(b[3], b[4], COARSE * b[4])
     a_rings, b_rings = fine_rings(spacing, a[4]), fine_rings(spacing, b[4])
-    a_to_b = distances(a[0], b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
-    b_to_a = distances(b[0], a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
+    # Each drawing's samples, evenly along its arc length, against the other's segments.
+    ref_lengths, cand_lengths = arc_lengths(ref, ref_ends), arc_lengths(cand, cand_ends)
+    qa, a_first, a_step = arc_samples(ref, ref_ends, ref_lengths, spacing)
+    qb, b_first, b_step = arc_samples(cand, cand_ends, cand_lengths, spacing)
+    a_to_b = distances(qa, b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
+    b_to_a = distances(qb, a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
     mean = (a_to_b.sum() + b_to_a.sum()) / (a_to_b.size + b_to_a.size)
     # The maximum, refined where it could be (:func:`refinement`) each way.
     largest = max(a_to_b.max(), b_to_a.max())
-    query = refinement(a[0], a[2], a_to_b, size / max_density, max_samples)
+    fine = size / max_density
+    query = refinement(ref, ref_ends, ref_lengths, a_first, a_step, a_to_b, fine, max_samples)
     if query.shape[0]:
         far = distances(query, b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
         largest = max(largest, far.max())
-    query = refinement(b[0], b[2], b_to_a, size / max_density, max_samples)
+    query = refinement(cand, cand_ends, cand_lengths, b_first, b_step, b_to_a, fine, max_samples)
     if query.shape[0]:
         far = distances(query, a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
         largest = max(largest, far.max())
@@ -661,6 +740,73 @@ DIRECT = 16.0
 """A scale's offsets are correlated by direct sums when these cost less than this many times
 the transforms' ``N·log2 N``."""
 
+PRUNE = 1e-9
+"""An offset is left out of the grid search when a lower bound on its error exceeds the best
+error so far by more than this fraction of the recording's energy (rounding, many orders of
+magnitude below it, cannot make a left-out offset the best)."""
+
+
+@inlined
+def _error_bound(
+    m: int, length: int, n: int, energy: float, cv: np.ndarray, cum: np.ndarray
+) -> float:
+    """A lower bound on ``Σ|v − w|²`` at offset ``m`` (:func:`best_mapping`'s grid): over the
+    overlap, ``|Σ v·w| ≤ √(V·W)`` (Cauchy–Schwarz; ``V`` and ``W`` the two energies there), so
+    the error is at least ``energy − V + (√V − √W)²``. ``cv`` and ``cum`` are the prefix sums
+    of ``|v|²`` and ``|w|²``."""
+    first = min(max(-m, 0), length)
+    last = max(min(max(n - m, 0), length), first)
+    recorded = max(cv[last + m] - cv[first + m], 0.0) if last > first else 0.0
+    model = max(cum[last] - cum[first], 0.0)
+    gap = math.sqrt(recorded) - math.sqrt(model)
+    return energy - recorded + gap * gap
+
+
+@inlined
+def _mapping_pass(
+    grid: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    model_t: np.ndarray,
+    model_v: np.ndarray,
+    slope: np.ndarray,
+    inv_step: float,
+    s: float,
+    o: float,
+    out: np.ndarray,
+) -> None:
+    """At the mapping ``(s, o)`` (:func:`_mapping_errors`), into ``out``: the error ``Σ|r|²``
+    of the residuals ``r = v − v̂``, the gradient ``Jᵀr`` (scale, offset) and the Gauss-Newton
+    matrix ``JᵀJ`` (ss, so, oo). With ``x = (t − o)/s`` and ``v̂ = m(x)/s`` (``m`` linear
+    between the model's samples, slope ``m′``): ``∂r/∂s = (m′(x)·x + m(x))/s²`` and
+    ``∂r/∂o = m′(x)/s²``; 0 outside the model's span."""
+    inv_s = 1.0 / s
+    f = inv_s * inv_s
+    last = model_t.size - 1
+    e = gs = go = hss = hso = hoo = 0.0
+    for k in range(grid.size):
+        x = (grid[k] - o) * inv_s
+        ex, ey = vx[k], vy[k]
+        if model_t[0] <= x <= model_t[last]:
+            if inv_step > 0:
+                j = int(min((x - model_t[0]) * inv_step, last - 1.0))
+            else:
+                j = _bisect(x, model_t)
+            u = x - model_t[j]
+            mx = model_v[j, 0] + slope[j, 0] * u
+            my = model_v[j, 1] + slope[j, 1] * u
+            ex -= mx * inv_s
+            ey -= my * inv_s
+            ox, oy = slope[j, 0] * f, slope[j, 1] * f
+            sx, sy = (slope[j, 0] * x + mx) * f, (slope[j, 1] * x + my) * f
+            gs += ex * sx + ey * sy
+            go += ex * ox + ey * oy
+            hss += sx * sx + sy * sy
+            hso += sx * ox + sy * oy
+            hoo += ox * ox + oy * oy
+        e += ex * ex + ey * ey
+    out[0], out[1], out[2], out[3], out[4], out[5] = e, gs, go, hss, hso, hoo
+
 
 @compiled
 def best_mapping(
@@ -673,15 +819,19 @@ def best_mapping(
     energy: float,
     steps: np.ndarray,
     widths: np.ndarray,
+    iterations: int,
 ) -> tuple[float, float, float]:
     """The velocity SNR's search (:func:`tagbot.metrics.velocity_snr`): the error ``Σ|v − v̂|²``
     of the best (scale, offset), and that pair.
 
     Every offset on the grid of each of ``scales``, the model resampled on the grid's spacing
     and correlated with ``v`` by direct sums or by FFT (whichever is cheaper for that scale,
-    the transform no longer than its own offsets need), the first smallest error kept; then
-    the polish from the better of that pair and the shared clock (scale 1, offset ``shared``),
-    for each of ``widths`` every pair of ``steps`` around the best pair so far."""
+    the transform no longer than its own offsets need), the first smallest error kept; offsets
+    that a lower bound (:func:`_error_bound`) shows cannot beat the best so far are skipped,
+    the scales nearest the spans' ratio first so that the best is soon good. Then the polish
+    from the better of that pair and the shared clock (scale 1, offset ``shared``): for each
+    of ``widths`` every pair of ``steps`` around the best pair so far, then at most
+    ``iterations`` Levenberg-Marquardt steps (each kept only if the error falls)."""
     n = grid.size
     dt = grid[1] - grid[0]
     span = grid[n - 1] - grid[0]
@@ -714,48 +864,69 @@ def best_mapping(
     buffer = np.empty(top, dtype=np.complex128)
     w = np.empty((int(lengths.max()), 2))
     cum = np.empty(w.shape[0] + 1)
+    cv = np.empty(n + 1)
+    cv[0] = 0.0
+    for k in range(n):
+        cv[k + 1] = cv[k] + (v[k, 0] * v[k, 0] + v[k, 1] * v[k, 1])
     inv_step = _uniform_step(model_t)
     slope = _slopes(model_t, model_v)
     sums = np.empty(int((high - low).max()) + 1)
     vx, vy = v[:, 0].copy(), v[:, 1].copy()
-    best, pick_scale, pick_offset = np.inf, 1.0, shared
-    z = buffer[:1]
+    best, pick, pick_scale, pick_offset = np.inf, count, 1.0, shared
+    pick_m = 0
+    margin = PRUNE * energy
+    ratio = span / model_span if model_span > 0 else 1.0
+    nearness = np.empty(count)
     for i in range(count):
+        nearness[i] = abs(math.log(scales[i] / ratio)) if scales[i] > 0 else np.inf
+    z = buffer[:1]
+    for i in np.argsort(nearness, kind="mergesort"):
         length, s = lengths[i], scales[i]
         cum[0] = 0.0
         for k in range(length):
             wx, wy = _interpolated(k * dt / s, model_t, model_v, slope, inv_step, False)
             w[k, 0], w[k, 1] = wx / s, wy / s
             cum[k + 1] = cum[k] + (w[k, 0] * w[k, 0] + w[k, 1] * w[k, 1])
-        size = sizes[i]
-        if size:
-            level = int(math.log2(size) + 0.5)
-            spectrum = spectra[size : 2 * size]
-            if not done[level]:
-                spectrum[:] = 0.0
-                for k in range(n):
-                    spectrum[k] = complex(v[k, 0], v[k, 1])
-                fft(spectrum, table, False)
-                done[level] = True
-            z = buffer[:size]
-            z[:] = 0.0
-            for k in range(length):
-                z[k] = complex(w[k, 0], w[k, 1])
-            fft(z, table, False)
-            for k in range(size):  # conjugated, so that the forward transform inverts it
-                z[k] = spectrum[k].conjugate() * z[k]
-            fft(z, table, False)
-        else:
-            _correlate_into(sums, vx, vy, w, length, low[i], high[i])
-        # Σ|v − w|² over the overlap = Σ|v|² − 2·Re Σ v·conj(w) + Σ|w|² (outside it, v or 0).
-        for m in range(low[i], high[i] + 1):
-            first = min(max(-m, 0), length)
-            last = min(max(n - m, 0), length)
-            # (By FFT, conj(conj(·)) has the same real part.)
-            cross = z[m % size].real / size if size else sums[m - low[i]]
-            err = energy - 2.0 * cross + (cum[max(last, first)] - cum[first])
-            if err < best:
-                best, pick_scale, pick_offset = err, s, grid[0] + m * dt
+        # Left out: the offsets at either end whose bound shows they cannot beat the best.
+        lo, hi = low[i], high[i]
+        while lo <= hi and _error_bound(lo, length, n, energy, cv, cum) > best + margin:
+            lo += 1
+        while hi >= lo and _error_bound(hi, length, n, energy, cv, cum) > best + margin:
+            hi -= 1
+        if lo <= hi:
+            size = sizes[i]
+            if size and (hi - lo + 1) * min(n, length) <= DIRECT * size * math.log2(size):
+                size = 0  # few offsets: direct sums cost less
+            if size:
+                level = int(math.log2(size) + 0.5)
+                spectrum = spectra[size : 2 * size]
+                if not done[level]:
+                    spectrum[:] = 0.0
+                    for k in range(n):
+                        spectrum[k] = complex(v[k, 0], v[k, 1])
+                    fft(spectrum, table, False)
+                    done[level] = True
+                z = buffer[:size]
+                z[:] = 0.0
+                for k in range(length):
+                    z[k] = complex(w[k, 0], w[k, 1])
+                fft(z, table, False)
+                for k in range(size):  # conjugated, so that the forward transform inverts it
+                    z[k] = spectrum[k].conjugate() * z[k]
+                fft(z, table, False)
+            else:
+                _correlate_into(sums, vx, vy, w, length, lo, hi)
+            # Σ|v − w|² over the overlap = Σ|v|² − 2·Re Σ v·conj(w) + Σ|w|² (outside: v or 0).
+            for mm in range(lo, hi + 1):
+                first = min(max(-mm, 0), length)
+                last = min(max(n - mm, 0), length)
+                # (By FFT, conj(conj(·)) has the same real part.)
+                cross = z[mm % size].real / size if size else sums[mm - lo]
+                err = energy - 2.0 * cross + (cum[max(last, first)] - cum[first])
+                # The first smallest in the scales' order, whatever order they are visited in.
+                if err < best or (err == best and (i < pick or (i == pick and mm < pick_m))):
+                    best, pick, pick_m = err, i, mm
+                    pick_scale, pick_offset = s, grid[0] + mm * dt
     # The polish starts from the better of the grid's pair and the shared clock, so that the
     # result is never below the shared clock's (a timed fit's own mapping).
     starts = np.array([pick_offset, shared])
@@ -787,4 +958,188 @@ def best_mapping(
                 if errors[b] < new_best:
                     new_best, new_scale, new_offset = errors[b], s_try, o_try[b]
         best, scale, offset = new_best, new_scale, new_offset
-    return best, scale, offset
+    return _refined(grid, vx, vy, model_t, model_v, slope, inv_step, best, scale, offset,
+                    reach, iterations)  # fmt: skip
+
+
+LM_DAMPING = 1e-3
+"""The Levenberg-Marquardt polish's first damping (relative to the matrix's diagonal)."""
+
+
+@inlined
+def _refined(
+    grid: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    model_t: np.ndarray,
+    model_v: np.ndarray,
+    slope: np.ndarray,
+    inv_step: float,
+    best: float,
+    scale: float,
+    offset: float,
+    reach: float,
+    iterations: int,
+) -> tuple[float, float, float]:
+    """The mapping ``(scale, offset)`` of error ``best`` improved by at most ``iterations``
+    Levenberg-Marquardt steps (:func:`_mapping_pass`; a step is kept only if the error falls,
+    the scale at most halves per step), until a step no longer moves it (1e-9 of the scale and
+    of ``reach``) or gains less than 1e-12 of the error."""
+    here = np.empty(6)
+    trial = np.empty(6)
+    if iterations <= 0:
+        return best, scale, offset
+    _mapping_pass(grid, vx, vy, model_t, model_v, slope, inv_step, scale, offset, here)
+    damping = LM_DAMPING
+    moved = False
+    for _ in range(iterations):
+        a, b, c = here[3] * (1.0 + damping), here[4], here[5] * (1.0 + damping)
+        det = a * c - b * b
+        if not det > 0:
+            break
+        s_try = max(scale - (c * here[1] - b * here[2]) / det, 0.5 * scale)
+        o_try = offset - (a * here[2] - b * here[1]) / det
+        _mapping_pass(grid, vx, vy, model_t, model_v, slope, inv_step, s_try, o_try, trial)
+        if trial[0] < here[0]:
+            still = abs(s_try - scale) <= 1e-9 * scale and abs(o_try - offset) <= 1e-9 * reach
+            gain = here[0] - trial[0]
+            scale, offset, moved = s_try, o_try, True
+            here[:] = trial
+            damping = max(0.1 * damping, 1e-9)
+            if still or gain < 1e-12 * here[0]:
+                break
+        else:
+            damping *= 10.0
+            if damping > 1e8:
+                break
+    return (here[0] if moved else best), scale, offset
+
+
+# --- the velocity SNR of a recording, whole -----------------------------------------------------
+
+OK, SHORT_MODEL, SHORT_RECORDING, AT_REST = range(4)
+"""What :func:`velocity_snr_of` found: a figure, or why there is none."""
+
+
+@compiled
+def filter_reach(dt: float, cutoff: float) -> int:
+    """Rows of three cut-off periods every ``dt`` s, how far the low-pass reflects each end; 0
+    where the grid is too coarse for the cut-off (see :func:`tagbot.metrics.low_pass`)."""
+    if 0.0 < 2.0 * cutoff * dt < 1.0:
+        return max(3, round(3.0 / (cutoff * dt)))
+    return 0
+
+
+@compiled
+def recording_velocity(
+    t: np.ndarray,
+    xy: np.ndarray,
+    dt: float,
+    cutoff: float,
+    filtered: bool,
+    order: int,
+    per_point: float,
+    stamps: np.ndarray,
+    blends: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """:func:`tagbot.metrics.recorded_velocity` (low-passed at ``cutoff`` if ``filtered``;
+    ``stamps``: the width, gap and steadiness of
+    :func:`tagbot.inputs.stamps_kernels.sample_instants`), and False instead if the recording
+    is too short (fewer than 3 samples, or over less than 3 grid steps)."""
+    if filtered:
+        t, _ = stamps_kernels.sample_instants(t, xy, stamps[0], stamps[1], stamps[2], blends)
+    if not rising(t):
+        keep = np.ones(t.size, np.bool_)
+        for i in range(1, t.size):
+            keep[i] = t[i] > t[i - 1]
+        t, xy = t[keep], xy[keep]
+    n = t.size
+    if n >= 3:
+        dt = max(dt, (t[n - 1] - t[0]) / (per_point * n))
+    if n < 3 or t[n - 1] - t[0] < 3.0 * dt:
+        return np.empty(0), np.empty((0, 2)), False
+    count = int((t[n - 1] - t[0]) / dt) + 1
+    reach = filter_reach(dt, cutoff) if filtered else 0
+    grid, v = grid_velocity(t, xy, dt, count, cutoff if filtered else 0.0, order, reach)
+    return grid, v, True
+
+
+@compiled
+def velocity_snr_of(
+    t: np.ndarray,
+    xy: np.ndarray,
+    model_t: np.ndarray,
+    model_v: np.ndarray,
+    dt: float,
+    cutoff: float,
+    filtered: bool,
+    order: int,
+    per_point: float,
+    stamps: np.ndarray,
+    blends: np.ndarray,
+    scales: np.ndarray,
+    steps: np.ndarray,
+    widths: np.ndarray,
+    iterations: int,
+) -> tuple[int, float, float, float, float]:
+    """:func:`tagbot.metrics.velocity_snr` whole (:func:`recording_velocity`, then
+    :func:`best_mapping` over ``scales`` times the spans' ratio and 1): ``(status, snr_db,
+    scale, offset, energy)``, the status :data:`OK` or why there is no figure."""
+    if model_t.size < 2:
+        return SHORT_MODEL, 0.0, 1.0, 0.0, 0.0
+    grid, v, ok = recording_velocity(t, xy, dt, cutoff, filtered, order, per_point, stamps, blends)
+    if not ok:
+        return SHORT_RECORDING, 0.0, 1.0, 0.0, 0.0
+    energy = 0.0
+    for k in range(v.shape[0]):
+        energy += v[k, 0] * v[k, 0] + v[k, 1] * v[k, 1]
+    if not energy > 0:
+        return AT_REST, 0.0, 1.0, 0.0, 0.0
+    shared = model_t[0]  # the offset of the shared clock
+    own = model_t - shared  # the mapping's offset is from the model's first sample
+    model_span = own[own.size - 1]
+    span = grid[grid.size - 1] - grid[0]
+    ratio = span / model_span if model_span > 0 else 1.0
+    tried = np.empty(scales.size + 1)
+    tried[: scales.size] = scales * ratio
+    tried[scales.size] = 1.0  # the model on the recording's own clock, as a timed fit is
+    best, scale, offset = best_mapping(
+        grid, v, own, model_v, tried, shared, energy, steps, widths, iterations
+    )
+    return OK, 10.0 * math.log10(energy / max(best, 1e-300)), scale, offset, energy
+
+
+@compiled
+def velocity_snrs(
+    t: np.ndarray,
+    xy: np.ndarray,
+    first: np.ndarray,
+    model_t: np.ndarray,
+    model_v: np.ndarray,
+    model_first: np.ndarray,
+    dt: float,
+    cutoff: float,
+    order: int,
+    per_point: float,
+    stamps: np.ndarray,
+    blends: np.ndarray,
+    scales: np.ndarray,
+    steps: np.ndarray,
+    widths: np.ndarray,
+    iterations: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`velocity_snr_of` (low-passed) of recordings ``first[k]:first[k + 1]`` against
+    models ``model_first[k]:model_first[k + 1]``: per recording its status, SNR (dB) and
+    energy."""
+    count = first.size - 1
+    status = np.empty(count, np.intp)
+    db = np.zeros(count)
+    energy = np.zeros(count)
+    for k in range(count):
+        a, b = first[k], first[k + 1]
+        c, d = model_first[k], model_first[k + 1]
+        status[k], db[k], _, _, energy[k] = velocity_snr_of(
+            t[a:b], xy[a:b], model_t[c:d], model_v[c:d], dt, cutoff, True, order, per_point,
+            stamps, blends, scales, steps, widths, iterations,
+        )  # fmt: skip
+    return status, db, energy

@@ -1,6 +1,6 @@
 """The compiled metrics against straightforward numpy references: the recorded velocity and its
-low-pass, the velocity SNR's search, densification and the shape error give the same values as
-the array code they replaced, to rounding (relative 1e-9, far below what a report prints)."""
+low-pass, the velocity SNR's grid search, densification and the shape error give the same values
+as array code, to rounding (relative 1e-9, far below what a report prints)."""
 
 from __future__ import annotations
 
@@ -20,6 +20,8 @@ from tagbot.metrics import (
     FILTER_ORDER,
     MAX_SAMPLES,
     MEAN_DENSITY,
+    POLISH_ITERATIONS,
+    POLISH_WIDTHS,
     VELOCITY_CUTOFF,
     densify,
     fit_report,
@@ -29,8 +31,10 @@ from tagbot.metrics import (
     turning_of,
     velocity_snr,
 )
+from tagbot.metrics_kernels import LM_DAMPING
 from tagbot.model.motion import sample_plans
 from tagbot.model.plan import Plan, Tag, random_plan, random_timed_plan
+from tests.test_metrics import arc_samples
 
 # --- references: the array code the compiled kernels replaced ----------------------------------
 
@@ -111,14 +115,57 @@ def _velocity_snr(t, xy, model_t, model_v, dt=0.01, cutoff=VELOCITY_CUTOFF):
     pick = int(np.argmin(e))
     best, scale, offset = float(e[pick]), float(starts[0][pick]), float(starts[1][pick])
     steps = np.linspace(-1.0, 1.0, 7)
-    for width in (0.1, 0.03, 0.01, 0.003, 0.001):
+    reach = max(span, dt)
+    for width in POLISH_WIDTHS:
         s_try = np.repeat(scale * (1 + width * steps), 7)
-        o_try = np.tile(offset + steps * width * max(span, dt), 7)
+        o_try = np.tile(offset + steps * width * reach, 7)
         e = errors(s_try, o_try)
         pick = int(np.argmin(e))
         if e[pick] < best:
             best, scale, offset = float(e[pick]), float(s_try[pick]), float(o_try[pick])
+    best, scale, offset = _levenberg_marquardt(
+        grid, rec, model_t, model, best, scale, offset, reach
+    )
     return 10.0 * np.log10(energy / max(best, 1e-300)), scale, offset
+
+
+def _levenberg_marquardt(grid, rec, model_t, model, best, scale, offset, reach):
+    """The polish's last part: Gauss-Newton steps on (scale, offset) with Marquardt's damping,
+    each kept only if the error falls (the kernel's rules, in array code)."""
+    slope = np.diff(model) / np.diff(model_t)
+
+    def state(s, o):
+        x = (grid - o) / s
+        inside = (x >= model_t[0]) & (x <= model_t[-1])
+        j = np.clip(np.searchsorted(model_t, x, side="right") - 1, 0, len(slope) - 1)
+        m = np.where(inside, model[j] + slope[j] * (x - model_t[j]), 0)
+        d = np.where(inside, slope[j], 0) / s**2
+        r = rec - m / s
+        js, jo = (d * x + m / s**2) * inside, d  # the residuals' derivatives
+        dot = lambda a, b: float(np.sum(a.real * b.real + a.imag * b.imag))  # noqa: E731
+        return dot(r, r), dot(r, js), dot(r, jo), dot(js, js), dot(js, jo), dot(jo, jo)
+
+    here, damping, moved = state(scale, offset), LM_DAMPING, False
+    for _ in range(POLISH_ITERATIONS):
+        a, b, c = here[3] * (1 + damping), here[4], here[5] * (1 + damping)
+        det = a * c - b * b
+        if not det > 0:
+            break
+        s_try = max(scale - (c * here[1] - b * here[2]) / det, 0.5 * scale)
+        o_try = offset - (a * here[2] - b * here[1]) / det
+        trial = state(s_try, o_try)
+        if trial[0] < here[0]:
+            still = abs(s_try - scale) <= 1e-9 * scale and abs(o_try - offset) <= 1e-9 * reach
+            gain = here[0] - trial[0]
+            scale, offset, here, moved = s_try, o_try, trial, True
+            damping = max(0.1 * damping, 1e-9)
+            if still or gain < 1e-12 * here[0]:
+                break
+        else:
+            damping *= 10.0
+            if damping > 1e8:
+                break
+    return (here[0] if moved else best), scale, offset
 
 
 def _densify(polyline: np.ndarray, spacing: float) -> np.ndarray:
@@ -138,26 +185,37 @@ def _distances(query: np.ndarray, polylines: list[np.ndarray]) -> np.ndarray:
     return shapely.distance(shapely.points(query), shapely.GeometryCollection(parts))
 
 
-def _farthest(pieces, coarse, other, fine):
-    """The largest distance from the densified ``pieces`` to ``other``, refined within
-    ``fine`` where it could be larger than at the samples."""
+def _along(polyline: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """The points at arc lengths ``s`` of the polyline."""
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(polyline, axis=0).T))])
+    keep = np.concatenate([[True], np.diff(along) > 0])
+    return np.column_stack([np.interp(s, along[keep], c) for c in polyline[keep].T])
+
+
+def _farthest(polylines, spacing, coarse, other, fine):
+    """The largest distance from ``polylines`` (their arc samples at ``spacing`` at distances
+    ``coarse``) to ``other``, refined along the path within ``fine`` where it could be larger
+    than at the samples."""
     top = float(coarse.max())
-    ends = np.cumsum([len(p) for p in pieces])
-    points = np.concatenate(pieces)
-    after = np.arange(len(points)) + 1
-    after[ends - 1] = ends - 1
-    i = np.flatnonzero(after != np.arange(len(points)))
-    gap = np.hypot(*(points[after[i]] - points[i]).T)
-    maybe = i[np.maximum(coarse[i], coarse[after[i]]) + 0.5 * gap > top + 0.5 * fine]
-    if not maybe.size:
+    chosen, first = [], 0
+    for p in polylines:
+        count = len(arc_samples(p, spacing))
+        if count > 1:
+            step = float(np.hypot(*np.diff(p, axis=0).T).sum()) / (count - 1)
+            d = coarse[first : first + count]
+            j = np.flatnonzero(np.maximum(d[:-1], d[1:]) + 0.5 * step > top + 0.5 * fine)
+            chosen.append((p, j * step, step))
+        first += count
+    total = sum(len(starts) * step for _, starts, step in chosen)
+    if not total:
         return top
-    lengths = gap[np.searchsorted(i, maybe)]
-    fine = max(fine, float(lengths.sum()) / MAX_SAMPLES)
-    pieces_ = np.maximum(1, np.ceil(lengths / fine).astype(np.intp))
-    start = np.repeat(points[maybe], pieces_, axis=0)
-    step = np.repeat((points[after[maybe]] - points[maybe]) / pieces_[:, None], pieces_, axis=0)
-    offset = np.arange(int(pieces_.sum())) - np.repeat(np.cumsum(pieces_) - pieces_, pieces_)
-    return max(top, float(_distances(start + step * offset[:, None], other).max()))
+    fine = max(fine, total / MAX_SAMPLES)
+    points = []
+    for p, starts, step in chosen:
+        pieces = max(1, math.ceil(step / fine))
+        s = (starts[:, None] + np.arange(pieces)[None, :] * step / pieces).ravel()
+        points.append(_along(p, s))
+    return max(top, float(_distances(np.concatenate(points), other).max()))
 
 
 def _shape_error(reference, candidate) -> tuple[float, float]:
@@ -168,12 +226,14 @@ def _shape_error(reference, candidate) -> tuple[float, float]:
     for drawing in (ref, cand):
         length = sum(float(np.hypot(*np.diff(p, axis=0).T).sum()) for p in drawing)
         spacing = max(spacing, length / MAX_SAMPLES)
-    a = [_densify(p, spacing) for p in ref]
-    b = [_densify(p, spacing) for p in cand]
-    a_to_b, b_to_a = _distances(np.concatenate(a), b), _distances(np.concatenate(b), a)
+    a = np.concatenate([arc_samples(p, spacing) for p in ref])
+    b = np.concatenate([arc_samples(p, spacing) for p in cand])
+    a_to_b, b_to_a = _distances(a, cand), _distances(b, ref)
     mean = (a_to_b.sum() + b_to_a.sum()) / (len(a_to_b) + len(b_to_a))
     fine = size / DENSITY
-    largest = max(_farthest(a, a_to_b, b, fine), _farthest(b, b_to_a, a, fine))
+    largest = max(
+        _farthest(ref, spacing, a_to_b, cand, fine), _farthest(cand, spacing, b_to_a, ref, fine)
+    )
     return float(mean) / size, largest / size
 
 

@@ -475,6 +475,25 @@ def evaluate_runs(
 
 
 @compiled
+def plan_grids(
+    t_off: np.ndarray, first_stroke: np.ndarray, starts: np.ndarray, step: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each plan's sampling times, every ``step`` from its start (``starts[k]``) to its end (the
+    latest ``t_off`` of its strokes ``first_stroke[k]:first_stroke[k + 1]``; the last sample at
+    or just past it), one plan after the other (plan ``k``'s rows ``first[k]:first[k + 1]``)."""
+    plans = starts.size
+    first = np.zeros(plans + 1, np.intp)
+    for k in range(plans):
+        end = t_off[first_stroke[k] : first_stroke[k + 1]].max()
+        first[k + 1] = first[k] + math.ceil((end - starts[k]) / step - 1e-9) + 1
+    t = np.empty(first[plans])
+    for k in range(plans):
+        for i in range(first[k + 1] - first[k]):
+            t[first[k] + i] = starts[k] + i * step
+    return t, first
+
+
+@compiled
 def evaluate_plans_into(
     t: np.ndarray,
     first_row: np.ndarray,

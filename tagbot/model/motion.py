@@ -137,16 +137,22 @@ def sample_plans(
 ) -> list[tuple[Array, Array, Array]]:
     """:func:`sample_plan` for each of ``plans`` (by default all), evaluated in one pass: each
     plan on its own grid, so that no pen lift is too short for ``step``."""
+    t, xy, v, first = sampled_plans(tag, step, plans)
+    return [(t[a:b], xy[a:b], v[a:b]) for a, b in itertools.pairwise(first)]
+
+
+def sampled_plans(
+    tag: Tag, step: float, plans: Sequence[int] | None = None
+) -> tuple[Array, Array, Array, NDArray[np.intp]]:
+    """:func:`sample_plans` joined: times, positions and velocities of all chosen plans one
+    after the other, plan ``k``'s rows ``first[k]:first[k + 1]``."""
     chosen = [tag.plans[k] for k in (range(len(tag.plans)) if plans is None else plans)]
     strokes = _Strokes(chosen, tag.size)
-    times = []
-    for k, plan in enumerate(chosen):
-        # Plan.end, from the windows the evaluation needs too.
-        end = float(strokes.t_off[strokes.first[k] : strokes.first[k + 1]].max())
-        count = math.ceil((end - plan.start) / step - 1e-9) + 1
-        times.append(plan.start + np.arange(count) * step)
-    drawn = strokes.evaluate(times)
-    return [(t, xy, v) for t, (xy, v) in zip(times, drawn, strict=True)]
+    # Plan.end, from the windows the evaluation needs too.
+    starts = np.array([plan.start for plan in chosen], dtype=float)
+    t, first = kernels.plan_grids(strokes.t_off, strokes.first, starts, float(step))
+    xy, v = strokes.evaluate_joined(t, first)
+    return t, xy, v, first
 
 
 def evaluate_plan(plan: Plan, t: ArrayLike, size: float | None = None) -> tuple[Array, Array]:
@@ -199,11 +205,17 @@ class _Strokes:
         steps[joins[(joins > 0) & (joins < len(t_all))] - 1] = 0.0  # each plan sorted on its own
         if np.any(steps < 0) or not np.all(np.isfinite(t_all)):
             raise ValueError("t: must be a finite, sorted 1-D array of times")
-        xy, v = np.zeros((len(t_all), 2)), np.zeros((len(t_all), 2))
+        xy, v = self.evaluate_joined(t_all, first)
+        return [(xy[first[k] : first[k + 1]], v[first[k] : first[k + 1]]) for k in range(len(ts))]
+
+    def evaluate_joined(self, t: Array, first: NDArray[np.intp]) -> tuple[Array, Array]:
+        """Positions and velocities at times ``t`` (finite; plan ``k``'s sorted, rows
+        ``first[k]:first[k + 1]``), one after the other."""
+        xy, v = np.zeros((len(t), 2)), np.zeros((len(t), 2))
         plans = self.plans
         if plans:
             kernels.evaluate_plans_into(
-                t_all,
+                t,
                 first,
                 self.first,
                 np.array([plan.targets[0] for plan in plans], dtype=float),
@@ -218,7 +230,7 @@ class _Strokes:
                 xy,
                 v,
             )
-        return [(xy[first[k] : first[k + 1]], v[first[k] : first[k + 1]]) for k in range(len(ts))]
+        return xy, v
 
 
 def sample_ink(
