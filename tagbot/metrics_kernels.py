@@ -25,6 +25,7 @@ __all__ = [
     "arc_lengths",
     "arc_samples",
     "best_mapping",
+    "crossing_grid",
     "densified",
     "distances",
     "extent",
@@ -50,7 +51,8 @@ __all__ = [
 
 COARSE = 16
 """Coarse cells are this many fine cells wide."""
-CELL = float(__import__("os").environ.get("CELL", "2"))
+CELL = 2.0
+"""Fine cells are at most this many sample spacings wide."""
 
 
 @compiled
@@ -159,15 +161,56 @@ def densified(
 
 
 @compiled
+def crossing_grid(segments: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A uniform grid of ``cell``-wide cells over the segments, each segment in every cell its
+    bounding box meets (the layout of :func:`grid_of`): a point of a segment lies in a cell
+    that holds it."""
+    x0 = y0 = np.inf
+    x1 = y1 = -np.inf
+    for e in range(segments.shape[0]):
+        ax, ay = segments[e, 0], segments[e, 1]
+        bx, by = ax + segments[e, 2], ay + segments[e, 3]
+        x0, x1 = min(x0, ax, bx), max(x1, ax, bx)
+        y0, y1 = min(y0, ay, by), max(y1, ay, by)
+    nx, ny = int((x1 - x0) / cell) + 1, int((y1 - y0) / cell) + 1
+    header = np.empty((1, 5))
+    header[0, 0], header[0, 1], header[0, 2], header[0, 3], header[0, 4] = x0, y0, nx, ny, 0
+    box = np.empty((segments.shape[0], 4), np.intp)
+    start = np.zeros(nx * ny + 1, np.intp)
+    for e in range(segments.shape[0]):
+        ax, ay = segments[e, 0], segments[e, 1]
+        bx, by = ax + segments[e, 2], ay + segments[e, 3]
+        box[e, 0] = min(int((min(ax, bx) - x0) / cell), nx - 1)
+        box[e, 1] = min(int((max(ax, bx) - x0) / cell), nx - 1)
+        box[e, 2] = min(int((min(ay, by) - y0) / cell), ny - 1)
+        box[e, 3] = min(int((max(ay, by) - y0) / cell), ny - 1)
+        for iy in range(box[e, 2], box[e, 3] + 1):
+            for ix in range(box[e, 0], box[e, 1] + 1):
+                start[iy * nx + ix + 1] += 1
+    for c in range(nx * ny):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    order = np.empty(start[nx * ny], np.intp)
+    for e in range(segments.shape[0]):
+        for iy in range(box[e, 2], box[e, 3] + 1):
+            for ix in range(box[e, 0], box[e, 1] + 1):
+                c = iy * nx + ix
+                order[fill[c]] = e
+                fill[c] += 1
+    return header, start, order
+
+
+@compiled
 def grids_of(
     segments: np.ndarray, cell: float, coarse_cell: float
 ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """The fine and coarse grids of the segments' midpoints (:func:`grid_of`)."""
+    """The fine grid of the segments (:func:`crossing_grid`) and the coarse one of their
+    midpoints (:func:`grid_of`)."""
     middle = np.empty((segments.shape[0], 2))
     for e in range(segments.shape[0]):
         middle[e, 0] = segments[e, 0] + 0.5 * segments[e, 2]
         middle[e, 1] = segments[e, 1] + 0.5 * segments[e, 3]
-    return grid_of(middle, cell), grid_of(middle, coarse_cell)
+    return crossing_grid(segments, cell), grid_of(middle, coarse_cell)
 
 
 @compiled
@@ -299,13 +342,15 @@ def _search(
     start: np.ndarray,
     order: np.ndarray,
     cell: float,
-    spacing: float,
+    slack: float,
     rings: int,
 ) -> tuple[float, bool]:
     """Improve ``best``, the distance from ``(x, y)`` to the polylines, over the cells of one
-    grid, ring by ring outwards, at most ``rings`` rings; and whether no segment left can be
-    nearer. Every point of a segment (at most ``spacing`` long) is within ``spacing / 2`` of its
-    midpoint, so a ring farther than the best distance plus that ends the search."""
+    grid: its own cell, then the cells within reach of what that found if they are few, else
+    ring by ring outwards, at most ``rings`` rings; and whether no segment left can be nearer.
+    Every point of a segment is within ``slack`` of a cell that holds it (0 for
+    :func:`crossing_grid`; half the segments' longest for a grid of their midpoints), so a
+    ring farther than the best distance plus that ends the search."""
     x0, y0 = header[0, 0], header[0, 1]
     nx, ny = int(header[0, 2]), int(header[0, 3])
     cx = min(max(math.floor((x - x0) / cell), 0), nx - 1)
@@ -314,7 +359,33 @@ def _search(
     # r cells plus this (0 for a query outside the grid).
     left, bottom = x - (x0 + cx * cell), y - (y0 + cy * cell)
     margin = max(min(left, cell - left, bottom, cell - bottom), 0.0)
-    for ring in range(min(max(nx, ny), rings) + 1):
+    c = cy * nx + cx
+    for e in range(start[c], start[c + 1]):
+        d2 = _segment_d2(x, y, segments, order[e])
+        if d2 < best * best:
+            best = math.sqrt(d2)
+    reach = best + slack
+    if reach <= margin:
+        return best, True
+    if reach < cell:  # near the polylines, the usual case: the cells the disc within reach meets
+        ix0, ix1 = math.floor((x - reach - x0) / cell), math.floor((x + reach - x0) / cell)
+        iy0, iy1 = math.floor((y - reach - y0) / cell), math.floor((y + reach - y0) / cell)
+        for iy in range(max(iy0, 0), min(iy1, ny - 1) + 1):
+            for ix in range(max(ix0, 0), min(ix1, nx - 1) + 1):
+                if ix == cx and iy == cy:
+                    continue
+                dx = max(x0 + ix * cell - x, 0.0, x - x0 - (ix + 1) * cell)
+                dy = max(y0 + iy * cell - y, 0.0, y - y0 - (iy + 1) * cell)
+                if dx * dx + dy * dy < reach * reach:
+                    c = iy * nx + ix
+                    for e in range(start[c], start[c + 1]):
+                        d2 = _segment_d2(x, y, segments, order[e])
+                        if d2 < best * best:
+                            best = math.sqrt(d2)
+                            reach = best + slack
+        return best, True
+    for ring in range(1, min(max(nx, ny), rings) + 1):
+        reach = best + slack
         for iy in range(max(cy - ring, 0), min(cy + ring, ny - 1) + 1):
             edge = iy == cy - ring or iy == cy + ring
             ix = cx - ring
@@ -322,17 +393,16 @@ def _search(
                 if 0 <= ix < nx:
                     dx = max(x0 + ix * cell - x, 0.0, x - x0 - (ix + 1) * cell)
                     dy = max(y0 + iy * cell - y, 0.0, y - y0 - (iy + 1) * cell)
-                    reach = best + 0.5 * spacing
                     if dx * dx + dy * dy < reach * reach:
                         c = iy * nx + ix
                         for e in range(start[c], start[c + 1]):
-                            i = order[e]
-                            d2 = _segment_d2(x, y, segments, i)
+                            d2 = _segment_d2(x, y, segments, order[e])
                             if d2 < best * best:
                                 best = math.sqrt(d2)
+                                reach = best + slack
                 ix += 1 if edge else max(2 * ring, 1)
         # Cells beyond this ring are farther than ``ring`` cells and the margin.
-        if ring * cell + margin >= best + 0.5 * spacing:
+        if ring * cell + margin >= best + slack:
             return best, True
     return best, max(nx, ny) <= rings
 
@@ -359,10 +429,10 @@ def distances(
             out[q] = out[q - 1]
             continue
         best, done = _search(x, y, np.inf, segments, fine[0], fine[1], fine[2], fine_cell,
-                             spacing, fine_rings)  # fmt: skip
+                             0.0, fine_rings)  # fmt: skip
         if not done:
             best, done = _search(x, y, best, segments, coarse[0], coarse[1], coarse[2],
-                                 coarse_cell, spacing, 1 << 30)  # fmt: skip
+                                 coarse_cell, 0.5 * spacing, 1 << 30)  # fmt: skip
         out[q] = best
     return out
 
@@ -397,7 +467,7 @@ def sampled(
     area = width * height
     count = samples.shape[0]
     typical = 2.0 * math.sqrt(area / count)
-    cell = min(CELL * spacing, max(0.25 * spacing, typical)) if typical > 0 else spacing
+    cell = min(CELL * spacing, max(0.5 * spacing, typical)) if typical > 0 else spacing
     dense = area > 0 and count * math.pi * (0.5 * spacing) ** 2 > crowded * area
     return samples, before, after, segments, cell, dense
 

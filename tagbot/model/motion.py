@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tagbot.errors import PlanError
 from tagbot.model import kernels
-from tagbot.model.plan import END_TOLERANCE, Plan, Tag, stroke_windows
+from tagbot.model.plan import END_TOLERANCE, Plan, Tag
 
 MAX_SAMPLES = 50_000_000
 """Refuse to allocate more samples than this (about 2.4 GB of arrays)."""
@@ -191,7 +191,7 @@ class _Strokes:
         self.onsets, self.mu, self.sigma, self.length = joined
         # Plan.windows's budget, stroke by stroke: the same arithmetic.
         budget = END_TOLERANCE * size / (np.repeat(counts, counts) * self.length)
-        self.t_on, self.t_off = stroke_windows(self.onsets, self.mu, self.sigma, budget)
+        self.t_on, self.t_off = kernels.windows_array(self.onsets, self.mu, self.sigma, budget)
 
     def evaluate(self, times: Sequence[ArrayLike]) -> list[tuple[Array, Array]]:
         """Positions and velocities of each plan at its own sorted times."""
