@@ -227,11 +227,14 @@ def velocity_snr(
     model_t[0])`` (velocities divide by ``scale``). Returns ``(snr_db, scale, offset)`` for the
     scale and offset maximising ``10·log10(Σ|v|² / Σ|v − v̂|²)``: for each of 41 scales from ¼
     to 4 times the span ratio, and 1, every offset on the ``dt`` grid (a cross-correlation by
-    direct sums or FFT, whichever costs less for the scale), then a local search from the
-    better of the best pair and the shared clock (scale 1, offset ``model_t[0]``: a timed fit's
-    own mapping, which the grid of offsets can miss by a fraction of a step), so the result is
-    never below :func:`clock_velocity_snr`'s; compiled
-    (:func:`tagbot.metrics_kernels.best_mapping`). Cost O(n log n) in the samples.
+    direct sums or FFT, whichever costs less for the scale; offsets that a Cauchy–Schwarz bound
+    shows cannot beat the best so far are skipped), then a local search from the better of the
+    best pair and the shared clock (scale 1, offset ``model_t[0]``: a timed fit's own mapping,
+    which the grid of offsets can miss by a fraction of a step): a pattern of scale and offset
+    steps at :data:`POLISH_WIDTHS`, then Levenberg–Marquardt steps on both (the error is a sum of
+    squares of the interpolated model), so the result is never below
+    :func:`clock_velocity_snr`'s; compiled (:func:`tagbot.metrics_kernels.best_mapping`). Cost
+    O(n log n) in the samples.
     """
     snr_db, scale, offset, _ = _velocity_snr(t, xy, model_t, model_v, dt, cutoff)
     return snr_db, scale, offset

@@ -5,7 +5,8 @@ polylines, found through a uniform grid of their segments (see
 
 The polylines are given as their segments ``(ax, ay, bx − ax, by − ay, 1 / length²)`` (K, 5; 0
 for a point), the polylines' own cut at their samples, each at most ``spacing`` long (a polyline
-of one point: one segment of length 0); the grid holds each segment in the cell of its
+of one point: one segment of length 0); the fine grid holds each segment in every cell its
+bounding box meets, the coarse one (for queries far from the polylines) in the cell of its
 midpoint.
 """
 
