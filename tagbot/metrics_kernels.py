@@ -807,6 +807,37 @@ def _correlate_into(
             out[j] += xs[j] * wx + ys[j] * wy
 
 
+@inlined
+def _resampled(
+    w: np.ndarray,
+    cum: np.ndarray,
+    length: int,
+    dt: float,
+    s: float,
+    model_t: np.ndarray,
+    model_v: np.ndarray,
+    slope: np.ndarray,
+    inv_step: float,
+) -> None:
+    """The model at scale ``s`` on the grid's spacing into ``w`` (``length`` samples: sample
+    ``k`` the model at ``k·dt/s``, over ``s``; as :func:`_interpolated`, written out for an even
+    model clock, with products for the divisions) and the prefix sums of ``|w|²`` into
+    ``cum``."""
+    cum[0] = 0.0
+    last = model_t.size - 1
+    inv_s, tick = 1.0 / s, dt / s
+    for k in range(length):
+        if inv_step > 0:
+            x = min(max(k * tick, model_t[0]), model_t[last])
+            j = int(min((x - model_t[0]) * inv_step, last - 1.0))
+            u = x - model_t[j]
+            wx, wy = model_v[j, 0] + slope[j, 0] * u, model_v[j, 1] + slope[j, 1] * u
+        else:
+            wx, wy = _interpolated(k * tick, model_t, model_v, slope, inv_step, False)
+        w[k, 0], w[k, 1] = wx * inv_s, wy * inv_s
+        cum[k + 1] = cum[k] + (w[k, 0] * w[k, 0] + w[k, 1] * w[k, 1])
+
+
 DIRECT = 16.0
 """A scale's offsets are correlated by direct sums when these cost less than this many times
 the transforms' ``N·log2 N``."""
@@ -954,10 +985,7 @@ def best_mapping(
     for i in np.argsort(nearness, kind="mergesort"):
         length, s = lengths[i], scales[i]
         cum[0] = 0.0
-        for k in range(length):
-            wx, wy = _interpolated(k * dt / s, model_t, model_v, slope, inv_step, False)
-            w[k, 0], w[k, 1] = wx / s, wy / s
-            cum[k + 1] = cum[k] + (w[k, 0] * w[k, 0] + w[k, 1] * w[k, 1])
+        _resampled(w, cum, length, dt, s, model_t, model_v, slope, inv_step)
         # Left out: the offsets at either end whose bound shows they cannot beat the best.
         lo, hi = low[i], high[i]
         while lo <= hi and _error_bound(lo, length, n, energy, cv, cum) > best + margin:
