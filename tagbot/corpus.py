@@ -251,9 +251,9 @@ def _map_processes(
     work: Callable[[FileJob], dict[str, Any]], jobs: Sequence[FileJob], workers: int
 ) -> Iterator[dict[str, Any]]:
     """Rows from a pool of ``workers`` processes, at most twice as many jobs in flight. A worker
-    that dies (a native crash) breaks the pool: the jobs it held are run again one by one, each
-    in a process of its own, so the file that kills a process gets an error row and the others
-    their results; a new pool takes the rest."""
+    that dies (a native crash) breaks the pool: the jobs it held are run again, each in a
+    process of its own (``workers`` such processes at a time), so the file that kills a process
+    gets an error row and the others their results; a new pool takes the rest."""
     queue = deque(jobs)
     while queue:
         in_flight: dict[Future[dict[str, Any]], FileJob] = {}
@@ -276,15 +276,41 @@ def _map_processes(
             finally:
                 for future in in_flight:
                     future.cancel()
-        for job in [*suspects, *in_flight.values()]:
-            yield _alone(work, job)
+        yield from _each_alone(work, [*suspects, *in_flight.values()], workers)
+
+
+_PRELOAD = ("tagbot.corpus", "tagbot.gesture", "tagbot.inputs", "tagbot.io.planfile")
+_PRELOAD += ("tagbot.render.api", "tagbot.source")
+"""What a fit or render worker imports first (seconds): the fork server does it once for all."""
 
 
 def _pool(workers: int) -> ProcessPoolExecutor:
     import multiprocessing
 
-    # spawn: workers share nothing with this process's threads (fork with threads can deadlock).
-    return ProcessPoolExecutor(max(1, workers), mp_context=multiprocessing.get_context("spawn"))
+    # Workers share nothing with this process's threads (fork with threads can deadlock): each
+    # is forked from a fork server, a single-threaded process that has done the imports (where
+    # there is one; else spawned, importing everything again).
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(list(_PRELOAD))
+    else:
+        context = multiprocessing.get_context("spawn")
+    return ProcessPoolExecutor(max(1, workers), mp_context=context)
+
+
+def _each_alone(
+    work: Callable[[FileJob], dict[str, Any]], jobs: Sequence[FileJob], workers: int
+) -> Iterator[dict[str, Any]]:
+    """:func:`_alone` for each of ``jobs``, ``workers`` of them at a time (each job still in a
+    process of its own), in order."""
+    if workers <= 1 or len(jobs) <= 1:
+        for job in jobs:
+            yield _alone(work, job)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(min(workers, len(jobs))) as threads:
+        yield from threads.map(lambda job: _alone(work, job), jobs)
 
 
 def _alone(work: Callable[[FileJob], dict[str, Any]], job: FileJob) -> dict[str, Any]:

@@ -34,6 +34,7 @@ exactly like Grbl's, and then :meth:`ParserState.step` refuses them with error 2
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, replace
 
 from .codes import LINE_BUFFER_SIZE, MAX_DIGITS, SETTINGS, State, is_realtime_byte
@@ -97,34 +98,21 @@ def scan_number(text: str, pos: int = 0) -> tuple[bool, int, int, int] | None:
     """The digits of a number at ``text[pos:]`` as Grbl's ``read_float`` collects them:
     ``(negative, mantissa, exponent, end)`` with value ``±mantissa·10^exponent`` (the first 8
     digits kept), or None when there is no digit."""
-    end = len(text)
-    i = pos
-    negative = False
-    if i < end and text[i] in "+-":
-        negative = text[i] == "-"
-        i += 1
-    mantissa = 0
-    exponent = 0
-    ndigit = 0
-    decimal = False
-    while i < end:
-        char = text[i]
-        if "0" <= char <= "9":
-            ndigit += 1
-            if ndigit <= MAX_DIGITS:
-                if decimal:
-                    exponent -= 1
-                mantissa = mantissa * 10 + (ord(char) - 48)
-            elif not decimal:
-                exponent += 1
-        elif char == "." and not decimal:
-            decimal = True
-        else:
-            break
-        i += 1
-    if not ndigit:
+    match = _NUMBER.match(text, pos)
+    assert match is not None  # every part of the pattern is optional
+    sign, whole, fraction = match.group(1), match.group(2), match.group(3) or ""
+    digits = whole + fraction
+    if not digits:
         return None
-    return negative, mantissa, exponent, i
+    # Digits past the 8th are dropped: each one before the point scales by ten.
+    dropped = max(0, len(whole) - MAX_DIGITS)
+    decimals = max(0, min(len(fraction), MAX_DIGITS - len(whole)))
+    return sign == "-", int(digits[:MAX_DIGITS]), dropped - decimals, match.end()
+
+
+_NUMBER = re.compile(r"([+-]?)([0-9]*)(?:\.([0-9]*))?")
+"""What Grbl's ``read_float`` takes: an optional sign, digits, at most one decimal point and
+its digits (no point: the fraction group is None)."""
 
 
 @dataclass(frozen=True)
@@ -299,6 +287,8 @@ def parse_line(text: str | bytes, state: State = State.IDLE) -> Parsed:
 
 def _line_buffer(text: str) -> str | None:
     """What Grbl's line buffer keeps of ``text``: None when it overflows (error 11)."""
+    if len(text) < LINE_BUFFER_SIZE and _PLAIN.fullmatch(text):
+        return text  # nothing to drop or upper-case, and short enough: kept as it is
     kept: list[str] = []
     in_parentheses = in_semicolon = overflow = False
     limit = LINE_BUFFER_SIZE - 1
@@ -320,6 +310,11 @@ def _line_buffer(text: str) -> str | None:
         else:
             kept.append(char.upper() if "a" <= char <= "z" else char)
     return None if overflow else "".join(kept)
+
+
+_PLAIN = re.compile(r"[^\x00-\x21?~/(;a-z\x7f-\U0010ffff]*")
+"""Lines the line buffer keeps character for character: no space or control character, no
+real-time character, no ``/``, comment or lower-case letter, nothing outside ASCII."""
 
 
 def _parse_words(line: str) -> Block | Error:
@@ -499,16 +494,18 @@ class ParserState:
         if any(code in NOT_MODELLED for code in block.commands):
             return Error(20)
         words = dict(block.words)
-        motion = block.command("motion") or ("G1" if block.jog else self.motion)
-        non_modal = block.command("non_modal")
-        units = block.command("units") or self.units
-        distance = block.command("distance") or self.distance
-        feed_mode = "G94" if block.jog else block.command("feed_mode") or self.feed_mode
+        commands: dict[str, str] = {}  # group -> the block's first command of it
+        for code in block.commands:
+            commands.setdefault(GROUPS[code], code)
+        command = commands.get
+        motion = command("motion") or ("G1" if block.jog else self.motion)
+        non_modal = command("non_modal")
+        units = command("units") or self.units
+        distance = command("distance") or self.distance
+        feed_mode = "G94" if block.jog else command("feed_mode") or self.feed_mode
         axes = {axis: words[axis] for axis in _AXES if axis in words}
-        explicit_motion = block.command("motion") not in (None, "G80")
-        axis_command = block.command("tool_length") or (
-            "motion" if explicit_motion or axes else None
-        )
+        explicit_motion = command("motion") not in (None, "G80")
+        axis_command = command("tool_length") or ("motion" if explicit_motion or axes else None)
         scale = MM_PER_INCH if units == "G20" else 1.0
 
         if "N" in words and words["N"] > MAX_LINE_NUMBER:
@@ -564,17 +561,16 @@ class ParserState:
                 return Error(16)
             return Step(replace(self, position=target), target, False, feed, jog=True)
 
-        flow = block.command("program_flow")
-        state = replace(
-            self,
+        flow = command("program_flow")
+        state = type(self)(  # every field: what dataclasses.replace does, without its checks
             motion=motion,
-            plane=block.command("plane") or self.plane,
+            plane=command("plane") or self.plane,
             units=units,
             distance=distance,
             feed_mode=feed_mode,
-            coord_system=block.command("coord_system") or self.coord_system,
-            spindle=block.command("spindle") or self.spindle,
-            coolant=block.command("coolant") or self.coolant,
+            coord_system=command("coord_system") or self.coord_system,
+            spindle=command("spindle") or self.spindle,
+            coolant=command("coolant") or self.coolant,
             tool=int(words.get("T", 0)),
             feed_rate=feed,
             spindle_speed=speed,

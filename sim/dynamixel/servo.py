@@ -227,6 +227,16 @@ def plan_time_based(
     return pieces, PROFILE_TRAPEZOIDAL if middle > 0.0 else PROFILE_TRIANGULAR
 
 
+_TIME_BASED_PROFILE = int(DriveMode.TIME_BASED_PROFILE)  # a plain int: IntFlag's & is slow
+
+_GOAL_CAPS = {
+    "goal_velocity": "velocity_limit",
+    "goal_pwm": "pwm_limit",
+    "goal_current": "current_limit",
+}
+"""Goal items and the limit item their magnitude may not exceed (Data Limit Error)."""
+
+
 class Trajectory:
     """The horn's motion over the whole run: segments of constant acceleration.
 
@@ -265,12 +275,15 @@ class Trajectory:
     ) -> None:
         """From time ``t`` (position ``p``) follow ``pieces``, then hold (or cruise at
         ``final_velocity``) at ``final_position`` (default: where the pieces end)."""
-        while len(self._t) > 1 and self._t[-1] >= t:
-            for column in (self._t, self._p, self._v, self._a):
-                column.pop()
-        if self._t[-1] >= t:  # only the first segment is left and it starts now
-            for column in (self._t, self._p, self._v, self._a):
-                column.pop()
+        times = self._t
+        kept = len(times)
+        while kept > 1 and times[kept - 1] >= t:
+            kept -= 1
+        if times[kept - 1] >= t:  # only the first segment is left and it starts now
+            kept -= 1
+        if kept < len(times):
+            for column in (times, self._p, self._v, self._a):
+                del column[kept:]
         tc, pc = t, p
         for duration, v, a in pieces:
             if duration <= 0.0:
@@ -338,6 +351,7 @@ class SimulatedServo:
         self._size = self.table.size  # a computed property: keep it
         self._layout = {e.key: (e.address, e.end, e.signed) for e in self.table.values()}
         self._owner = [None] * self._size  # address -> item covering it
+        self._items_at: dict[tuple[int, int], tuple[int, list[ControlTableEntry]]] = {}
         for entry in self.table.values():
             for address in range(entry.address, entry.end):
                 self._owner[address] = entry  # type: ignore[call-overload]
@@ -443,7 +457,7 @@ class SimulatedServo:
         goal = float(self.get("goal_position"))
         vlimit = self.velocity_limit
         pv, pa = self.get("profile_velocity"), self.get("profile_acceleration")
-        if self.memory[10] & DriveMode.TIME_BASED_PROFILE:
+        if self.memory[10] & _TIME_BASED_PROFILE:
             pv, pa = min(pv, MAX_TIME_PROFILE_MS), min(pa, MAX_TIME_PROFILE_MS)
             pieces, kind = plan_time_based(p, v, goal, pv / 1000.0, pa / 1000.0, vlimit)
         else:
@@ -510,7 +524,14 @@ class SimulatedServo:
         self._put("present_temperature", self.temperature)
 
     def _items(self, address: int, length: int) -> tuple[int, list[ControlTableEntry]]:
-        """The items a write covers, or an error if it covers anything else."""
+        """The items a write covers, or an error if it covers anything else (the layout never
+        changes: worked out once per address and length)."""
+        known = self._items_at.get((address, length))
+        if known is None:
+            known = self._items_at[(address, length)] = self._find_items(address, length)
+        return known
+
+    def _find_items(self, address: int, length: int) -> tuple[int, list[ControlTableEntry]]:
         end = address + length
         if length < 1:
             return ErrorCode.DATA_LENGTH, []
@@ -530,33 +551,33 @@ class SimulatedServo:
 
     def check_write(self, address: int, data: bytes) -> int:
         """The error a WRITE of ``data`` at ``address`` would get now (0: it would succeed)."""
+        return self._check_write(address, data)[0]
+
+    def _check_write(self, address: int, data: bytes) -> tuple[int, list[ControlTableEntry]]:
+        """:meth:`check_write`'s error, and the items the write covers."""
         error, items = self._items(address, len(data))
         if error:
-            return error
+            return error, items
         if any(not entry.writable for entry in items):
-            return ErrorCode.ACCESS
+            return ErrorCode.ACCESS, items
         if self.torque and any(entry.address < EEPROM_END for entry in items):
-            return ErrorCode.ACCESS
+            return ErrorCode.ACCESS, items
         limits = 0
         for entry in items:
             value = entry.decode(data[entry.address - address : entry.end - address])
             if not entry.in_range(value):
-                return ErrorCode.DATA_RANGE
+                return ErrorCode.DATA_RANGE, items
             if entry.key == "operating_mode" and value not in self.table.operating_modes:
-                return ErrorCode.DATA_RANGE
+                return ErrorCode.DATA_RANGE, items
             limits = limits or self._limit_error(entry.key, value)
-        return limits
+        return limits, items
 
     def _limit_error(self, key: str, value: int) -> int:
         if key == "goal_position" and self._operating_mode() == OperatingMode.POSITION:
             low, high = self.get("min_position_limit"), self.get("max_position_limit")
             return 0 if low <= value <= high else ErrorCode.DATA_LIMIT
-        caps = {
-            "goal_velocity": "velocity_limit",
-            "goal_pwm": "pwm_limit",
-            "goal_current": "current_limit",
-        }
-        if key in caps and abs(value) > self.get(caps[key]):
+        cap = _GOAL_CAPS.get(key)
+        if cap is not None and abs(value) > self.get(cap):
             return ErrorCode.DATA_LIMIT
         if key == "torque_enable" and value and self.hardware_error & self.get("shutdown"):
             return ErrorCode.RESULT_FAIL
@@ -565,26 +586,29 @@ class SimulatedServo:
     def write(self, address: int, data: bytes, t: float) -> int:
         """WRITE: the error (0: done, with its effects at time ``t``)."""
         data = bytes(data)
-        error = self.check_write(address, data)
+        error, items = self._check_write(address, data)
         if error:
             return error
-        _, items = self._items(address, len(data))
-        before = {entry.key: self.get(entry.key) for entry in items}
-        p, _ = self.trajectory.state(t)
-        self.memory[address : address + len(data)] = data
         keys = {entry.key for entry in items}
-        if "homing_offset" in keys:
-            shift = self.get("homing_offset") - before["homing_offset"]
+        # Only these two items' old values matter (and the position only for the first).
+        homing = "homing_offset" in keys
+        if homing:
+            offset_before = self.get("homing_offset")
+            p, _ = self.trajectory.state(t)
+        torque_before = self.get("torque_enable") if "torque_enable" in keys else 0
+        self.memory[address : address + len(data)] = data
+        if homing:
+            shift = self.get("homing_offset") - offset_before
             self.trajectory.replan(t, p + shift, ())
-        if "torque_enable" in keys and self.torque != bool(before["torque_enable"]):
+        if "torque_enable" in keys and self.torque != bool(torque_before):
             if self.torque:
                 self._torque_on(t)
             else:
                 self.trajectory.hold(t)
         mode = self._operating_mode()
         if "goal_position" in keys and mode in POSITION_MODES:
-            shutdown = self.hardware_error & self.get("shutdown")
             if not self.torque and self.memory[10] & DriveMode.TORQUE_ON_BY_GOAL_UPDATE:
+                shutdown = self.hardware_error & self.get("shutdown")
                 self.memory[64] = 0 if shutdown else 1
             if self.torque:
                 self._start_profile(t)

@@ -70,7 +70,9 @@ machine); host-side timing in :mod:`sim.grbl.transport`
 
 from __future__ import annotations
 
+import functools
 import math
+import re
 import threading
 import time
 from collections import deque
@@ -205,6 +207,12 @@ def avr_read_float(text: str, pos: int = 0) -> tuple[float, int] | None:
 def avr_words(text: str) -> dict[str, float]:
     """The value words of a line in Grbl's buffer form (``N10G4P0.15``), read by
     :func:`avr_read_float`; the last of a repeated letter wins (the parser refuses those)."""
+    return dict(_avr_words(text))
+
+
+@functools.lru_cache(maxsize=4096)
+def _avr_words(text: str) -> tuple[tuple[str, float], ...]:
+    """:func:`avr_words` as pairs, remembered (long jobs repeat lines)."""
     words: dict[str, float] = {}
     i = 3 if text.startswith("$J=") else 0
     while i < len(text):
@@ -214,8 +222,18 @@ def avr_words(text: str) -> dict[str, float]:
             i += 1
             continue
         words[letter], i = read
-    return words
+    return tuple(words.items())
 
+
+@functools.lru_cache(maxsize=4096)
+def _parse_line(text: str, state: State) -> object:
+    """:func:`~firmware_protocols.grbl.parse_line`, remembered: a pure function of the line and
+    the state, whose results are frozen values (long jobs repeat lines)."""
+    return parse_line(text, state)
+
+
+_REALTIME = re.compile(b"[\\x18!?~\\x80-\\xff]")
+"""The bytes :func:`~firmware_protocols.grbl.is_realtime_byte` says are real-time."""
 
 _WCO_REFRESH = (30, 10)  # REPORT_WCO_REFRESH_BUSY_COUNT, _IDLE_COUNT
 _OVR_REFRESH = (20, 10)  # REPORT_OVR_REFRESH_BUSY_COUNT, _IDLE_COUNT
@@ -310,7 +328,7 @@ class SimulatedGrbl:
         send lines fast enough. Counted when the next move arrives."""
         self._wall_start = time.monotonic()
         self._output: deque[tuple[float, bytes]] = deque()
-        self._rx: deque[int] = deque()
+        self._rx = bytearray()  # the receive ring's bytes, oldest first
         self._rx_head = 0  # ring indices, for Bf:'s exact arithmetic
         self._rx_tail = 0
         self.lost_bytes = 0
@@ -340,11 +358,15 @@ class SimulatedGrbl:
     def write(self, data: bytes) -> int:
         """Bytes from the host, arriving now. Returns ``len(data)`` (lost bytes included)."""
         self._check_open()
-        for byte in bytes(data):
-            if not is_realtime_byte(byte):
-                self._store(byte)
-            elif not self.silent:  # a hung main loop: real-time bytes are taken, then ignored
-                self._realtime(byte)
+        data = bytes(data)
+        if _REALTIME.search(data) is None:
+            self._store_all(data)  # the common case: as byte by byte, at once
+        else:
+            for byte in data:
+                if not is_realtime_byte(byte):
+                    self._store(byte)
+                elif not self.silent:  # a hung main loop: real-time bytes are taken, then ignored
+                    self._realtime(byte)
         self._pump()
         return len(data)
 
@@ -356,6 +378,8 @@ class SimulatedGrbl:
 
     def read_timed(self) -> list[tuple[float, bytes]]:
         """Like :meth:`read`, with the simulated time each chunk was printed at."""
+        if not self._output:
+            return []
         chunks = list(self._output)
         self._output.clear()
         return chunks
@@ -373,6 +397,11 @@ class SimulatedGrbl:
     def advance_to(self, t: float, until: Callable[[], bool] | None = None) -> bool:
         """Move the simulated clock on to time ``t`` (no effect if it is already later), or
         only to the first event at which ``until()`` holds (then True)."""
+        if until is None:
+            quiet = self.quiet_until()
+            if quiet is not None and t < quiet:
+                self.executor.move_clock(t)  # no event on the way: only the clock moves
+                return False
         self._check_open()
 
         mark = self._blocked_until
@@ -413,6 +442,15 @@ class SimulatedGrbl:
             self.advance_to(time.monotonic() - self._wall_start)
         else:
             self._pump()
+
+    def quiet_until(self) -> float | None:
+        """While the main loop is stalled on a full planner (and no alarm is scheduled): the
+        time of the executor's next event (``inf``: none). Until then bytes that are not
+        real-time only go into the receive ring, whenever they arrive. None otherwise."""
+        if self._alarms or self.closed or not self._stalled_on_full_planner():
+            return None
+        event = self.executor.next_event()
+        return math.inf if event is None else event
 
     def run_until_idle(self, limit: float = 3600.0) -> bool:
         """Advance until nothing is left to do (no line waiting, idle, no scheduled alarm), or
@@ -629,6 +667,14 @@ class SimulatedGrbl:
         self._rx.append(byte)
         self._rx_head = (self._rx_head + 1) % RX_BUFFER_SIZE
 
+    def _store_all(self, data: bytes) -> None:
+        """:meth:`_store` each byte of ``data`` (none of them real-time)."""
+        room = max(0, RX_CAPACITY - len(self._rx))
+        kept = data[:room]
+        self.lost_bytes += len(data) - len(kept)
+        self._rx += kept
+        self._rx_head = (self._rx_head + len(kept)) % RX_BUFFER_SIZE
+
     def _rx_available(self) -> int:
         """``serial_get_rx_buffer_available()`` of Grbl 1.1h, quirk included (128 when empty)."""
         head, tail = self._rx_head, self._rx_tail
@@ -673,8 +719,37 @@ class SimulatedGrbl:
         self._pump()
         return self.closed
 
+    def _stalled_on_full_planner(self) -> bool:
+        """The main loop would only offer its next block to a full planner again and stop: no
+        real-time flag to act on, no delay, motion running, no dwell, no step idle delay. Then
+        :meth:`_pump` has nothing to do (the long jobs' hot path: called at every byte and
+        event while the planner is full)."""
+        if (
+            self._status_pending
+            or self._reset_pending
+            or self._hold_pending
+            or self._jog_cancel
+            or self._critical
+            or self._restart
+            or self._blocked_until is not None
+            or not self._actions
+        ):
+            return False
+        head = self._actions[0]
+        if type(head) is not _Wait or type(head.item) is not MotionBlock:
+            return False
+        ex = self.executor
+        return (
+            ex.state == RUN
+            and ex._lock_until is None
+            and ex._dwell is None
+            and len(ex.planner.blocks) >= ex.planner.capacity
+        )
+
     def _pump(self) -> None:
         """Grbl at the current time: a blocking delay, or the main loop while it can run."""
+        if self._stalled_on_full_planner():
+            return
         while not (self.closed or self.silent):
             if self._blocked_until is not None:
                 if self.now < self._blocked_until:
@@ -768,18 +843,28 @@ class SimulatedGrbl:
     def _take_line(self) -> bool:
         """Move characters from the ring into the line; handle a complete line. False when the
         ring holds no complete line any more."""
-        while self._rx:
-            if self._rx[0] in (0x0A, 0x0D) and not self._checkpoint():
-                return False  # protocol_execute_realtime at each line's end stopped the loop
-            byte = self._rx.popleft()
-            self._rx_tail = (self._rx_tail + 1) % RX_BUFFER_SIZE
-            if byte in (0x0A, 0x0D):
-                text = self._line.decode("latin-1")
-                self._line.clear()
-                self._handle_line(text)
-                return True
-            self._line.append(byte)
-        return False
+        rx = self._rx
+        if not rx:
+            return False
+        ends = [i for i in (rx.find(b"\n"), rx.find(b"\r")) if i >= 0]
+        if not ends:  # no line end yet: every byte moves into the line
+            self._line += rx
+            self._rx_tail = (self._rx_tail + len(rx)) % RX_BUFFER_SIZE
+            rx.clear()
+            return False
+        end = min(ends)
+        if end:  # the characters before the line end
+            self._line += rx[:end]
+            del rx[:end]
+            self._rx_tail = (self._rx_tail + end) % RX_BUFFER_SIZE
+        if not self._checkpoint():
+            return False  # protocol_execute_realtime at each line's end stopped the loop
+        del rx[0]
+        self._rx_tail = (self._rx_tail + 1) % RX_BUFFER_SIZE
+        text = self._line.decode("latin-1")
+        self._line.clear()
+        self._handle_line(text)
+        return True
 
     def _handle_line(self, text: str) -> None:
         self.lines_received += 1
@@ -790,7 +875,7 @@ class SimulatedGrbl:
         if injected is not None:
             self._emit(Error(injected))
         else:
-            parsed = parse_line(text, self._state if self._state != State.IDLE else self.state)
+            parsed = _parse_line(text, self._state if self._state != State.IDLE else self.state)
             if isinstance(parsed, Error):
                 self._emit(parsed)
             elif isinstance(parsed, Block):

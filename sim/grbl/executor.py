@@ -392,6 +392,12 @@ class GrblExecutor:
             self.now = max(self.now, event)
             self._handle_event()
 
+    def move_clock(self, t: float) -> None:
+        """:meth:`run_until` ``t`` when no internal event comes by then (:meth:`next_event` is
+        later, or None): only the clock moves."""
+        self.now = max(self.now, t)
+        self._touch()
+
     def run_until_idle(self, limit: float = math.inf) -> bool:
         """Run until the machine is idle (or time ``limit``). True if it became idle."""
         if self._motion_done():
@@ -482,6 +488,10 @@ class GrblExecutor:
         self._cur_released = seg.n_step <= 1
         if self._cur_released:
             self._prep_buffer()
+
+    def next_event(self) -> float | None:
+        """The time of the next internal event (see :meth:`run_until`), None when there is none."""
+        return self._next_event()
 
     def _next_event(self) -> float | None:
         if self._frozen_at is not None:

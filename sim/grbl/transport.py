@@ -40,6 +40,7 @@ from urllib.parse import parse_qsl, urlsplit
 
 import serial
 
+from firmware_protocols.grbl import is_realtime_byte
 from sim import pty
 from sim.grbl.device import SimulatedGrbl
 
@@ -138,9 +139,11 @@ class Link:
     def send(self, data: bytes, latency: float = 0.0) -> None:
         """Queue ``data``; its first byte starts ``latency`` seconds from now at the earliest."""
         t = max(self.now + latency, self._to_device_free)
+        step = self.byte_time
+        queue = self._to_device
         for byte in data:
-            t += self.byte_time
-            self._to_device.append((t, byte))
+            t += step
+            queue.append((t, byte))
         self._to_device_free = t
 
     @property
@@ -159,6 +162,19 @@ class Link:
             chunk = bytearray()
             while queue and queue[0][0] <= max(arrival, device.now):
                 chunk.append(queue.popleft()[1])
+            quiet = device.quiet_until()
+            if quiet is not None and not any(map(is_realtime_byte, chunk)):
+                # The main loop is stalled on a full planner: until its next event, ordinary
+                # bytes only fill the receive ring, so those arriving by then go in at once (as
+                # one at a time would, at the last one's arrival).
+                last = None
+                while queue and queue[0][0] <= t and queue[0][0] < quiet:
+                    if is_realtime_byte(queue[0][1]):
+                        break
+                    last, byte = queue.popleft()
+                    chunk.append(byte)
+                if last is not None and last > device.now:
+                    device.advance_to(last)
             device.write(bytes(chunk))
             self._collect()
         device.advance_to(t)
@@ -169,6 +185,20 @@ class Link:
             start = max(t, self._to_host_free)
             self._to_host_free = start + len(chunk) * self.byte_time
             self._to_host.append((self._to_host_free, chunk))
+
+    def idle_until(self) -> float:
+        """Before this time nothing happens on the line or in the device but the clock moving:
+        no byte reaches either end, Grbl's main loop stays stalled on a full planner
+        (:meth:`SimulatedGrbl.quiet_until`). ``-inf`` when that cannot be said."""
+        device = self.device
+        quiet = device.quiet_until()
+        if quiet is None or device.out_waiting:
+            return -math.inf
+        if self._to_device:
+            quiet = min(quiet, self._to_device[0][0])
+        if self._to_host:
+            quiet = min(quiet, self._to_host[0][0])
+        return quiet
 
     def available(self) -> int:
         now = self.now

@@ -891,8 +891,11 @@ def line_effects(
     state = ParserState(position=(start[0], start[1], 0.0))
     moves: list[bool] = []
     targets: list[tuple[float, float]] = []
+    parsed_as: dict[str, object] = {}  # parse_line is a pure function with frozen results
     for text in lines:
-        parsed = parse_line(text.strip())
+        parsed = parsed_as.get(text)
+        if parsed is None:
+            parsed = parsed_as[text] = parse_line(text.strip())
         moved = False
         if isinstance(parsed, Block):
             step = state.step(parsed)
