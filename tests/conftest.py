@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -18,6 +19,19 @@ tagbot.kernel_check.install()
 
 THREAD_GRACE_SECONDS = 2.0
 """How long a test's threads get to finish after the test before it fails for leaking them."""
+
+
+@pytest.fixture(autouse=True, scope="session")
+def interruptible_children() -> Iterator[None]:
+    """Programs the tests start take Ctrl-C (SIGINT) as from a terminal, even when the suite
+    itself runs with SIGINT ignored (a background job of a shell script): an ignored signal is
+    inherited through exec, and Python then installs no KeyboardInterrupt handler."""
+    ignored = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+    if ignored:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    if ignored:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 @pytest.fixture(autouse=True)
