@@ -744,7 +744,7 @@ def _slopes(xp: np.ndarray, fp: np.ndarray) -> np.ndarray:
     return slope
 
 
-@inlined
+@compiled
 def _mapping_errors(
     grid: np.ndarray,
     vx: np.ndarray,
@@ -864,7 +864,7 @@ def _error_bound(
     return energy - recorded + gap * gap
 
 
-@inlined
+@compiled
 def _mapping_pass(
     grid: np.ndarray,
     vx: np.ndarray,
@@ -1065,7 +1065,7 @@ LM_DAMPING = 1e-3
 """The Levenberg-Marquardt polish's first damping (relative to the matrix's diagonal)."""
 
 
-@inlined
+@compiled
 def _refined(
     grid: np.ndarray,
     vx: np.ndarray,
@@ -1234,11 +1234,14 @@ def velocity_snrs(
     status = np.empty(count, np.intp)
     db = np.zeros(count)
     energy = np.zeros(count)
+    filtered = cutoff > 0.0
     for k in range(count):
         a, b = first[k], first[k + 1]
         c, d = model_first[k], model_first[k + 1]
+        # Contiguous copies and no literal flag: the signature Python calls velocity_snr_of
+        # with, compiled once.
         status[k], db[k], _, _, energy[k] = velocity_snr_of(
-            t[a:b], xy[a:b], model_t[c:d], model_v[c:d], dt, cutoff, True, order, per_point,
-            stamps, blends, scales, steps, widths, iterations,
+            t[a:b].copy(), xy[a:b].copy(), model_t[c:d].copy(), model_v[c:d].copy(), dt, cutoff,
+            filtered, order, per_point, stamps, blends, scales, steps, widths, iterations,
         )  # fmt: skip
     return status, db, energy
