@@ -334,6 +334,37 @@ def _segment_d2(qx: float, qy: float, segments: np.ndarray, i: int) -> float:
 
 
 @inlined
+def _cell_search(
+    x: float,
+    y: float,
+    best: float,
+    slack: float,
+    ix: int,
+    iy: int,
+    x0: float,
+    y0: float,
+    nx: int,
+    start: np.ndarray,
+    order: np.ndarray,
+    cell: float,
+    segments: np.ndarray,
+) -> float:
+    """``best`` improved over the segments of cell ``(ix, iy)`` of a grid (its corner
+    ``(x0, y0)``, ``nx`` cells wide), if that cell is within ``best + slack`` of ``(x, y)``
+    (:func:`_search`)."""
+    dx = max(x0 + ix * cell - x, 0.0, x - x0 - (ix + 1) * cell)
+    dy = max(y0 + iy * cell - y, 0.0, y - y0 - (iy + 1) * cell)
+    reach = best + slack
+    if dx * dx + dy * dy < reach * reach:
+        c = iy * nx + ix
+        for e in range(start[c], start[c + 1]):
+            d2 = _segment_d2(x, y, segments, order[e])
+            if d2 < best * best:
+                best = math.sqrt(d2)
+    return best
+
+
+@inlined
 def _search(
     x: float,
     y: float,
@@ -360,11 +391,7 @@ def _search(
     # r cells plus this (0 for a query outside the grid).
     left, bottom = x - (x0 + cx * cell), y - (y0 + cy * cell)
     margin = max(min(left, cell - left, bottom, cell - bottom), 0.0)
-    c = cy * nx + cx
-    for e in range(start[c], start[c + 1]):
-        d2 = _segment_d2(x, y, segments, order[e])
-        if d2 < best * best:
-            best = math.sqrt(d2)
+    best = _cell_search(x, y, best, slack, cx, cy, x0, y0, nx, start, order, cell, segments)
     reach = best + slack
     if reach <= margin:
         return best, True
@@ -373,34 +400,18 @@ def _search(
         iy0, iy1 = math.floor((y - reach - y0) / cell), math.floor((y + reach - y0) / cell)
         for iy in range(max(iy0, 0), min(iy1, ny - 1) + 1):
             for ix in range(max(ix0, 0), min(ix1, nx - 1) + 1):
-                if ix == cx and iy == cy:
-                    continue
-                dx = max(x0 + ix * cell - x, 0.0, x - x0 - (ix + 1) * cell)
-                dy = max(y0 + iy * cell - y, 0.0, y - y0 - (iy + 1) * cell)
-                if dx * dx + dy * dy < reach * reach:
-                    c = iy * nx + ix
-                    for e in range(start[c], start[c + 1]):
-                        d2 = _segment_d2(x, y, segments, order[e])
-                        if d2 < best * best:
-                            best = math.sqrt(d2)
-                            reach = best + slack
+                if ix != cx or iy != cy:
+                    best = _cell_search(x, y, best, slack, ix, iy, x0, y0, nx, start, order,
+                                        cell, segments)  # fmt: skip
         return best, True
     for ring in range(1, min(max(nx, ny), rings) + 1):
-        reach = best + slack
         for iy in range(max(cy - ring, 0), min(cy + ring, ny - 1) + 1):
             edge = iy == cy - ring or iy == cy + ring
             ix = cx - ring
             while ix <= cx + ring:
                 if 0 <= ix < nx:
-                    dx = max(x0 + ix * cell - x, 0.0, x - x0 - (ix + 1) * cell)
-                    dy = max(y0 + iy * cell - y, 0.0, y - y0 - (iy + 1) * cell)
-                    if dx * dx + dy * dy < reach * reach:
-                        c = iy * nx + ix
-                        for e in range(start[c], start[c + 1]):
-                            d2 = _segment_d2(x, y, segments, order[e])
-                            if d2 < best * best:
-                                best = math.sqrt(d2)
-                                reach = best + slack
+                    best = _cell_search(x, y, best, slack, ix, iy, x0, y0, nx, start, order,
+                                        cell, segments)  # fmt: skip
                 ix += 1 if edge else max(2 * ring, 1)
         # Cells beyond this ring are farther than ``ring`` cells and the margin.
         if ring * cell + margin >= best + slack:
