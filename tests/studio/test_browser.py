@@ -284,7 +284,7 @@ def test_variations_side_by_side_and_adopt_one(page: Any, running: Running) -> N
 
 def test_play_moves_the_pen_along_the_trajectory(page: Any, running: Running) -> None:
     # Every position the pen takes is recorded in the page, so a busy host that
-    # draws few frames still shows the pen travelling from start to end.
+    # draws few frames (or ends the animation early) still shows the pen moving.
     page.evaluate(
         """() => {
         window.penTrail = [];
@@ -296,8 +296,6 @@ def test_play_moves_the_pen_along_the_trajectory(page: Any, running: Running) ->
     )
     page.click("#play")
     page.wait_for_function("new Set(window.penTrail).size >= 3", timeout=20_000)
-    trail = page.evaluate("window.penTrail")
-    assert len(set(trail)) >= 3
     # The brush preview is the server's render_array picture.
     page.wait_for_function("document.getElementById('brush').src.startsWith('blob:')")
     assert page.evaluate("document.getElementById('brush').naturalWidth") == 460
