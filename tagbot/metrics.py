@@ -110,7 +110,7 @@ class _Polylines:
         query = _kernel_array(query)
         if self.tree is not None:
             return self._near_segments(query)
-        return kernels.distances(
+        distance, _ = kernels.distances(
             query,
             self.segments,
             self.fine,
@@ -120,6 +120,7 @@ class _Polylines:
             self.spacing,
             kernels.fine_rings(self.spacing, self.cell),
         )
+        return distance
 
     def _near_segments(self, query: Array) -> Array:
         assert self.tree is not None
@@ -141,9 +142,11 @@ class _Polylines:
         hold it are resampled along the path at ``fine``
         (:func:`tagbot.metrics_kernels.refinement`)."""
         top = float(coarse.max())
+        unknown = np.full(len(coarse), -1, dtype=np.intp)  # nearest segments not known here
         query = kernels.refinement(
-            *self.joined, self.lengths, self.first, self.step, coarse, fine, MAX_SAMPLES
-        )
+            *self.joined, self.lengths, self.first, self.step, self.queries, coarse, unknown,
+            other.segments, fine, MAX_SAMPLES,
+        )  # fmt: skip
         return max(top, float(other.distance(query).max())) if len(query) else top
 
 

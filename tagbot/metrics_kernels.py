@@ -285,26 +285,60 @@ def refinement(
     lengths: np.ndarray,
     first: np.ndarray,
     step: np.ndarray,
+    samples: np.ndarray,
     near: np.ndarray,
+    nearest: np.ndarray,
+    segments: np.ndarray,
     fine: float,
     max_samples: int,
 ) -> np.ndarray:
     """Where the largest distance from the polylines to others could exceed the largest at
-    their samples (:func:`arc_samples`: ``first``, ``step``; ``near``, each sample's distance)
-    by more than ``fine / 2``: every interval between consecutive samples for which it could
-    (along the path the distance changes no faster than the arc length), resampled along the
-    path every ``fine`` (coarser if that would give more than ``max_samples`` points)."""
-    limit = near.max() + 0.5 * fine
+    their ``samples`` (:func:`arc_samples`: ``first``, ``step``) by more than ``fine / 2``:
+    every interval between consecutive samples for which it could, resampled along the path
+    every ``fine`` (coarser if that would give more than ``max_samples`` points).
+
+    ``near`` is each sample's distance to the others' ``segments``, ``nearest`` the segment it
+    is to (-1: not known). Along the path the distance changes no faster than the arc length
+    (at most ``(near[j] + near[j + 1] + step) / 2`` between samples ``j`` and ``j + 1``), and
+    it is at most the distance to any one segment, which is convex along each straight piece
+    of the path: at most its largest at the interval's ends and the polyline's points inside
+    it. An interval is left out if the first bound keeps it within ``fine / 2`` of the largest
+    at the samples, or the second (the samples' nearest segments) at or below that largest:
+    resampling it could not change the figure. Near the polylines the second leaves out most
+    intervals (a sample's nearest segment is usually the whole interval's)."""
+    largest = near.max()
+    limit = largest + 0.5 * fine
     chosen = np.empty(near.size, np.intp)
     owner = np.empty(near.size, np.intp)
     count = 0
     total = 0.0
     for k in range(ends.size):
+        begin, last = ends[k - 1] if k > 0 else 0, ends[k] - 1
+        h = step[k]
+        piece = begin  # the path's piece (points ``piece``, ``piece + 1``) sample j lies on
         for j in range(first[k], first[k + 1] - 1):
-            if max(near[j], near[j + 1]) + 0.5 * step[k] > limit:
-                chosen[count], owner[count] = j, k
-                count += 1
-                total += step[k]
+            s = (j + 1 - first[k]) * h
+            after = piece
+            while after < last - 1 and lengths[after + 1] < s:
+                after += 1
+            if 0.5 * (near[j] + near[j + 1] + h) > limit:
+                bound = np.inf
+                for e in (nearest[j], nearest[j + 1]):
+                    if e < 0:
+                        continue
+                    # Segment e's distance at the interval's ends and the points inside it.
+                    worst = max(
+                        _segment_d2(samples[j, 0], samples[j, 1], segments, e),
+                        _segment_d2(samples[j + 1, 0], samples[j + 1, 1], segments, e),
+                    )
+                    for i in range(piece + 1, after + 1):
+                        worst = max(worst, _segment_d2(points[i, 0], points[i, 1], segments, e))
+                    bound = min(bound, math.sqrt(worst))
+                if bound > largest:
+                    chosen[count], owner[count] = j, k
+                    count += 1
+                    total += h
+            piece = after
     fine = max(fine, total / max_samples)
     pieces = np.empty(count, np.intp)
     for c in range(count):
@@ -338,6 +372,7 @@ def _cell_search(
     x: float,
     y: float,
     best: float,
+    nearest: int,
     slack: float,
     ix: int,
     iy: int,
@@ -348,10 +383,10 @@ def _cell_search(
     order: np.ndarray,
     cell: float,
     segments: np.ndarray,
-) -> float:
-    """``best`` improved over the segments of cell ``(ix, iy)`` of a grid (its corner
-    ``(x0, y0)``, ``nx`` cells wide), if that cell is within ``best + slack`` of ``(x, y)``
-    (:func:`_search`)."""
+) -> tuple[float, int]:
+    """``best`` (the distance to segment ``nearest``) improved over the segments of cell
+    ``(ix, iy)`` of a grid (its corner ``(x0, y0)``, ``nx`` cells wide), if that cell is within
+    ``best + slack`` of ``(x, y)`` (:func:`_search`), and the segment it is to."""
     dx = max(x0 + ix * cell - x, 0.0, x - x0 - (ix + 1) * cell)
     dy = max(y0 + iy * cell - y, 0.0, y - y0 - (iy + 1) * cell)
     reach = best + slack
@@ -360,8 +395,8 @@ def _cell_search(
         for e in range(start[c], start[c + 1]):
             d2 = _segment_d2(x, y, segments, order[e])
             if d2 < best * best:
-                best = math.sqrt(d2)
-    return best
+                best, nearest = math.sqrt(d2), order[e]
+    return best, nearest
 
 
 @inlined
@@ -369,6 +404,7 @@ def _search(
     x: float,
     y: float,
     best: float,
+    nearest: int,
     segments: np.ndarray,
     header: np.ndarray,
     start: np.ndarray,
@@ -376,10 +412,11 @@ def _search(
     cell: float,
     slack: float,
     rings: int,
-) -> tuple[float, bool]:
-    """Improve ``best``, the distance from ``(x, y)`` to the polylines, over the cells of one
-    grid: its own cell, then the cells within reach of what that found if they are few, else
-    ring by ring outwards, at most ``rings`` rings; and whether no segment left can be nearer.
+) -> tuple[float, int, bool]:
+    """Improve ``best``, the distance from ``(x, y)`` to the polylines (to their segment
+    ``nearest``, -1 for none yet), over the cells of one grid: its own cell, then the cells
+    within reach of what that found if they are few, else ring by ring outwards, at most
+    ``rings`` rings; the segment it is to, and whether no segment left can be nearer.
     Every point of a segment is within ``slack`` of a cell that holds it (0 for
     :func:`crossing_grid`; half the segments' longest for a grid of their midpoints), so a
     ring farther than the best distance plus that ends the search."""
@@ -391,32 +428,34 @@ def _search(
     # r cells plus this (0 for a query outside the grid).
     left, bottom = x - (x0 + cx * cell), y - (y0 + cy * cell)
     margin = max(min(left, cell - left, bottom, cell - bottom), 0.0)
-    best = _cell_search(x, y, best, slack, cx, cy, x0, y0, nx, start, order, cell, segments)
+    best, nearest = _cell_search(
+        x, y, best, nearest, slack, cx, cy, x0, y0, nx, start, order, cell, segments
+    )
     reach = best + slack
     if reach <= margin:
-        return best, True
+        return best, nearest, True
     if reach < cell:  # near the polylines, the usual case: the cells the disc within reach meets
         ix0, ix1 = math.floor((x - reach - x0) / cell), math.floor((x + reach - x0) / cell)
         iy0, iy1 = math.floor((y - reach - y0) / cell), math.floor((y + reach - y0) / cell)
         for iy in range(max(iy0, 0), min(iy1, ny - 1) + 1):
             for ix in range(max(ix0, 0), min(ix1, nx - 1) + 1):
                 if ix != cx or iy != cy:
-                    best = _cell_search(x, y, best, slack, ix, iy, x0, y0, nx, start, order,
-                                        cell, segments)  # fmt: skip
-        return best, True
+                    best, nearest = _cell_search(x, y, best, nearest, slack, ix, iy, x0, y0,
+                                                 nx, start, order, cell, segments)  # fmt: skip
+        return best, nearest, True
     for ring in range(1, min(max(nx, ny), rings) + 1):
         for iy in range(max(cy - ring, 0), min(cy + ring, ny - 1) + 1):
             edge = iy == cy - ring or iy == cy + ring
             ix = cx - ring
             while ix <= cx + ring:
                 if 0 <= ix < nx:
-                    best = _cell_search(x, y, best, slack, ix, iy, x0, y0, nx, start, order,
-                                        cell, segments)  # fmt: skip
+                    best, nearest = _cell_search(x, y, best, nearest, slack, ix, iy, x0, y0,
+                                                 nx, start, order, cell, segments)  # fmt: skip
                 ix += 1 if edge else max(2 * ring, 1)
         # Cells beyond this ring are farther than ``ring`` cells and the margin.
         if ring * cell + margin >= best + slack:
-            return best, True
-    return best, max(nx, ny) <= rings
+            return best, nearest, True
+    return best, nearest, max(nx, ny) <= rings
 
 
 @compiled
@@ -429,24 +468,26 @@ def distances(
     coarse_cell: float,
     spacing: float,
     fine_rings: int,
-) -> np.ndarray:
-    """Each query point's exact distance to the polylines: searched in the fine grid for
-    ``fine_rings`` rings (enough for points near the polylines, the usual case), then, if that
-    could not settle it, in the coarse one (far points cost a few coarse rings, not thousands of
-    fine ones). A point repeating the one before it (a pen at rest) has its distance."""
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each query point's exact distance to the polylines, and the segment it is to: searched
+    in the fine grid for ``fine_rings`` rings (enough for points near the polylines, the usual
+    case), then, if that could not settle it, in the coarse one (far points cost a few coarse
+    rings, not thousands of fine ones). A point repeating the one before it (a pen at rest) has
+    its distance."""
     out = np.empty(query.shape[0])
+    nearest = np.full(query.shape[0], -1, np.intp)
     for q in range(query.shape[0]):
         x, y = query[q, 0], query[q, 1]
         if q > 0 and x == query[q - 1, 0] and y == query[q - 1, 1]:
-            out[q] = out[q - 1]
+            out[q], nearest[q] = out[q - 1], nearest[q - 1]
             continue
-        best, done = _search(x, y, np.inf, segments, fine[0], fine[1], fine[2], fine_cell,
-                             0.0, fine_rings)  # fmt: skip
+        best, near, done = _search(x, y, np.inf, -1, segments, fine[0], fine[1], fine[2],
+                                   fine_cell, 0.0, fine_rings)  # fmt: skip
         if not done:
-            best, done = _search(x, y, best, segments, coarse[0], coarse[1], coarse[2],
-                                 coarse_cell, 0.5 * spacing, 1 << 30)  # fmt: skip
-        out[q] = best
-    return out
+            best, near, done = _search(x, y, best, near, segments, coarse[0], coarse[1],
+                                       coarse[2], coarse_cell, 0.5 * spacing, 1 << 30)  # fmt: skip
+        out[q], nearest[q] = best, near
+    return out, nearest
 
 
 @compiled
@@ -517,19 +558,21 @@ def shape_error_of(
     ref_lengths, cand_lengths = arc_lengths(ref, ref_ends), arc_lengths(cand, cand_ends)
     qa, a_first, a_step = arc_samples(ref, ref_ends, ref_lengths, spacing)
     qb, b_first, b_step = arc_samples(cand, cand_ends, cand_lengths, spacing)
-    a_to_b = distances(qa, b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
-    b_to_a = distances(qb, a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
+    a_to_b, a_near = distances(qa, b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
+    b_to_a, b_near = distances(qb, a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
     mean = (a_to_b.sum() + b_to_a.sum()) / (a_to_b.size + b_to_a.size)
     # The maximum, refined where it could be (:func:`refinement`) each way.
     largest = max(a_to_b.max(), b_to_a.max())
     fine = size / max_density
-    query = refinement(ref, ref_ends, ref_lengths, a_first, a_step, a_to_b, fine, max_samples)
+    query = refinement(ref, ref_ends, ref_lengths, a_first, a_step, qa, a_to_b, a_near, b[3],
+                       fine, max_samples)  # fmt: skip
     if query.shape[0]:
-        far = distances(query, b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
+        far, _ = distances(query, b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
         largest = max(largest, far.max())
-    query = refinement(cand, cand_ends, cand_lengths, b_first, b_step, b_to_a, fine, max_samples)
+    query = refinement(cand, cand_ends, cand_lengths, b_first, b_step, qb, b_to_a, b_near, a[3],
+                       fine, max_samples)  # fmt: skip
     if query.shape[0]:
-        far = distances(query, a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
+        far, _ = distances(query, a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
         largest = max(largest, far.max())
     return mean / size, largest / size, size
 
