@@ -281,6 +281,89 @@ def arc_samples(
     return out, first, step
 
 
+@inlined
+def _could_exceed(
+    points: np.ndarray,
+    segments: np.ndarray,
+    x0: float,
+    y0: float,
+    d0: float,
+    e0: int,
+    x1: float,
+    y1: float,
+    d1: float,
+    e1: int,
+    length: float,
+    inside: int,
+    until: int,
+    largest: float,
+    limit: float,
+) -> bool:
+    """Whether the distance to ``segments`` along a piece of path ``length`` long, from
+    ``(x0, y0)`` (distance ``d0``, to segment ``e0``; -1: not known) through ``points[inside:
+    until + 1]`` to ``(x1, y1)`` (``d1``, ``e1``), could exceed ``limit``, or for its ends'
+    segments ``largest``: the distance changes no faster than the arc length (at most
+    ``(d0 + d1 + length) / 2``), and it is at most the distance to any one segment, which is
+    convex along each straight piece of the path (at most its largest at the ends and the
+    points between)."""
+    if 0.5 * (d0 + d1 + length) <= limit:
+        return False
+    bound = np.inf
+    for e in (e0, e1):
+        if e < 0:
+            continue
+        worst = max(_segment_d2(x0, y0, segments, e), _segment_d2(x1, y1, segments, e))
+        for i in range(inside, until + 1):
+            worst = max(worst, _segment_d2(points[i, 0], points[i, 1], segments, e))
+        bound = min(bound, math.sqrt(worst))
+    return bound > largest
+
+
+@compiled
+def _chosen(
+    points: np.ndarray,
+    ends: np.ndarray,
+    lengths: np.ndarray,
+    first: np.ndarray,
+    step: np.ndarray,
+    samples: np.ndarray,
+    near: np.ndarray,
+    nearest: np.ndarray,
+    segments: np.ndarray,
+    largest: float,
+    fine: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """The intervals between consecutive ``samples`` (:func:`arc_samples`: ``first``,
+    ``step``; ``near``, their distances to ``segments``, ``nearest`` the segment each is to,
+    -1: not known) where the distance could exceed ``largest`` (at least the samples'
+    largest) by more than ``fine / 2`` (:func:`_could_exceed`, the bar ``fine / 2`` higher for
+    the first bound): each one's first sample, its polyline, the pieces of path (points ``p``,
+    ``p + 1``) its ends lie on, and their total length."""
+    limit = largest + 0.5 * fine
+    chosen = np.empty(near.size, np.intp)
+    owner = np.empty(near.size, np.intp)
+    pieces = np.empty((near.size, 2), np.intp)
+    count = 0
+    total = 0.0
+    for k in range(ends.size):
+        last = ends[k] - 1
+        piece = ends[k - 1] if k > 0 else 0  # the piece sample j lies on
+        for j in range(first[k], first[k + 1] - 1):
+            after = piece
+            while after < last - 1 and lengths[after + 1] < (j + 1 - first[k]) * step[k]:
+                after += 1
+            a, b = samples[j], samples[j + 1]
+            if _could_exceed(points, segments, a[0], a[1], near[j], nearest[j], b[0], b[1],
+                             near[j + 1], nearest[j + 1], step[k], piece + 1, after, largest,
+                             limit):  # fmt: skip
+                chosen[count], owner[count] = j, k
+                pieces[count, 0], pieces[count, 1] = piece, after
+                count += 1
+                total += step[k]
+            piece = after
+    return chosen[:count], owner[:count], pieces[:count], total
+
+
 @compiled
 def refinement(
     points: np.ndarray,
@@ -296,53 +379,15 @@ def refinement(
     max_samples: int,
 ) -> np.ndarray:
     """Where the largest distance from the polylines to others could exceed the largest at
-    their ``samples`` (:func:`arc_samples`: ``first``, ``step``) by more than ``fine / 2``:
-    every interval between consecutive samples for which it could, resampled along the path
-    every ``fine`` (coarser if that would give more than ``max_samples`` points).
-
-    ``near`` is each sample's distance to the others' ``segments``, ``nearest`` the segment it
-    is to (-1: not known). Along the path the distance changes no faster than the arc length
-    (at most ``(near[j] + near[j + 1] + step) / 2`` between samples ``j`` and ``j + 1``), and
-    it is at most the distance to any one segment, which is convex along each straight piece
-    of the path: at most its largest at the interval's ends and the polyline's points inside
-    it. An interval is left out if the first bound keeps it within ``fine / 2`` of the largest
-    at the samples, or the second (the samples' nearest segments) at or below that largest:
-    resampling it could not change the figure. Near the polylines the second leaves out most
-    intervals (a sample's nearest segment is usually the whole interval's)."""
-    largest = near.max()
-    limit = largest + 0.5 * fine
-    chosen = np.empty(near.size, np.intp)
-    owner = np.empty(near.size, np.intp)
-    count = 0
-    total = 0.0
-    for k in range(ends.size):
-        begin, last = ends[k - 1] if k > 0 else 0, ends[k] - 1
-        h = step[k]
-        piece = begin  # the path's piece (points ``piece``, ``piece + 1``) sample j lies on
-        for j in range(first[k], first[k + 1] - 1):
-            s = (j + 1 - first[k]) * h
-            after = piece
-            while after < last - 1 and lengths[after + 1] < s:
-                after += 1
-            if 0.5 * (near[j] + near[j + 1] + h) > limit:
-                bound = np.inf
-                for e in (nearest[j], nearest[j + 1]):
-                    if e < 0:
-                        continue
-                    # Segment e's distance at the interval's ends and the points inside it.
-                    worst = max(
-                        _segment_d2(samples[j, 0], samples[j, 1], segments, e),
-                        _segment_d2(samples[j + 1, 0], samples[j + 1, 1], segments, e),
-                    )
-                    for i in range(piece + 1, after + 1):
-                        worst = max(worst, _segment_d2(points[i, 0], points[i, 1], segments, e))
-                    bound = min(bound, math.sqrt(worst))
-                if bound > largest:
-                    chosen[count], owner[count] = j, k
-                    count += 1
-                    total += h
-            piece = after
+    their ``samples`` by more than ``fine / 2`` (:func:`_chosen`): those intervals resampled
+    along the path every ``fine`` (coarser if that would give more than ``max_samples``
+    points), for a search that gives no nearest segments (:func:`farthest` bisects
+    instead)."""
+    chosen, owner, _, total = _chosen(
+        points, ends, lengths, first, step, samples, near, nearest, segments, near.max(), fine
+    )
     fine = max(fine, total / max_samples)
+    count = chosen.size
     pieces = np.empty(count, np.intp)
     for c in range(count):
         pieces[c] = max(1, math.ceil(step[owner[c]] / fine))
@@ -494,6 +539,89 @@ def distances(
 
 
 @compiled
+def farthest(
+    points: np.ndarray,
+    ends: np.ndarray,
+    lengths: np.ndarray,
+    first: np.ndarray,
+    step: np.ndarray,
+    samples: np.ndarray,
+    near: np.ndarray,
+    nearest: np.ndarray,
+    largest: float,
+    segments: np.ndarray,
+    fine: tuple[np.ndarray, np.ndarray, np.ndarray],
+    fine_cell: float,
+    coarse: tuple[np.ndarray, np.ndarray, np.ndarray],
+    coarse_cell: float,
+    spacing: float,
+    fine_rings: int,
+    resolution: float,
+    max_samples: int,
+) -> float:
+    """The largest distance from the polylines to the segments (their grids as
+    :func:`distances`), or ``largest`` if that is larger, within ``resolution / 2`` (coarser
+    if the intervals that could hold it are longer than ``max_samples`` of it): the
+    ``samples``' distances are ``near``, to segments ``nearest``; each interval between them
+    that :func:`_chosen` keeps is halved, its midpoint measured (from its ends' segments on),
+    and each half kept while :func:`_could_exceed` says it could exceed the largest so far.
+    A piece shorter than the resolution cannot exceed it by more than half of that."""
+    largest = max(largest, near.max())
+    chosen, owner, pieces, total = _chosen(
+        points, ends, lengths, first, step, samples, near, nearest, segments, largest,
+        resolution,
+    )  # fmt: skip
+    if not chosen.size:
+        return largest
+    resolution = max(resolution, total / max_samples)
+    # Depth first: each halving takes one interval and leaves two.
+    depth = max(math.ceil(math.log2(max(step.max() / resolution, 1.0))), 0) + 3
+    real = np.empty((depth, 2, 4))  # per interval and end: arc length, x, y, distance
+    whole = np.empty((depth, 2, 2), np.intp)  # per interval and end: its segment, its piece
+    for c in range(chosen.size):
+        j, k = chosen[c], owner[c]
+        last = ends[k] - 1
+        for end in range(2):
+            i = j + end
+            real[0, end, 0] = (i - first[k]) * step[k]
+            real[0, end, 1], real[0, end, 2] = samples[i, 0], samples[i, 1]
+            real[0, end, 3] = near[i]
+            whole[0, end, 0], whole[0, end, 1] = nearest[i], pieces[c, end]
+        top = 1
+        while top > 0:
+            top -= 1
+            r, w = real[top], whole[top]
+            if not _could_exceed(points, segments, r[0, 1], r[0, 2], r[0, 3], w[0, 0], r[1, 1],
+                                 r[1, 2], r[1, 3], w[1, 0], r[1, 0] - r[0, 0], w[0, 1] + 1,
+                                 w[1, 1], largest, largest + 0.5 * resolution):  # fmt: skip
+                continue
+            s = 0.5 * (r[0, 0] + r[1, 0])
+            x, y, p = _point_along(points, lengths, last, s, w[0, 1])
+            best, e = np.inf, -1
+            for end in range(2):
+                if w[end, 0] >= 0:
+                    d = math.sqrt(_segment_d2(x, y, segments, w[end, 0]))
+                    if d < best:
+                        best, e = d, w[end, 0]
+            best, e, done = _search(x, y, best, e, segments, fine[0], fine[1], fine[2],
+                                    fine_cell, 0.0, fine_rings)  # fmt: skip
+            if not done:
+                best, e, done = _search(x, y, best, e, segments, coarse[0], coarse[1],
+                                        coarse[2], coarse_cell, 0.5 * spacing, 1 << 30)  # fmt: skip
+            largest = max(largest, best)
+            # The halves: (midpoint, end 1) in the next row, (end 0, midpoint) in this one.
+            for q in range(4):
+                real[top + 1, 1, q] = r[1, q]
+            whole[top + 1, 1, 0], whole[top + 1, 1, 1] = w[1, 0], w[1, 1]
+            for row, end in ((top + 1, 0), (top, 1)):
+                real[row, end, 0], real[row, end, 1] = s, x
+                real[row, end, 2], real[row, end, 3] = y, best
+                whole[row, end, 0], whole[row, end, 1] = e, p
+            top += 2
+    return largest
+
+
+@compiled
 def spacing_of(
     ref: np.ndarray,
     ref_ends: np.ndarray,
@@ -564,19 +692,15 @@ def shape_error_of(
     a_to_b, a_near = distances(qa, b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
     b_to_a, b_near = distances(qb, a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
     mean = (a_to_b.sum() + b_to_a.sum()) / (a_to_b.size + b_to_a.size)
-    # The maximum, refined where it could be (:func:`refinement`) each way.
+    # The maximum, refined where it could be (:func:`farthest`) each way.
     largest = max(a_to_b.max(), b_to_a.max())
     fine = size / max_density
-    query = refinement(ref, ref_ends, ref_lengths, a_first, a_step, qa, a_to_b, a_near, b[3],
+    largest = farthest(ref, ref_ends, ref_lengths, a_first, a_step, qa, a_to_b, a_near, largest,
+                       b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings, fine,
+                       max_samples)  # fmt: skip
+    largest = farthest(cand, cand_ends, cand_lengths, b_first, b_step, qb, b_to_a, b_near,
+                       largest, a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings,
                        fine, max_samples)  # fmt: skip
-    if query.shape[0]:
-        far, _ = distances(query, b[3], b_fine, b[4], b_coarse, COARSE * b[4], spacing, b_rings)
-        largest = max(largest, far.max())
-    query = refinement(cand, cand_ends, cand_lengths, b_first, b_step, qb, b_to_a, b_near, a[3],
-                       fine, max_samples)  # fmt: skip
-    if query.shape[0]:
-        far, _ = distances(query, a[3], a_fine, a[4], a_coarse, COARSE * a[4], spacing, a_rings)
-        largest = max(largest, far.max())
     return mean / size, largest / size, size
 
 

@@ -55,6 +55,22 @@ def test_shape_error_matches_exact_segment_distances(seed: int) -> None:
     assert error.max >= figures[0][1] - 1e-12  # never below what the samples already show
 
 
+@pytest.mark.parametrize("height", [0.0137, 0.05, 0.2, 0.61])
+def test_shape_error_max_finds_a_peak_between_samples(height: float) -> None:
+    """A tent over its base: the farthest point of either from the other is the apex, at
+    ``height``, between the arc samples. It is found (from the samples' nearest segments, by
+    halving) within half the stated resolution, and never above the exact figure."""
+    from tagbot.metrics import DENSITY
+
+    offset = 0.3 / 250  # the apex off the samples
+    tent = np.array([[0.0, 0.0], [0.5 + offset, height], [1.0, 0.0]])
+    base = np.array([[0.0, 0.0], [1.0, 0.0]])
+    for reference, candidate in (([tent], [base]), ([base], [tent])):
+        error = shape_error(reference, candidate)
+        assert error.max * error.size <= height + 1e-12
+        assert error.max * error.size >= height - 0.5 * error.size / DENSITY
+
+
 def test_shape_error_of_a_long_scribble_is_bounded_and_still_exact() -> None:
     # 10 000 strokes across the box: densified at the fixed density this was 40 million points.
     zigzag = np.column_stack([np.tile([0.0, 1.0], 5000), np.arange(10_000) * 1e-4])
