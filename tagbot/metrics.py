@@ -158,8 +158,9 @@ def shape_error(reference: Sequence[ArrayLike], candidate: Sequence[ArrayLike]) 
     of each polyline included), and each sample measured exactly against the other drawing's
     segments (a grid search, compiled): the mean is over these samples, so by arc length (a pen
     at rest, hundreds of points in one place, weighs nothing); the max is refined along the
-    path where it could be, to within 1/(2·:data:`DENSITY`) of the size. Cost linear in the
-    samples for drawings that are close.
+    path where it could be (halving the intervals between samples that a bound does not rule
+    out), to within 1/(2·:data:`DENSITY`) of the size. Cost linear in the samples for
+    drawings that are close.
     """
     return _shape_error(_joined(reference), _joined(candidate))
 
