@@ -1023,6 +1023,18 @@ DIRECT = 16.0
 """A scale's offsets are correlated by direct sums when these cost less than this many times
 the transforms' ``N·log2 N``."""
 
+SINGLE = 2.0**-24
+"""The unit roundoff of single precision, in which the grid search's direct sums are taken
+(twice as many products per vector instruction): each error is then known within a bound, and
+recomputed in double precision, as :func:`_correlate_into` sums it, only if it could be the
+smallest so far, so the pair found is the same..."""
+SINGLE_WORK = 8192
+"""... for scales of at least this many products (offsets by overlap; below, converting the model
+costs more than it saves)..."""
+SINGLE_RANGE = 1e15
+"""... and a model that, scaled as the recording is (its RMS 1), has an RMS within this and its
+inverse (no single-precision overflow, no underflow that could matter against the bound)."""
+
 PRUNE = 1e-9
 """An offset is left out of the grid search when a lower bound on its error exceeds the best
 error so far by more than this fraction of the recording's energy (rounding, many orders of
@@ -1109,7 +1121,8 @@ def best_mapping(
 
     Every offset on the grid of each of ``scales``, the model resampled on the grid's spacing
     and correlated with ``v`` by direct sums or by FFT (whichever is cheaper for that scale,
-    the transform no longer than its own offsets need), the first smallest error kept; offsets
+    the transform no longer than its own offsets need; long direct sums in single precision,
+    see :data:`SINGLE`), the first smallest error kept; offsets
     that a lower bound (:func:`_error_bound`) shows cannot beat the best so far are skipped,
     the scales nearest the spans' ratio first so that the best is soon good. Then the polish
     from the better of that pair and the shared clock (scale 1, offset ``shared``): for each
@@ -1155,6 +1168,16 @@ def best_mapping(
     slope = _slopes(model_t, model_v)
     sums = np.empty(int((high - low).max()) + 1)
     vx, vy = v[:, 0].copy(), v[:, 1].copy()
+    unit = math.sqrt(n / energy)  # the recording's RMS 1 in single precision
+    single = False  # whether any scale has the work for single precision
+    for i in range(count):
+        single |= (high[i] - low[i] + 1) * min(n, lengths[i]) >= SINGLE_WORK
+    rows = n if single else 0
+    vx32, vy32 = np.empty(rows, np.float32), np.empty(rows, np.float32)
+    for k in range(rows):
+        vx32[k], vy32[k] = vx[k] * unit, vy[k] * unit
+    w32 = np.empty((w.shape[0] if single else 0, 2), np.float32)
+    sums32 = np.empty(sums.size if single else 0, np.float32)
     best, pick, pick_scale, pick_offset = np.inf, count, 1.0, shared
     pick_m = 0
     margin = PRUNE * energy
@@ -1174,6 +1197,7 @@ def best_mapping(
         while hi >= lo and _error_bound(hi, length, n, energy, cv, cum) > best + margin:
             hi -= 1
         if lo <= hi:
+            tolerance = 0.0
             size = sizes[i]
             if size and (hi - lo + 1) * min(n, length) <= DIRECT * size * math.log2(size):
                 size = 0  # few offsets: direct sums cost less
@@ -1194,15 +1218,34 @@ def best_mapping(
                 for k in range(size):  # conjugated, so that the forward transform inverts it
                     z[k] = spectrum[k].conjugate() * z[k]
                 fft(z, table, False)
+            elif (hi - lo + 1) * min(n, length) >= SINGLE_WORK and (
+                1.0 / SINGLE_RANGE < unit * math.sqrt(cum[length] / length) < SINGLE_RANGE
+            ):
+                for k in range(length):
+                    w32[k, 0], w32[k, 1] = w[k, 0] * unit, w[k, 1] * unit
+                _correlate_into(sums32, vx32, vy32, w32, length, lo, hi)
+                # Each product within 5 units of its size (its factors' and its own rounding),
+                # a sum of m terms within m − 1 units of theirs, and Σ|v||w| ≤ √(Σv²·Σw²): the
+                # correlation within (m + 6)·u·√(energy·Σw²), the error within twice that; and
+                # twice again, to spare.
+                terms = min(n, length) + 6
+                tolerance = 4.0 * terms * SINGLE * math.sqrt(energy * cum[length])
             else:
                 _correlate_into(sums, vx, vy, w, length, lo, hi)
             # Σ|v − w|² over the overlap = Σ|v|² − 2·Re Σ v·conj(w) + Σ|w|² (outside: v or 0).
             for mm in range(lo, hi + 1):
                 first = min(max(-mm, 0), length)
-                last = min(max(n - mm, 0), length)
-                # (By FFT, conj(conj(·)) has the same real part.)
-                cross = z[mm % size].real / size if size else sums[mm - lo]
-                err = energy - 2.0 * cross + (cum[max(last, first)] - cum[first])
+                last = max(min(max(n - mm, 0), length), first)
+                if tolerance > 0:
+                    err = energy - 2.0 * sums32[mm - lo] / (unit * unit) + (cum[last] - cum[first])
+                    if err - tolerance > best:
+                        continue  # not the smallest, even within its tolerance
+                    cross = 0.0  # it could be: its double-precision sum, as _correlate_into's
+                    for k in range(first, last):
+                        cross += vx[k + mm] * w[k, 0] + vy[k + mm] * w[k, 1]
+                else:  # (by FFT, conj(conj(·)) has the same real part)
+                    cross = z[mm % size].real / size if size else sums[mm - lo]
+                err = energy - 2.0 * cross + (cum[last] - cum[first])
                 # The first smallest in the scales' order, whatever order they are visited in.
                 if err < best or (err == best and (i < pick or (i == pick and mm < pick_m))):
                     best, pick, pick_m = err, i, mm

@@ -68,7 +68,7 @@ def _recorded_velocity(t, xy, dt=0.01, cutoff=None):
     return grid, np.gradient(rec, dt, axis=0)
 
 
-def _velocity_snr(t, xy, model_t, model_v, dt=0.01, cutoff=VELOCITY_CUTOFF):
+def _velocity_snr(t, xy, model_t, model_v, dt=0.01, cutoff=VELOCITY_CUTOFF, polish=True):
     model_t, model_v = np.asarray(model_t, dtype=float), np.asarray(model_v, dtype=float)
     shared = float(model_t[0])
     model_t = model_t - model_t[0]
@@ -114,6 +114,8 @@ def _velocity_snr(t, xy, model_t, model_v, dt=0.01, cutoff=VELOCITY_CUTOFF):
     e = errors(*starts)
     pick = int(np.argmin(e))
     best, scale, offset = float(e[pick]), float(starts[0][pick]), float(starts[1][pick])
+    if not polish:  # the grid's pair, or the shared clock if better
+        return 10.0 * np.log10(energy / max(best, 1e-300)), scale, offset
     steps = np.linspace(-1.0, 1.0, 7)
     reach = max(span, dt)
     for width in POLISH_WIDTHS:
@@ -314,6 +316,31 @@ def test_velocity_snr_of_a_long_recording_is_the_array_codes():
     model_v = np.gradient(xy[::2], model_t, axis=0)
     got = velocity_snr(t, xy, model_t, model_v)
     np.testing.assert_allclose(got, _velocity_snr(t, xy, model_t, model_v), rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_grid_search_in_single_precision_finds_the_array_codes_pair(seed):
+    """A model on a slower clock than the recording (as a geometric fit's is): its longest
+    scales have the work for single-precision sums (:data:`~tagbot.metrics_kernels.SINGLE_WORK`),
+    and the grid's pair is still the one the double-precision array code finds."""
+    trace, model = _timed_case(seed, rate=120.0)
+    ((model_t, _, model_v),) = sample_plans(model, 0.005)
+    model_t, model_v = 2.5 * model_t, model_v / 2.5
+    grid, v = recorded_velocity(trace.t, trace.xy, cutoff=VELOCITY_CUTOFF)
+    own = model_t - model_t[0]
+    ratio = (grid[-1] - grid[0]) / own[-1]
+    scales = np.append(np.geomspace(0.25, 4.0, 41) * ratio, 1.0)
+    lengths = (own[-1] * scales / 0.01).astype(int) + 1
+    offsets = np.abs((grid[-1] - grid[0] - scales * own[-1]) / 0.01) + 1
+    assert np.max(offsets * np.minimum(len(grid), lengths)) >= metrics_kernels.SINGLE_WORK
+    energy = float(np.sum(v * v))
+    best, scale, offset = metrics_kernels.best_mapping(
+        grid, v, own, np.ascontiguousarray(model_v), scales, float(model_t[0]), energy,
+        np.linspace(-1.0, 1.0, 7), np.empty(0), 0,
+    )  # fmt: skip
+    db_ref, scale_ref, offset_ref = _velocity_snr(trace.t, trace.xy, model_t, model_v, polish=False)
+    assert (scale, offset) == pytest.approx((scale_ref, offset_ref), rel=1e-12, abs=1e-12)
+    assert 10 * np.log10(energy / best) == pytest.approx(db_ref, abs=1e-9)
 
 
 def test_velocity_snr_on_an_uneven_model_clock_is_the_array_codes():
