@@ -420,7 +420,7 @@ def _segment_d2(qx: float, qy: float, segments: np.ndarray, i: int) -> float:
 def _cell_search(
     x: float,
     y: float,
-    best: float,
+    best2: float,
     nearest: int,
     slack: float,
     ix: int,
@@ -433,26 +433,31 @@ def _cell_search(
     cell: float,
     segments: np.ndarray,
 ) -> tuple[float, int]:
-    """``best`` (the distance to segment ``nearest``) improved over the segments of cell
-    ``(ix, iy)`` of a grid (its corner ``(x0, y0)``, ``nx`` cells wide), if that cell is within
-    ``best + slack`` of ``(x, y)`` (:func:`_search`), and the segment it is to."""
+    """``best2`` (the squared distance to segment ``nearest``) improved over the segments of
+    cell ``(ix, iy)`` of a grid (its corner ``(x0, y0)``, ``nx`` cells wide), if that cell is
+    within the distance plus ``slack`` of ``(x, y)`` (:func:`_search`), and the segment it is
+    to. Squares throughout: no square root in the search's chain."""
     dx = max(x0 + ix * cell - x, 0.0, x - x0 - (ix + 1) * cell)
     dy = max(y0 + iy * cell - y, 0.0, y - y0 - (iy + 1) * cell)
-    reach = best + slack
-    if dx * dx + dy * dy < reach * reach:
+    if slack > 0.0:
+        reach = math.sqrt(best2) + slack
+        reach2 = reach * reach
+    else:
+        reach2 = best2
+    if dx * dx + dy * dy < reach2:
         c = iy * nx + ix
         for e in range(start[c], start[c + 1]):
             d2 = _segment_d2(x, y, segments, order[e])
-            if d2 < best * best:
-                best, nearest = math.sqrt(d2), order[e]
-    return best, nearest
+            if d2 < best2:
+                best2, nearest = d2, order[e]
+    return best2, nearest
 
 
 @inlined
 def _search(
     x: float,
     y: float,
-    best: float,
+    best2: float,
     nearest: int,
     segments: np.ndarray,
     header: np.ndarray,
@@ -462,9 +467,9 @@ def _search(
     slack: float,
     rings: int,
 ) -> tuple[float, int, bool]:
-    """Improve ``best``, the distance from ``(x, y)`` to the polylines (to their segment
-    ``nearest``, -1 for none yet), over the cells of one grid: its own cell, then the cells
-    within reach of what that found if they are few, else ring by ring outwards, at most
+    """Improve ``best2``, the squared distance from ``(x, y)`` to the polylines (to their
+    segment ``nearest``, -1 for none yet), over the cells of one grid: its own cell, then the
+    cells within reach of what that found if they are few, else ring by ring outwards, at most
     ``rings`` rings; the segment it is to, and whether no segment left can be nearer.
     Every point of a segment is within ``slack`` of a cell that holds it (0 for
     :func:`crossing_grid`; half the segments' longest for a grid of their midpoints), so a
@@ -477,34 +482,34 @@ def _search(
     # r cells plus this (0 for a query outside the grid).
     left, bottom = x - (x0 + cx * cell), y - (y0 + cy * cell)
     margin = max(min(left, cell - left, bottom, cell - bottom), 0.0)
-    best, nearest = _cell_search(
-        x, y, best, nearest, slack, cx, cy, x0, y0, nx, start, order, cell, segments
+    best2, nearest = _cell_search(
+        x, y, best2, nearest, slack, cx, cy, x0, y0, nx, start, order, cell, segments
     )
-    reach = best + slack
+    reach = math.sqrt(best2) + slack
     if reach <= margin:
-        return best, nearest, True
+        return best2, nearest, True
     if reach < cell:  # near the polylines, the usual case: the cells the disc within reach meets
         ix0, ix1 = math.floor((x - reach - x0) / cell), math.floor((x + reach - x0) / cell)
         iy0, iy1 = math.floor((y - reach - y0) / cell), math.floor((y + reach - y0) / cell)
         for iy in range(max(iy0, 0), min(iy1, ny - 1) + 1):
             for ix in range(max(ix0, 0), min(ix1, nx - 1) + 1):
                 if ix != cx or iy != cy:
-                    best, nearest = _cell_search(x, y, best, nearest, slack, ix, iy, x0, y0,
+                    best2, nearest = _cell_search(x, y, best2, nearest, slack, ix, iy, x0, y0,
                                                  nx, start, order, cell, segments)  # fmt: skip
-        return best, nearest, True
+        return best2, nearest, True
     for ring in range(1, min(max(nx, ny), rings) + 1):
         for iy in range(max(cy - ring, 0), min(cy + ring, ny - 1) + 1):
             edge = iy == cy - ring or iy == cy + ring
             ix = cx - ring
             while ix <= cx + ring:
                 if 0 <= ix < nx:
-                    best, nearest = _cell_search(x, y, best, nearest, slack, ix, iy, x0, y0,
+                    best2, nearest = _cell_search(x, y, best2, nearest, slack, ix, iy, x0, y0,
                                                  nx, start, order, cell, segments)  # fmt: skip
                 ix += 1 if edge else max(2 * ring, 1)
         # Cells beyond this ring are farther than ``ring`` cells and the margin.
-        if ring * cell + margin >= best + slack:
-            return best, nearest, True
-    return best, nearest, max(nx, ny) <= rings
+        if ring * cell + margin >= math.sqrt(best2) + slack:
+            return best2, nearest, True
+    return best2, nearest, max(nx, ny) <= rings
 
 
 @compiled
@@ -530,12 +535,12 @@ def distances(
         if q > 0 and x == query[q - 1, 0] and y == query[q - 1, 1]:
             out[q], nearest[q] = out[q - 1], nearest[q - 1]
             continue
-        best, near, done = _search(x, y, np.inf, -1, segments, fine[0], fine[1], fine[2],
-                                   fine_cell, 0.0, fine_rings)  # fmt: skip
+        best2, near, done = _search(x, y, np.inf, -1, segments, fine[0], fine[1], fine[2],
+                                    fine_cell, 0.0, fine_rings)  # fmt: skip
         if not done:
-            best, near, done = _search(x, y, best, near, segments, coarse[0], coarse[1],
-                                       coarse[2], coarse_cell, 0.5 * spacing, 1 << 30)  # fmt: skip
-        out[q], nearest[q] = best, near
+            best2, near, done = _search(x, y, best2, near, segments, coarse[0], coarse[1],
+                                        coarse[2], coarse_cell, 0.5 * spacing, 1 << 30)  # fmt: skip
+        out[q], nearest[q] = math.sqrt(best2), near
     return out, nearest
 
 
@@ -598,19 +603,20 @@ def farthest(
                 continue
             s = 0.5 * (r[0, 0] + r[1, 0])
             x, y, p = _point_along(points, lengths, last, s, w[0, 1])
-            best, e = np.inf, -1
+            best2, e = np.inf, -1
             for end in range(2):
                 if w[end, 0] >= 0:
-                    d = math.sqrt(_segment_d2(x, y, segments, w[end, 0]))
-                    if d < best:
-                        best, e = d, w[end, 0]
+                    d2 = _segment_d2(x, y, segments, w[end, 0])
+                    if d2 < best2:
+                        best2, e = d2, w[end, 0]
             # The fine grid, then if need be the coarse one, as :func:`distances` searches
             # (written out: a shared inlined helper made that loop 40 % slower).
-            best, e, done = _search(x, y, best, e, segments, fine[0], fine[1], fine[2],
-                                    fine_cell, 0.0, fine_rings)  # fmt: skip
+            best2, e, done = _search(x, y, best2, e, segments, fine[0], fine[1], fine[2],
+                                     fine_cell, 0.0, fine_rings)  # fmt: skip
             if not done:
-                best, e, done = _search(x, y, best, e, segments, coarse[0], coarse[1],
-                                        coarse[2], coarse_cell, 0.5 * spacing, 1 << 30)  # fmt: skip
+                best2, e, done = _search(x, y, best2, e, segments, coarse[0], coarse[1], coarse[2],
+                                         coarse_cell, 0.5 * spacing, 1 << 30)  # fmt: skip
+            best = math.sqrt(best2)
             largest = max(largest, best)
             # The halves: (midpoint, end 1) in the next row, (end 0, midpoint) in this one.
             for q in range(4):
