@@ -177,7 +177,8 @@ def crossing_grid(segments: np.ndarray, cell: float) -> tuple[np.ndarray, np.nda
         bx, by = ax + segments[e, 2], ay + segments[e, 3]
         x0, x1 = min(x0, ax, bx), max(x1, ax, bx)
         y0, y1 = min(y0, ay, by), max(y1, ay, by)
-    nx, ny = int((x1 - x0) / cell) + 1, int((y1 - y0) / cell) + 1
+    inv = 1.0 / cell  # cells by products, as :func:`_search` finds them
+    nx, ny = int((x1 - x0) * inv) + 1, int((y1 - y0) * inv) + 1
     header = np.empty((1, 5))
     header[0, 0], header[0, 1], header[0, 2], header[0, 3], header[0, 4] = x0, y0, nx, ny, 0
     box = np.empty((segments.shape[0], 4), np.intp)
@@ -185,10 +186,10 @@ def crossing_grid(segments: np.ndarray, cell: float) -> tuple[np.ndarray, np.nda
     for e in range(segments.shape[0]):
         ax, ay = segments[e, 0], segments[e, 1]
         bx, by = ax + segments[e, 2], ay + segments[e, 3]
-        box[e, 0] = min(int((min(ax, bx) - x0) / cell), nx - 1)
-        box[e, 1] = min(int((max(ax, bx) - x0) / cell), nx - 1)
-        box[e, 2] = min(int((min(ay, by) - y0) / cell), ny - 1)
-        box[e, 3] = min(int((max(ay, by) - y0) / cell), ny - 1)
+        box[e, 0] = min(int((min(ax, bx) - x0) * inv), nx - 1)
+        box[e, 1] = min(int((max(ax, bx) - x0) * inv), nx - 1)
+        box[e, 2] = min(int((min(ay, by) - y0) * inv), ny - 1)
+        box[e, 3] = min(int((max(ay, by) - y0) * inv), ny - 1)
         for iy in range(box[e, 2], box[e, 3] + 1):
             for ix in range(box[e, 0], box[e, 1] + 1):
                 start[iy * nx + ix + 1] += 1
@@ -476,8 +477,9 @@ def _search(
     ring farther than the best distance plus that ends the search."""
     x0, y0 = header[0, 0], header[0, 1]
     nx, ny = int(header[0, 2]), int(header[0, 3])
-    cx = min(max(math.floor((x - x0) / cell), 0), nx - 1)
-    cy = min(max(math.floor((y - y0) / cell), 0), ny - 1)
+    inv = 1.0 / cell  # (out of the caller's loop: the grids' cells by products)
+    cx = min(max(math.floor((x - x0) * inv), 0), nx - 1)
+    cy = min(max(math.floor((y - y0) * inv), 0), ny - 1)
     # How far the query is inside its own cell: every cell beyond ring r is farther than
     # r cells plus this (0 for a query outside the grid).
     left, bottom = x - (x0 + cx * cell), y - (y0 + cy * cell)
@@ -489,8 +491,8 @@ def _search(
     if reach <= margin:
         return best2, nearest, True
     if reach < cell:  # near the polylines, the usual case: the cells the disc within reach meets
-        ix0, ix1 = math.floor((x - reach - x0) / cell), math.floor((x + reach - x0) / cell)
-        iy0, iy1 = math.floor((y - reach - y0) / cell), math.floor((y + reach - y0) / cell)
+        ix0, ix1 = math.floor((x - reach - x0) * inv), math.floor((x + reach - x0) * inv)
+        iy0, iy1 = math.floor((y - reach - y0) * inv), math.floor((y + reach - y0) * inv)
         for iy in range(max(iy0, 0), min(iy1, ny - 1) + 1):
             for ix in range(max(ix0, 0), min(ix1, nx - 1) + 1):
                 if ix != cx or iy != cy:
