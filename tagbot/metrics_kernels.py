@@ -953,15 +953,14 @@ def _mapping_errors(
     """``Σ|v − v̂|²`` of scale ``s`` with each of ``offsets`` into ``out``: the model mapped as
     ``v̂(t) = model_v((t − o)/s) / s``, zero outside the model's span (``slope`` of
     :func:`_slopes`, ``inv_step`` of :func:`_uniform_step`, as :func:`_interpolated`, written
-    out: the polish's inner loop), all offsets in one pass over the recording (a row of the
-    polish's pattern); or, once every sum has reached ``bound``, the partial sums (their terms
-    are not negative: no whole sum would be below ``bound`` either)."""
+    out: the polish's inner loop), each sum over the recording in its order; or, for a sum that
+    reaches ``bound``, the partial sum that did (its terms are not negative: the whole sum
+    would not be below ``bound`` either)."""
     inv_s = 1.0 / s
     last = model_t.size - 1
-    out[:] = 0.0
-    for k in range(grid.size):
-        below = False
-        for b in range(offsets.size):
+    for b in range(offsets.size):
+        total = 0.0
+        for k in range(grid.size):
             x = (grid[k] - offsets[b]) * inv_s
             ex, ey = vx[k], vy[k]
             if model_t[0] <= x <= model_t[last]:
@@ -972,10 +971,10 @@ def _mapping_errors(
                 u = x - model_t[j]
                 ex -= (model_v[j, 0] + slope[j, 0] * u) * inv_s
                 ey -= (model_v[j, 1] + slope[j, 1] * u) * inv_s
-            out[b] += ex * ex + ey * ey
-            below |= out[b] < bound
-        if not below:
-            break
+            total += ex * ex + ey * ey
+            if total >= bound:
+                break
+        out[b] = total
 
 
 @inlined
