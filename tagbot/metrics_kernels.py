@@ -38,6 +38,7 @@ __all__ = [
     "grid_velocity",
     "grids_of",
     "low_pass_into",
+    "midpoint_grid",
     "path_length",
     "recording_velocity",
     "refinement",
@@ -47,6 +48,7 @@ __all__ = [
     "spacing_of",
     "turning",
     "twiddles",
+    "unbuilt",
     "velocity_snr_of",
     "velocity_snrs",
 ]
@@ -207,16 +209,29 @@ def crossing_grid(segments: np.ndarray, cell: float) -> tuple[np.ndarray, np.nda
 
 
 @compiled
-def grids_of(
-    segments: np.ndarray, cell: float, coarse_cell: float
-) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """The fine grid of the segments (:func:`crossing_grid`) and the coarse one of their
-    midpoints (:func:`grid_of`)."""
+def midpoint_grid(segments: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The coarse grid of the segments: each in the cell of its midpoint (:func:`grid_of`)."""
     middle = np.empty((segments.shape[0], 2))
     for e in range(segments.shape[0]):
         middle[e, 0] = segments[e, 0] + 0.5 * segments[e, 2]
         middle[e, 1] = segments[e, 1] + 0.5 * segments[e, 3]
-    return crossing_grid(segments, cell), grid_of(middle, coarse_cell)
+    return grid_of(middle, cell)
+
+
+@compiled
+def unbuilt() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A coarse grid not built yet: :func:`distances` and :func:`farthest` build it
+    (:func:`midpoint_grid`) only if some query is far enough to need it, which few are."""
+    return np.empty((0, 5)), np.zeros(1, np.intp), np.empty(0, np.intp)
+
+
+@compiled
+def grids_of(
+    segments: np.ndarray, cell: float, coarse_cell: float
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The fine grid of the segments (:func:`crossing_grid`) and the coarse one of their
+    midpoints (:func:`midpoint_grid`)."""
+    return crossing_grid(segments, cell), midpoint_grid(segments, coarse_cell)
 
 
 @compiled
@@ -528,8 +543,8 @@ def distances(
     """Each query point's exact distance to the polylines, and the segment it is to: searched
     in the fine grid for ``fine_rings`` rings (enough for points near the polylines, the usual
     case), then, if that could not settle it, in the coarse one (far points cost a few coarse
-    rings, not thousands of fine ones). A point repeating the one before it (a pen at rest) has
-    its distance."""
+    rings, not thousands of fine ones; built here at the first such point if ``coarse`` is
+    :func:`unbuilt`). A point repeating the one before it (a pen at rest) has its distance."""
     out = np.empty(query.shape[0])
     nearest = np.full(query.shape[0], -1, np.intp)
     for q in range(query.shape[0]):
@@ -540,6 +555,8 @@ def distances(
         best2, near, done = _search(x, y, np.inf, -1, segments, fine[0], fine[1], fine[2],
                                     fine_cell, 0.0, fine_rings)  # fmt: skip
         if not done:
+            if not coarse[0].shape[0]:
+                coarse = midpoint_grid(segments, coarse_cell)
             best2, near, done = _search(x, y, best2, near, segments, coarse[0], coarse[1],
                                         coarse[2], coarse_cell, 0.5 * spacing, 1 << 30)  # fmt: skip
         out[q], nearest[q] = math.sqrt(best2), near
@@ -568,12 +585,13 @@ def farthest(
     max_samples: int,
 ) -> float:
     """The largest distance from the polylines to the segments (their grids as
-    :func:`distances`), or ``largest`` if that is larger, within ``resolution / 2`` (coarser
-    if the intervals that could hold it are longer than ``max_samples`` of it): the
-    ``samples``' distances are ``near``, to segments ``nearest``; each interval between them
-    that :func:`_chosen` keeps is halved, its midpoint measured (from its ends' segments on),
-    and each half kept while :func:`_could_exceed` says it could exceed the largest so far.
-    A piece shorter than the resolution cannot exceed it by more than half of that."""
+    :func:`distances`, the coarse one perhaps :func:`unbuilt`), or ``largest`` if that is
+    larger, within ``resolution / 2`` (coarser if the intervals that could hold it are longer
+    than ``max_samples`` of it): the ``samples``' distances are ``near``, to segments
+    ``nearest``; each interval between them that :func:`_chosen` keeps is halved, its
+    midpoint measured (from its ends' segments on), and each half kept while
+    :func:`_could_exceed` says it could exceed the largest so far. A piece shorter than the
+    resolution cannot exceed it by more than half of that."""
     largest = max(largest, near.max())
     chosen, owner, pieces, total = _chosen(
         points, ends, lengths, first, step, samples, near, nearest, segments, largest,
@@ -616,6 +634,8 @@ def farthest(
             best2, e, done = _search(x, y, best2, e, segments, fine[0], fine[1], fine[2],
                                      fine_cell, 0.0, fine_rings)  # fmt: skip
             if not done:
+                if not coarse[0].shape[0]:
+                    coarse = midpoint_grid(segments, coarse_cell)
                 best2, e, done = _search(x, y, best2, e, segments, coarse[0], coarse[1], coarse[2],
                                          coarse_cell, 0.5 * spacing, 1 << 30)  # fmt: skip
             best = math.sqrt(best2)
@@ -693,8 +713,8 @@ def shape_error_of(
     b = sampled(cand, cand_ends, spacing, crowded)
     if a[5] or b[5]:
         return math.nan, math.nan, size
-    a_fine, a_coarse = grids_of(a[3], a[4], COARSE * a[4])
-    b_fine, b_coarse = grids_of(b[3], b[4], COARSE * b[4])
+    a_fine, b_fine = crossing_grid(a[3], a[4]), crossing_grid(b[3], b[4])
+    a_coarse, b_coarse = unbuilt(), unbuilt()  # built where a query needs them
     a_rings, b_rings = fine_rings(spacing, a[4]), fine_rings(spacing, b[4])
     # Each drawing's samples, evenly along its arc length, against the other's segments.
     ref_lengths, cand_lengths = arc_lengths(ref, ref_ends), arc_lengths(cand, cand_ends)
