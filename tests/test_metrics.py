@@ -32,16 +32,13 @@ def _oracle_distances(query: np.ndarray, polylines: list[np.ndarray]) -> np.ndar
     return shapely.distance(shapely.points(query), lines)
 
 
-@pytest.mark.parametrize("seed", range(5))
-def test_shape_error_matches_exact_segment_distances(seed: int) -> None:
-    rng = np.random.default_rng(seed)
-    reference = [np.cumsum(rng.normal(size=(n, 2)), axis=0) for n in (30, 12)]
-    candidate = [p + rng.normal(scale=0.05, size=p.shape) for p in reference]
-    error = shape_error(reference, candidate)
-    # The oracle: samples evenly along each drawing's arc length, each measured exactly against
-    # the other's segments; the mean at the mean's sampling, the max at the fine one.
+def _assert_oracles_figures(reference: list[np.ndarray], candidate: list[np.ndarray]) -> None:
+    """The shape error against the oracle: samples evenly along each drawing's arc length, each
+    measured exactly against the other's segments; the mean at the mean's sampling, the max at
+    the fine one."""
     from tagbot.metrics import DENSITY, MEAN_DENSITY
 
+    error = shape_error(reference, candidate)
     figures = []
     for density in (MEAN_DENSITY, DENSITY):
         spacing = error.size / density
@@ -53,6 +50,27 @@ def test_shape_error_matches_exact_segment_distances(seed: int) -> None:
     assert error.mean == pytest.approx(figures[0][0], rel=1e-9)
     assert error.max == pytest.approx(figures[1][1], abs=0.5 / DENSITY)
     assert error.max >= figures[0][1] - 1e-12  # never below what the samples already show
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_shape_error_matches_exact_segment_distances(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    reference = [np.cumsum(rng.normal(size=(n, 2)), axis=0) for n in (30, 12)]
+    candidate = [p + rng.normal(scale=0.05, size=p.shape) for p in reference]
+    _assert_oracles_figures(reference, candidate)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_shape_error_of_a_stray_far_stroke_is_exact(seed: int) -> None:
+    """A stroke far outside the other drawing (its samples beyond the fine grid's rings, found
+    through the coarse grid, which is built only then), and a lone far point."""
+    rng = np.random.default_rng(seed)
+    reference = [np.cumsum(rng.normal(size=(40, 2)), axis=0)]
+    low, high = reference[0].min(axis=0), reference[0].max(axis=0)
+    stray = high + (high - low) * rng.uniform(0.3, 2.0) + np.cumsum(rng.normal(size=(6, 2)), 0)
+    candidate = [reference[0] + rng.normal(scale=0.05, size=(40, 2)), stray, low[None] - 50.0]
+    _assert_oracles_figures(reference, candidate)
+    _assert_oracles_figures(candidate, reference)
 
 
 @pytest.mark.parametrize("height", [0.0137, 0.05, 0.2, 0.61])
