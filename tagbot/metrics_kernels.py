@@ -1197,6 +1197,7 @@ def best_mapping(
     inv_step = _uniform_step(model_t)
     slope = _slopes(model_t, model_v)
     sums = np.empty(int((high - low).max()) + 1)
+    errors_of = np.empty(sums.size)  # the errors of a scale correlated by FFT
     vx, vy = v[:, 0].copy(), v[:, 1].copy()
     unit = math.sqrt(n / energy)  # the recording's RMS 1 in single precision
     single = False  # whether any scale has the work for single precision
@@ -1263,23 +1264,40 @@ def best_mapping(
             else:
                 _correlate_into(sums, vx, vy, w, length, lo, hi)
             # Σ|v − w|² over the overlap = Σ|v|² − 2·Re Σ v·conj(w) + Σ|w|² (outside: v or 0).
-            for mm in range(lo, hi + 1):
-                first = min(max(-mm, 0), length)
-                last = max(min(max(n - mm, 0), length), first)
-                if tolerance > 0:
+            if tolerance > 0:
+                for mm in range(lo, hi + 1):
+                    first = min(max(-mm, 0), length)
+                    last = max(min(max(n - mm, 0), length), first)
                     err = energy - 2.0 * sums32[mm - lo] / (unit * unit) + (cum[last] - cum[first])
                     if err - tolerance > best:
                         continue  # not the smallest, even within its tolerance
                     cross = 0.0  # it could be: its double-precision sum, as _correlate_into's
                     for k in range(first, last):
                         cross += vx[k + mm] * w[k, 0] + vy[k + mm] * w[k, 1]
-                else:  # (by FFT, conj(conj(·)) has the same real part)
-                    cross = z[mm % size].real / size if size else sums[mm - lo]
-                err = energy - 2.0 * cross + (cum[last] - cum[first])
-                # The first smallest in the scales' order, whatever order they are visited in.
-                if err < best or (err == best and (i < pick or (i == pick and mm < pick_m))):
-                    best, pick, pick_m = err, i, mm
-                    pick_scale, pick_offset = s, grid[0] + mm * dt
+                    err = energy - 2.0 * cross + (cum[last] - cum[first])
+                    # The first smallest in the scales' order, whatever order they are visited
+                    # in.
+                    if err < best or (err == best and (i < pick or (i == pick and mm < pick_m))):
+                        best, pick, pick_m = err, i, mm
+                        pick_scale, pick_offset = s, grid[0] + mm * dt
+                continue
+            # Every offset's error, then the first smallest of them (as offset by offset).
+            errors = sums[: hi - lo + 1] if not size else errors_of[: hi - lo + 1]
+            for mm in range(lo, hi + 1):
+                first = min(max(-mm, 0), length)
+                last = max(min(max(n - mm, 0), length), first)
+                # (by FFT, conj(conj(·)) has the same real part)
+                cross = z[mm % size].real / size if size else sums[mm - lo]
+                errors[mm - lo] = energy - 2.0 * cross + (cum[last] - cum[first])
+            at = 0
+            for j in range(1, errors.size):
+                if errors[j] < errors[at]:
+                    at = j
+            err, mm = errors[at], lo + at
+            # The first smallest in the scales' order, whatever order they are visited in.
+            if err < best or (err == best and (i < pick or (i == pick and mm < pick_m))):
+                best, pick, pick_m = err, i, mm
+                pick_scale, pick_offset = s, grid[0] + mm * dt
     # The polish starts from the better of the grid's pair and the shared clock, so that the
     # result is never below the shared clock's (a timed fit's own mapping).
     starts = np.array([pick_offset, shared])
