@@ -8,10 +8,10 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from tagbot import metrics_kernels as kernels
 from tagbot.inputs.stamps import BLENDS, GAP, REGULAR, SMOOTHING
@@ -60,6 +60,14 @@ class ShapeError:
     """The input's bounding-box diagonal the figures are divided by."""
 
 
+def _tree(points: ArrayLike) -> Any:
+    """scipy's KD-tree of ``points``, imported on first use: only crowded drawings and machine
+    runs need one, and importing ``scipy.spatial`` costs about 70 ms of a ``tagbot fit``."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(points)
+
+
 def _kernel_array(a: ArrayLike) -> Array:
     """``a`` as a C-contiguous, writeable float array: one compiled signature for every caller
     (slices and read-only :class:`~tagbot.model.motion.Motion` arrays among them; a copy only
@@ -97,7 +105,7 @@ class _Polylines:
         # Where many long segments pass near every point (thousands of strokes over one another,
         # segments long because of MAX_SAMPLES), the exact search would visit all of them: the
         # KD-tree of the samples then gives distances to the segments of the nearest few.
-        self.tree = cKDTree(self.points) if crowded else None
+        self.tree = _tree(self.points) if crowded else None
         if self.tree is None:
             self.fine, self.coarse = kernels.grids_of(
                 self.segments, self.cell, kernels.COARSE * self.cell
@@ -513,8 +521,8 @@ def compare_execution(
         tp, xyp = np.asarray(tp, dtype=float), np.asarray(xyp, dtype=float)
         te, xye = run[:, 0], run[:, 1:3]
         path = densify(xyp, spacing)
-        d_exec, _ = cKDTree(path).query(xye)
-        d_plan, _ = cKDTree(densify(xye, spacing)).query(xyp)
+        d_exec, _ = _tree(path).query(xye)
+        d_plan, _ = _tree(densify(xye, spacing)).query(xyp)
         to_path.append(d_exec)
         from_path.append(d_plan)
         p_onset, p_end = _movement(tp, xyp)
@@ -628,7 +636,7 @@ def compare_reports(
         arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(xyp, axis=0).T))])
         dense_arc = densify(np.column_stack([arc, np.zeros_like(arc)]), spacing)[:, 0]
         dense = np.column_stack([np.interp(dense_arc, arc, xyp[:, i]) for i in (0, 1)])
-        d, nearest = cKDTree(dense).query(xye)
+        d, nearest = _tree(dense).query(xye)
         distances.append(d)
         moving = np.concatenate([[True], np.diff(arc) > 0])  # interp needs rising arc length
         t_by_position = np.interp(dense_arc[nearest], arc[moving], tp[moving])
@@ -719,7 +727,7 @@ def stroke_report(
         mt, mxy, mv = sample_plan(tag, k, dt)
         owner = _fastest_stroke(plan, mt, size)
         xy = np.asarray(getattr(trace, "xy", trace), dtype=float)
-        _, nearest = cKDTree(mxy).query(xy)
+        _, nearest = _tree(mxy).query(xy)
         n = plan.n_strokes
         dist = np.linalg.norm(xy - mxy[nearest], axis=1)
         count = np.bincount(owner[nearest], minlength=n)

@@ -265,3 +265,24 @@ def test_the_fastest_stroke_is_the_dense_argmax_over_all_strokes(seed):
     speed = plan.geometry.length * np.exp(-0.5 * z * z) / (plan.sigma * elapsed)
     speed[t[:, None] <= plan.onsets[None, :]] = 0.0
     np.testing.assert_array_equal(_fastest_stroke(plan, t, tag.size), np.argmax(speed, axis=1))
+
+
+def test_a_report_imports_no_kd_tree_it_does_not_use() -> None:
+    """Only crowded drawings and machine runs need scipy's KD-tree; ``tagbot fit`` should not
+    pay for importing ``scipy.spatial`` (about 70 ms) on every ordinary tag."""
+    import subprocess
+    import sys
+
+    script = (
+        "import sys, numpy as np\n"
+        "from tagbot.inputs import Trace\n"
+        "from tagbot.metrics import fit_report\n"
+        "from tagbot.model.plan import Tag, random_plan\n"
+        "tag = Tag((random_plan(np.random.default_rng(3)),))\n"
+        "report = fit_report([Trace(tag.sample(0.005).xy)], tag)\n"
+        "assert report.shape.mean < 1e-3, report\n"
+        "print('scipy.spatial' in sys.modules)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "False"
