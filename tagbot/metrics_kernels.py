@@ -1289,10 +1289,12 @@ def best_mapping(
                 # (by FFT, conj(conj(·)) has the same real part)
                 cross = z[mm % size].real / size if size else sums[mm - lo]
                 errors[mm - lo] = energy - 2.0 * cross + (cum[last] - cum[first])
-            at = 0
-            for j in range(1, errors.size):
-                if errors[j] < errors[at]:
+            at = -1
+            for j in range(errors.size):  # (NaN, which no finite input gives, never picked)
+                if errors[j] == errors[j] and (at < 0 or errors[j] < errors[at]):
                     at = j
+            if at < 0:
+                continue
             err, mm = errors[at], lo + at
             # The first smallest in the scales' order, whatever order they are visited in.
             if err < best or (err == best and (i < pick or (i == pick and mm < pick_m))):
