@@ -1264,6 +1264,8 @@ def best_mapping(
             else:
                 _correlate_into(sums, vx, vy, w, length, lo, hi)
             # Σ|v − w|² over the overlap = Σ|v|² − 2·Re Σ v·conj(w) + Σ|w|² (outside: v or 0).
+            # Single precision: offset by offset, each recomputed only if it could beat the best
+            # so far (one pass with the other paths' two measured 5 % slower in all).
             if tolerance > 0:
                 for mm in range(lo, hi + 1):
                     first = min(max(-mm, 0), length)
