@@ -79,7 +79,8 @@ def traces_of(case: tuple[str, str, object]) -> list[Trace]:
 
 
 def parts(traces: list[Trace], tag: object) -> np.ndarray:
-    """Seconds of the report's sampling, shape error and velocity SNR, each alone."""
+    """Seconds of the report's sampling, shape error and velocity SNR, each alone (the shape of
+    each plan's whole motion, as the report has it for plans without an ``ink`` window)."""
     model_t, model_xy, model_v, first = sampled_plans(tag, 0.005)
     reference = metrics._joined([np.asarray(tr.xy, dtype=float) for tr in traces])
     drawn = (model_xy, first[1:])
