@@ -158,6 +158,19 @@ def _timed_traces(components: list[tuple[bool, np.ndarray]], rate: float) -> lis
     return traces
 
 
+def case_traces(case: tuple[str, str, object]) -> list[Trace]:
+    """A case's traces, as its dataset reads them."""
+    dataset, _, payload = case
+    if dataset == "gml":
+        path, timed = payload
+        traces = load_traces(path)
+        # Velocity SNR only where index.csv vouches for the timing.
+        return traces if timed else [Trace(tr.xy) for tr in traces]
+    if dataset == "synthetic":
+        return _synthetic_traces(payload)
+    return _timed_traces(payload, 100.0 if dataset == "unipen" else 120.0)
+
+
 # --- one fit ---------------------------------------------------------------------------------
 
 
@@ -172,15 +185,8 @@ def run_case(case: tuple[str, str, object], model: str, refine: bool) -> Row:
     try:
         load_s = 0.0
         if dataset == "gml":
-            path, timed = payload
-            load_s = min(_timed(lambda: load_traces(path)) for _ in range(3))
-            traces = load_traces(path)
-            if not timed:  # velocity SNR only where index.csv vouches for the timing
-                traces = [Trace(tr.xy) for tr in traces]
-        elif dataset == "synthetic":
-            traces = _synthetic_traces(payload)
-        else:
-            traces = _timed_traces(payload, 100.0 if dataset == "unipen" else 120.0)
+            load_s = min(_timed(lambda: load_traces(payload[0])) for _ in range(3))
+        traces = case_traces(case)
         # Fit and sampling are each timed as the best of 3 runs (a fit is deterministic).
         options = {"model": model, "refine": refine, "timing": TIMING}
         tag = fit(traces, **options)

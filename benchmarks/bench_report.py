@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -31,7 +30,7 @@ import numpy as np
 
 from tagbot import metrics
 from tagbot.gesture import fit
-from tagbot.inputs import Trace, load_traces
+from tagbot.inputs import Trace
 from tagbot.model.motion import sampled_plans
 
 VARIANTS = {
@@ -58,24 +57,8 @@ def settings(scales: int, density: int) -> Iterator[None]:
 
 
 def best(fn: Callable[..., object], *args: object) -> float:
-    """Seconds of ``fn(*args)``, the best of 3 runs."""
-    times = []
-    for _ in range(3):
-        started = time.perf_counter()
-        fn(*args)
-        times.append(time.perf_counter() - started)
-    return min(times)
-
-
-def traces_of(case: tuple[str, str, object]) -> list[Trace]:
-    dataset, _, payload = case
-    if dataset == "gml":
-        path, timed = payload
-        traces = load_traces(path)
-        return traces if timed else [Trace(tr.xy) for tr in traces]
-    if dataset == "synthetic":
-        return bench_fit._synthetic_traces(payload)
-    return bench_fit._timed_traces(payload, 100.0 if dataset == "unipen" else 120.0)
+    """Seconds of ``fn(*args)``, the best of 3 runs (as bench_fit times)."""
+    return min(bench_fit._timed(lambda: fn(*args)) for _ in range(3))
 
 
 def parts(traces: list[Trace], tag: object) -> np.ndarray:
@@ -130,7 +113,7 @@ def main() -> None:
         report_s = np.zeros((len(VARIANTS), len(cases)))
         found = np.zeros((len(VARIANTS), len(cases), 3))
         for i, case in enumerate(cases):
-            traces = traces_of(case)
+            traces = bench_fit.case_traces(case)
             tag = fit(traces, timing=bench_fit.TIMING)
             fit_s[i] = best(fit, traces, "gamma", bench_fit.TIMING)
             split[i] = parts(traces, tag)
