@@ -73,16 +73,15 @@ def sample(tag: Tag, dt: float = 0.01) -> Motion:
     """Sample ``tag`` every ``dt`` seconds. See the module docstring for what each sample holds."""
     dt = _check_dt(dt)
     size, origin = tag.size, tag.start
-    first = [int(np.ceil((p.start - origin) / dt - 1e-9)) for p in tag.plans]
-    last = [int(np.ceil((p.end(size) - origin) / dt)) for p in tag.plans]
+    starts, ends = owned_spans(tag)
+    first = [int(np.ceil((start - origin) / dt - 1e-9)) for start in starts]
+    last = [int(np.ceil((end - origin) / dt)) for end in ends]
     for k in range(1, len(tag.plans)):
-        if first[k] < last[k - 1] + 2:
-            lift = tag.plans[k].start - tag.plans[k - 1].end(size)
-            raise PlanError(
-                f"dt: {dt:g} s is too coarse for the {lift:.3g} s pen lift between"
-                f" plans[{k - 1}] and plans[{k}]; use dt < {lift / 2:.3g} s"
-                f" or delay plans[{k}].start"
-            )
+        if tag.plans[k].start < tag.plans[k - 1].end(size):  # handed over at starts[k]
+            cut = (starts[k] - origin) / dt
+            whole = ends[k - 1] >= tag.plans[k - 1].end(size)  # the motion ends there anyway
+            last[k - 1] = max(int(np.ceil(cut) if whole else np.floor(cut + 1e-9)), first[k - 1])
+            first[k] = last[k - 1] + 1
     n = last[-1] + 1
     if n > MAX_SAMPLES:
         raise PlanError(
@@ -90,23 +89,29 @@ def sample(tag: Tag, dt: float = 0.01) -> Motion:
         )
 
     t = origin + np.arange(n) * dt
+    rows = [slice(first[k], last[k] + 1) for k in range(len(tag.plans))]
+    downs = [
+        rows[k] if plan.ink is None else _down_rows(plan.ink_window(size), t, dt)
+        for k, plan in enumerate(tag.plans)
+    ]
+    for k in range(1, len(tag.plans)):
+        if downs[k].start < downs[k - 1].stop + 1:  # no pen-up sample between the runs
+            up = tag.plans[k].ink_window(size)[0] - tag.plans[k - 1].ink_window(size)[1]
+            raise PlanError(
+                f"dt: {dt:g} s is too coarse for the {up:.3g} s pen lift between"
+                f" plans[{k - 1}] and plans[{k}]; use dt < {up / 2:.3g} s"
+                f" or delay plans[{k}].start"
+            )
     xy = np.empty((n, 2))
     v = np.zeros((n, 2))
     pen = np.zeros(n, dtype=np.int8)
     plan_index = np.full(n, -1, dtype=np.intp)
-    rows = [slice(first[k], last[k] + 1) for k in range(len(tag.plans))]
     drawn = evaluate_plans(tag.plans, [t[r] for r in rows], size)
     lift_start = 0
     for k, (plan, (p, pv)) in enumerate(zip(tag.plans, drawn, strict=True)):
         xy[lift_start : first[k]] = plan.targets[0]  # pen up, waiting where it goes down next
         xy[rows[k]], v[rows[k]] = p, pv
-        down = rows[k]
-        if plan.ink is not None:  # in the air before touch-down and after lift-off
-            on, off = plan.ink_window(size)
-            eps = 1e-6 * dt  # a sample on the window's edge is down
-            down = slice(
-                int(np.searchsorted(t, on - eps)), int(np.searchsorted(t, off + eps, "right"))
-            )
+        down = downs[k]  # in the air before touch-down and after lift-off
         pen[down] = 1
         plan_index[down] = k
         lift_start = last[k] + 1
@@ -114,6 +119,32 @@ def sample(tag: Tag, dt: float = 0.01) -> Motion:
     for array in (t, xy, v, speed, pen, plan_index):
         array.flags.writeable = False
     return Motion(t=t, xy=xy, v=v, speed=speed, pen=pen, plan=plan_index, dt=dt)
+
+
+def owned_spans(tag: Tag) -> tuple[list[float], list[float]]:
+    """When each plan of ``tag`` holds the pen, ``(starts, ends)`` on the tag's clock: from its
+    start to its end, except where the next plan starts before that end (their motions overlap
+    in the air, after the one's lift-off and before the other's touch-down). There the pen is
+    handed over halfway between the lift-off and the touch-down: the earlier plan's tail after
+    it and the later plan's approach before it are not drawn."""
+    size = tag.size
+    starts = [plan.start for plan in tag.plans]
+    ends = [plan.end(size) for plan in tag.plans]
+    for k in range(1, len(tag.plans)):
+        if starts[k] < ends[k - 1]:
+            lift_off = tag.plans[k - 1].ink_window(size)[1]
+            touch_down = tag.plans[k].ink_window(size)[0]
+            low, high = max(lift_off, starts[k]), min(touch_down, ends[k - 1])
+            starts[k] = ends[k - 1] = min(max(0.5 * (lift_off + touch_down), low), high)
+    return starts, ends
+
+
+def _down_rows(window: tuple[float, float], t: Array, dt: float) -> slice:
+    """The rows of ``t`` inside an ink window (a sample on the window's edge is down)."""
+    eps = 1e-6 * dt
+    return slice(
+        int(np.searchsorted(t, window[0] - eps)), int(np.searchsorted(t, window[1] + eps, "right"))
+    )
 
 
 def _check_dt(dt: float) -> float:

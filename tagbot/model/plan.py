@@ -334,7 +334,10 @@ def stroke_windows(
 class Tag:
     """An ordered sequence of plans with pen lifts between them.
 
-    Plans must not overlap in time: each starts once the previous one's motion has ended.
+    Plans are drawn one after another: each touches down once the previous one has lifted the
+    pen (:meth:`Plan.ink_window`). Their motions in the air may overlap: a lognormal tail after
+    a lift-off is cut where the next plan takes over (:func:`~tagbot.model.motion.sample`),
+    never drawn as ink that delays the next plan.
     """
 
     plans: tuple[Plan, ...]
@@ -370,11 +373,17 @@ class Tag:
                 f" than {MAX_DURATION:g} s"
             )
         for k in range(1, len(plans)):
-            previous_end = plans[k - 1].end(self.size)
-            if plans[k].start < previous_end:
+            if plans[k].start < plans[k - 1].start:
                 raise PlanError(
-                    f"plans[{k}].start: {plans[k].start:.6g} s is before plans[{k - 1}] ends"
-                    f" ({previous_end:.6g} s); plans are drawn one after another"
+                    f"plans[{k}].start: {plans[k].start:.6g} s is before plans[{k - 1}] starts"
+                    f" ({plans[k - 1].start:.6g} s); plans are drawn one after another"
+                )
+            lift_off = plans[k - 1].ink_window(self.size)[1]
+            touch_down = plans[k].ink_window(self.size)[0]
+            if touch_down < lift_off:
+                raise PlanError(
+                    f"plans[{k}]: the pen touches down at {touch_down:.6g} s, before plans[{k - 1}]"
+                    f" lifts it off ({lift_off:.6g} s); plans are drawn one after another"
                 )
 
     @cached_property

@@ -292,3 +292,36 @@ def test_the_compiled_pass_is_the_reference_evaluation(drawn, seed):
         scale = max(1.0, float(np.abs(plan.targets).max()))
         np.testing.assert_allclose(xy, ref_xy, rtol=0, atol=1e-9 * scale)
         np.testing.assert_allclose(v, ref_v, rtol=1e-9, atol=1e-9 * scale)
+
+
+def test_plans_overlapping_in_the_air_hand_over_between_lift_off_and_touch_down():
+    """A tail after a lift-off overlapping the next plan's approach: each sample belongs to one
+    plan, the pen-down runs are exactly the ink windows, the pen is up in between, and the
+    handover lies halfway between the lift-off and the touch-down."""
+    rng = np.random.default_rng(3)
+    a = random_plan(rng, 6, 0.0, False)
+    b = random_plan(rng, 6, 0.0, False)
+    size = float(np.hypot(*np.ptp(np.concatenate([a.targets, b.targets]), axis=0)))
+    off = 0.6 * a.end(size)
+    a = Plan(a.targets, a.dt, a.mu, a.sigma, a.phi1, a.phi2, 0.0, (0.0, off))
+    on = off + 0.2  # the second touches down 0.2 s after the first lifts off
+    b = Plan(b.targets, b.dt, b.mu, b.sigma, b.phi1, b.phi2, off - 0.1, (0.3, b.end(size) - off))
+    tag = Tag((a, b))
+    assert b.start < a.end(tag.size)  # the motions overlap in the air
+    motion = tag.sample(0.01)
+    runs = list(motion.runs())
+    assert [k for k, _ in runs] == [0, 1]
+    (_, first), (_, second) = runs
+    assert motion.t[first.start] == pytest.approx(0.0)
+    assert motion.t[first.stop - 1] <= off + 1e-9 < motion.t[first.stop]
+    assert motion.t[second.start - 1] < on - 1e-9 <= motion.t[second.start]
+    handover = 0.5 * (off + on)
+    before = motion.t < handover - 1e-9
+    xy_a, _ = evaluate_plan(a, motion.t[before & (motion.t > 0.0)], tag.size)
+    np.testing.assert_allclose(motion.xy[before & (motion.t > 0.0)], xy_a, atol=1e-12)
+    after = motion.t > handover + 0.01
+    xy_b, _ = evaluate_plan(b, motion.t[after], tag.size)
+    np.testing.assert_allclose(motion.xy[after], xy_b, atol=1e-12)
+    assert np.all(motion.pen[first.stop : second.start] == 0)
+    with pytest.raises(PlanError, match=r"dt: 0\.3 s is too coarse for the 0\.2 s pen lift"):
+        tag.sample(0.3)

@@ -100,9 +100,26 @@ def test_tag_validation():
     with pytest.raises(PlanError, match=r"plans\[0\]\.strokes\[0\]\.phi: a sigma-model stroke"):
         Tag((make(),), model="sigma")
     first = make()
-    with pytest.raises(PlanError, match=r"plans\[1\]\.start: 0\.5 s is before plans\[0\] ends"):
+    end = first.end(Tag((first,)).size)
+    with pytest.raises(
+        PlanError, match=rf"plans\[1\]: the pen touches down at 0\.5 s, before plans\[0\] lifts it off \({end:.6g} s\)"
+    ):
         Tag((first, make(start=0.5)))
-    Tag((first, make(start=first.end(Tag((first,)).size) + 1e-3)))  # right after: fine
+    Tag((first, make(start=end)))  # right after (no lift at all): fine
+    with pytest.raises(PlanError, match=r"plans\[1\]\.start: -1 s is before plans\[0\] starts"):
+        Tag((first, make(start=-1.0, ink=(0.05, 0.1))))
+
+
+def test_tag_plans_overlap_in_the_air_only():
+    """A tail after the lift-off may overlap the next plan; the ink may not."""
+    first = make(ink=(0.0, 0.5))
+    size = Tag((first,)).size
+    assert first.end(size) > 0.6  # the motion goes on in the air after the lift-off
+    Tag((first, make(start=0.5)))  # touches down as the first lifts off
+    with pytest.raises(PlanError, match=r"plans\[1\]: the pen touches down at 0\.49 s"):
+        Tag((first, make(start=0.49)))
+    second = make(start=0.3, ink=(0.3, 0.6))  # touches down at 0.6, its approach in the air
+    Tag((first, second))
 
 
 @pytest.mark.parametrize("sigma_model", [False, True])
