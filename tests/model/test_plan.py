@@ -101,9 +101,11 @@ def test_tag_validation():
         Tag((make(),), model="sigma")
     first = make()
     end = first.end(Tag((first,)).size)
-    with pytest.raises(
-        PlanError, match=rf"plans\[1\]: the pen touches down at 0\.5 s, before plans\[0\] lifts it off \({end:.6g} s\)"
-    ):
+    message = (
+        rf"plans\[1\]: the pen touches down at 0\.5 s, before plans\[0\] lifts it off"
+        rf" \({end:.6g} s\)"
+    )
+    with pytest.raises(PlanError, match=message):
         Tag((first, make(start=0.5)))
     Tag((first, make(start=end)))  # right after (no lift at all): fine
     with pytest.raises(PlanError, match=r"plans\[1\]\.start: -1 s is before plans\[0\] starts"):
