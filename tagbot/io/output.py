@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import os
 import secrets
+import stat
 from pathlib import Path
 
 from tagbot.errors import OutputError
@@ -20,13 +21,18 @@ _CREATE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0
 
 def check_output_file(path: str | os.PathLike[str]) -> None:
     """Refuse an output file that cannot be written: its folder is missing or not writable, or
-    the path is a folder. ``-`` (stdout) always passes."""
+    the path exists and is not a regular file (a folder, a device such as ``/dev/null``, a FIFO,
+    a socket: the atomic write would replace it with a regular file). ``-`` (stdout) always
+    passes."""
     name = os.fsdecode(path)
     if name == "-":
         return
     target = Path(name)
     if target.is_dir():
         raise OutputError(f"{name}: is a folder, not a file")
+    kind = _special_kind(target)
+    if kind is not None:
+        raise OutputError(f"{name}: is {kind}, not a regular file (outputs are files)")
     if target.exists() and not os.access(target, os.W_OK):
         raise OutputError(f"{name}: not writable")
     _check_folder(target.parent, name)
@@ -48,6 +54,25 @@ def check_output_folder(path: str | os.PathLike[str]) -> None:
         raise OutputError(f"{name}: {existing} is not a folder")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise OutputError(f"{name}: the folder {existing} is not writable")
+
+
+def _special_kind(target: Path) -> str | None:
+    """What ``target`` is when it exists and is neither a regular file nor a folder (symbolic
+    links followed), else None."""
+    try:
+        mode = os.stat(target).st_mode
+    except OSError:
+        return None
+    kinds = (
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISSOCK, "a socket"),
+    )
+    for test, kind in kinds:
+        if test(mode):
+            return kind
+    return None if stat.S_ISREG(mode) or stat.S_ISDIR(mode) else "not a regular file"
 
 
 def _check_folder(folder: Path, name: str) -> None:
