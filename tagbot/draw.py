@@ -42,7 +42,12 @@ from tagbot.control import RunControl
 from tagbot.errors import InputError
 from tagbot.io.motionfile import MotionTable, write_motion_csv
 from tagbot.io.planfile import save_plan
-from tagbot.metrics import compare_execution, compare_reports, compare_with_recording
+from tagbot.metrics import (
+    compare_execution,
+    compare_reports,
+    compare_with_recording,
+    without_pauses,
+)
 from tagbot.model import Tag
 
 __all__ = [
@@ -102,6 +107,7 @@ class MachineRun:
     planned_duration: float
     """The job's planned duration, s (travel and pen moves included)."""
     executed_duration: float
+    """The job as it ran, s: pauses and host stalls included."""
     placement: dict[str, Any]
     port: str
     """The port as named, or ``"simulator"``."""
@@ -110,6 +116,16 @@ class MachineRun:
     warnings: list[str] = field(default_factory=list)
     error: BaseException | None = None
     """The fault that stopped the run (re-raised once the run folder is written)."""
+    pauses: list[tuple[float, float]] = field(default_factory=list)
+    """Pauses asked for, ``(start, length)`` s on the executed clock: named in the report and
+    left out of the comparison (see :func:`tagbot.metrics.compare_execution`)."""
+    stalls: list[tuple[float, float]] = field(default_factory=list)
+    """Host stalls, ``(start, length)`` s on the executed clock: times the host sent nothing
+    the machine needed (beyond what the device's own catch-up absorbs). Named in the report
+    and kept in the comparison's timeline."""
+    until: float | None = None
+    """After a stop: the planned time the machine had drawn to (the comparison cuts the plan
+    there); None when the job ran to its end."""
 
 
 class PreparedRun(Protocol):
@@ -204,8 +220,10 @@ def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[s
 
     ``device``, ``port``, ``simulated``, ``completed``, ``error``, ``warnings``, ``unit``
     (``line``/``tick``), ``total``, ``sent``, ``executed`` (the last line or tick the machine
-    executed, from 1), ``resume_from``, ``planned_duration_s``, ``executed_duration_s``,
-    ``executed_source``, ``placement``, the comparison (``path_deviation_mean_mm``,
+    executed, from 1), ``resume_from``, ``planned_duration_s``, ``executed_duration_s`` (pauses
+    and stalls included), ``paused_s``, ``pauses``, ``longest_pause_s`` (pauses asked for: their
+    total, count and longest, s), ``stalled_s``, ``stalls``, ``longest_stall_s`` (host stalls, the
+    same), ``executed_source``, ``placement``, the comparison (``path_deviation_mean_mm``,
     ``path_deviation_max_mm``, ``speed_snr_db``, drawing durations, per-run figures; or
     ``comparison_error`` when nothing was drawn) and ``details`` (the device's own figures).
     With ``recorded`` traces (timed), also ``recorded_speed_snr_db`` and ``recorded_runs``: the
@@ -227,6 +245,8 @@ def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[s
         "resume_from": run.resume_from,
         "planned_duration_s": run.planned_duration,
         "executed_duration_s": run.executed_duration,
+        **_holes("paused_s", "pauses", "longest_pause_s", run.pauses),
+        **_holes("stalled_s", "stalls", "longest_stall_s", run.stalls),
         "executed_source": run.executed_source,
         "placement": run.placement,
     }
@@ -237,7 +257,13 @@ def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[s
                     run.planned_runs, run.executed, run.executed_runs, plans=run.plans
                 )
             else:
-                comparison = compare_execution(run.planned_runs, run.executed, plans=run.plans)
+                comparison = compare_execution(
+                    run.planned_runs,
+                    run.executed,
+                    plans=run.plans,
+                    pauses=run.pauses,
+                    until=run.until,
+                )
         except ValueError as e:  # nothing was drawn (a fault before the first pen-down)
             report["comparison_error"] = str(e)
         else:
@@ -251,11 +277,20 @@ def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[s
         )
     elif recorded is not None and run.executed.size:
         try:
-            report.update(compare_with_recording(run.executed, recorded, run.plans))
+            executed = without_pauses(run.executed, run.pauses)
+            report.update(compare_with_recording(executed, recorded, run.plans))
         except ValueError as e:
             report["recorded_comparison_error"] = str(e)
     report["details"] = run.details
     return report
+
+
+def _holes(
+    total: str, count: str, longest: str, holes: Sequence[tuple[float, float]]
+) -> dict[str, Any]:
+    """The total, count and longest of ``(start, length)`` intervals, under those keys."""
+    lengths = [float(length) for _, length in holes]
+    return {total: sum(lengths), count: len(lengths), longest: max(lengths, default=0.0)}
 
 
 def _backend(name: str) -> Callable[..., Any]:

@@ -498,8 +498,21 @@ def compare_execution(
     plans: Sequence[int] | None = None,
     dt: float = 0.01,
     spacing: float = 0.005,
+    pauses: Sequence[tuple[float, float]] = (),
+    until: float | None = None,
 ) -> ExecutionComparison:
     """Executed pen-down runs against the planned ones (``(t, xy)`` per run, in order).
+
+    Like with like, for both machines:
+
+    - ``pauses``: ``(start, length)`` s on the executed clock, the pauses asked for (pen lifted
+      or motion held). They are taken out of the executed timeline first (samples inside
+      dropped, later ones moved back by the length), so a pause costs no fidelity figure.
+      Host stalls are *not* given here: they stay in the timeline as they ran and cost what
+      they cost (a stopped pen is a speed error);
+    - ``until``: after a stop, the planned time the machine had drawn to; each planned run is
+      cut there (one not begun is left out), so the drawn part is compared with the part of the
+      plan it stands for.
 
     Runs are matched in order. Each executed run is aligned in time to its planned run (the
     offset that best matches their velocities, searched within ±1 s of the offset between their
@@ -508,8 +521,10 @@ def compare_execution(
     ``dt`` grid (executed velocity by central differences), and the time each run takes from
     its first to its last movement.
     """
-    runs_e = executed_runs(executed)
+    runs_e = executed_runs(without_pauses(executed, pauses))
     plans = list(range(len(planned))) if plans is None else list(plans)
+    if until is not None:
+        planned, plans = planned_until(planned, plans, until)
     pairs = list(zip(planned, runs_e, plans, strict=False))
     if not pairs:
         raise ValueError("compare_execution: no pen-down run was executed")
@@ -550,6 +565,33 @@ def compare_execution(
         planned_runs=len(planned),
         executed_runs=len(runs_e),
     )
+
+
+def without_pauses(executed: ArrayLike, pauses: Sequence[tuple[float, float]]) -> Array:
+    """``executed`` ``(N, 4)`` with each pause ``(start, length)`` (executed clock) taken out:
+    samples inside dropped, later ones moved back by its length (see :func:`compare_execution`)."""
+    data = np.array(executed, dtype=float).reshape(-1, 4)
+    for start, length in sorted(pauses, reverse=True):  # the latest first: earlier ones unmoved
+        t = data[:, 0]
+        data = data[(t < start) | (t >= start + length)]
+        data[data[:, 0] >= start + length, 0] -= length
+    return data
+
+
+def planned_until(
+    planned: Sequence[tuple[ArrayLike, ArrayLike]], plans: Sequence[int], until: float
+) -> tuple[list[tuple[Array, Array]], list[int]]:
+    """The planned runs cut at planned time ``until`` (runs with fewer than two samples
+    before it left out), and their plans."""
+    kept: list[tuple[Array, Array]] = []
+    kept_plans: list[int] = []
+    for (t, xy), plan in zip(planned, plans, strict=True):
+        t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
+        inside = t <= until + 1e-9
+        if inside.sum() >= 2:
+            kept.append((t[inside], xy[inside]))
+            kept_plans.append(int(plan))
+    return kept, kept_plans
 
 
 def _db(signal: float, noise: float) -> float:
