@@ -35,7 +35,6 @@ import math
 import multiprocessing
 import os
 import platform
-import re
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -46,6 +45,7 @@ import numpy as np
 
 from tagbot.gesture import fit
 from tagbot.inputs import Trace, load_traces
+from tagbot.inputs.unipen import parse_unipen
 from tagbot.metrics import fit_report
 from tagbot.model.plan import Tag, random_plan
 
@@ -87,44 +87,20 @@ def gml_cases(data: Path) -> list[tuple[str, str, object]]:
 
 
 def unipen_cases(data: Path) -> list[tuple[str, str, object]]:
+    """Each ``.SEGMENT WORD`` of the segment files, read by :mod:`tagbot.inputs.unipen` from the
+    file they include (the library never follows ``.INCLUDE``: the benchmark does, on its data)."""
     cases = []
     for seg_file in sorted((data / "unipen" / "data").rglob("*.dat")):
-        include = None
-        words = []
-        for line in seg_file.read_text(errors="replace").splitlines():
-            if line.startswith(".INCLUDE"):
-                include = line.split()[1]
-            m = re.match(r'\.SEGMENT WORD (\d+)-(\d+) \S+ "(.*)"', line)
-            if m:
-                words.append((int(m[1]), int(m[2]), m[3]))
-        if include is None:
+        index = parse_unipen(seg_file.read_bytes(), str(seg_file))
+        if not index.includes:
             continue
-        components = _unipen_components(data / "unipen" / "include" / include)
-        writer = Path(include).stem
-        for a, b, label in words:
-            cases.append(("unipen", f"{writer}:{a}-{b}:{label}", components[a : b + 1]))
+        path = data / "unipen" / "include" / index.includes[0]
+        recording = parse_unipen(path.read_bytes(), str(path))
+        for seg in index.segments:
+            if seg.kind == "WORD" and seg.components is not None:
+                name = f"{path.stem}:{seg.components}:{seg.label}"
+                cases.append(("unipen", name, recording.traces(seg.components)))
     return cases
-
-
-def _unipen_components(path: Path) -> list[tuple[bool, np.ndarray]]:
-    """Pen-down and pen-up blocks in order: (down?, points in mm)."""
-    per_mm = 50.0
-    components: list[tuple[bool, list[list[float]]]] = []
-    current: list[list[float]] | None = None
-    for line in path.read_text(errors="replace").splitlines():
-        if line.startswith(".X_POINTS_PER_MM"):
-            per_mm = float(line.split()[1])
-        elif line.startswith((".PEN_DOWN", ".PEN_UP")):
-            current = []
-            components.append((line.startswith(".PEN_DOWN"), current))
-        elif line.startswith("."):
-            current = None
-        elif current is not None and line.strip():
-            x, y = line.split()[:2]
-            current.append([float(x), float(y)])
-    return [
-        (down, np.asarray(pts, dtype=float).reshape(-1, 2) / per_mm) for down, pts in components
-    ]
 
 
 def mocap_cases(data: Path) -> list[tuple[str, str, object]]:
@@ -168,7 +144,9 @@ def case_traces(case: tuple[str, str, object]) -> list[Trace]:
         return traces if timed else [Trace(tr.xy) for tr in traces]
     if dataset == "synthetic":
         return _synthetic_traces(payload)
-    return _timed_traces(payload, 100.0 if dataset == "unipen" else 120.0)
+    if dataset == "unipen":
+        return payload
+    return _timed_traces(payload, 120.0)
 
 
 # --- one fit ---------------------------------------------------------------------------------

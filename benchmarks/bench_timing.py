@@ -42,7 +42,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_fit import _timed_traces, gml_cases, mocap_cases, unipen_cases
+from bench_fit import case_traces, gml_cases, mocap_cases, unipen_cases
 
 from tagbot.gesture import fit
 from tagbot.gesture.timing import TimingOptions, resample
@@ -97,7 +97,7 @@ def _traces(case: tuple[str, str, object]) -> list:
     dataset, _, payload = case
     if dataset == "gml":
         return load_traces(payload[0])
-    return _timed_traces(payload, 100.0 if dataset == "unipen" else 120.0)
+    return case_traces(case)
 
 
 def run_case(case: tuple[str, str, object], model: str) -> Row:

@@ -8,11 +8,12 @@ timing). The format is told from the content, never from the file name, since ``
 * XML whose root is ``<gml>``: GML (:mod:`tagbot.inputs.gml`);
 * XML whose root is ``<svg>``: SVG (:mod:`tagbot.inputs.svg`);
 * JSON or JSONP with a ``"gml"`` or ``"tag"`` field: #000000book GML (:mod:`tagbot.inputs.gml`);
-* other JSON (a list, or ``{"traces": ...}``), and CSV: point files (:mod:`tagbot.inputs.points`).
+* other JSON (a list, or ``{"traces": ...}``), and CSV: point files (:mod:`tagbot.inputs.points`);
+* text whose first line is a ``.KEYWORD``: UNIPEN (:mod:`tagbot.inputs.unipen`).
 
 Files larger than :data:`MAX_INPUT_BYTES` are refused before being read. Every problem raises
 :class:`~tagbot.errors.InputError` with one line naming the file and the problem, e.g.
-``tag.gml: not a GML, SVG or point file (starts with '%PDF-1.4')`` or
+``tag.gml: not a GML, SVG, point or UNIPEN file (starts with '%PDF-1.4')`` or
 ``points.csv: line 7: y is not a number ('abc')``.
 """
 
@@ -40,6 +41,7 @@ from tagbot.inputs.points import (
 )
 from tagbot.inputs.svg import read_svg, read_svg_document
 from tagbot.inputs.trace import Trace
+from tagbot.inputs.unipen import load_unipen, looks_like_unipen, read_unipen
 
 __all__ = [
     "FORMATS",
@@ -48,19 +50,22 @@ __all__ = [
     "Trace",
     "detect_format",
     "load_traces",
+    "load_unipen",
     "read_gml",
     "read_points_csv",
     "read_points_json",
     "read_svg",
     "read_traces_bytes",
+    "read_unipen",
 ]
 
-FORMATS = ("gml", "svg", "csv", "json")
-"""What :func:`detect_format` returns: GML (XML or #000000book JSON), SVG, point CSV, point JSON."""
+FORMATS = ("gml", "svg", "csv", "json", "unipen")
+"""What :func:`detect_format` returns: GML (XML or #000000book JSON), SVG, point CSV, point JSON,
+UNIPEN."""
 
 
 def load_traces(path: str | os.PathLike[str]) -> list[Trace]:
-    """Read the traces of a GML, SVG or point file, whatever its extension."""
+    """Read the traces of a GML, SVG, point or UNIPEN file, whatever its extension."""
     return read_traces_bytes(read_input(path), os.fsdecode(path))
 
 
@@ -76,6 +81,8 @@ def read_traces_bytes(data: bytes, name: str = "<input>") -> list[Trace]:
         return read_gml_json(parsed, name)
     if fmt == "json":
         return read_points_json_object(parsed, name)
+    if fmt == "unipen":
+        return read_unipen(data, name)
     return read_points_csv(data, name)
 
 
@@ -100,12 +107,12 @@ def _sniff(data: bytes, name: str) -> tuple[str, object]:
         if kind in ("gml", "svg"):
             return kind, doc
         what = f"the XML root is <{kind}>" if kind else "XML without a root element"
-        raise InputError(f"{name}: not a GML, SVG or point file ({what})")
+        raise InputError(f"{name}: not a GML, SVG, point or UNIPEN file ({what})")
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         raise InputError(
-            f"{name}: not a GML, SVG or point file (not UTF-8 text at byte {e.start}; "
+            f"{name}: not a GML, SVG, point or UNIPEN file (not UTF-8 text at byte {e.start}; "
             f"starts with {preview(data)})"
         ) from e
     if first in "{[" or unwrap_jsonp(text) is not None:
@@ -124,7 +131,9 @@ def _sniff(data: bytes, name: str) -> tuple[str, object]:
         raise InputError(f"{name}: JSON, but neither #000000book GML nor points ({what})")
     if looks_like_csv(text):
         return "csv", None
-    raise InputError(f"{name}: not a GML, SVG or point file (starts with {preview(data)})")
+    if first == "." and looks_like_unipen(text):
+        return "unipen", None
+    raise InputError(f"{name}: not a GML, SVG, point or UNIPEN file (starts with {preview(data)})")
 
 
 def _first_char(data: bytes) -> str:

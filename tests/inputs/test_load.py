@@ -75,17 +75,18 @@ def test_detect_format(data: bytes, fmt: str) -> None:
     ("data", "message"),
     [
         (b"%PDF-1.4\n%\xe2\xe3\xcf\xd3\n",
-         "not a GML, SVG or point file (not UTF-8 text at byte 10; starts with '%PDF-1.4')"),
-        (b"%PDF-1.4\n1 0 obj\n", "not a GML, SVG or point file (starts with '%PDF-1.4')"),
+         "not a GML, SVG, point or UNIPEN file (not UTF-8 text at byte 10; "
+         "starts with '%PDF-1.4')"),
+        (b"%PDF-1.4\n1 0 obj\n", "not a GML, SVG, point or UNIPEN file (starts with '%PDF-1.4')"),
         (b"", "empty file"),
         (b" \n\t", "empty file"),
-        (b"<html><body/></html>", "not a GML, SVG or point file (the XML root is <html>)"),
+        (b"<html><body/></html>", "not a GML, SVG, point or UNIPEN file (the XML root is <html>)"),
         (b'{"name": "x", "id": 3}', "JSON, but neither #000000book GML nor points "
          "(top-level fields: id, name)"),
         (b'{"model": "gamma", "plans": []}', "a tagbot plan file, not a recording (GML, SVG"
          " or points); plans are drawn, sampled or rendered as they are, not fitted"),
-        (b"3", "not a GML, SVG or point file (starts with '3')"),
-        (b"hello world\n", "not a GML, SVG or point file (starts with 'hello')"),
+        (b"3", "not a GML, SVG, point or UNIPEN file (starts with '3')"),
+        (b"hello world\n", "not a GML, SVG, point or UNIPEN file (starts with 'hello')"),
         (b"{oops", "not JSON (line 1, column 2: Expecting property name enclosed"),
     ],
 )  # fmt: skip
