@@ -123,6 +123,31 @@ def parse_number(text: object, decimal_comma: bool = True) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def number_problem(text: object, decimal_comma: bool = True) -> str | None:
+    """What is wrong with a number that cannot be used: ``"not a finite number"`` (``NaN``,
+    ``inf``, ``1e400``) or ``"out of range"`` (beyond :data:`MAX_MAGNITUDE`); None when ``text``
+    is a usable number, or no number at all (readers that skip junk decide about that)."""
+    if isinstance(text, bool):
+        return None
+    if isinstance(text, int | float):
+        try:
+            x = float(text)
+        except OverflowError:
+            return "out of range"
+    elif isinstance(text, str):
+        s = text.strip()
+        if s.lower().lstrip("+-") in ("nan", "inf", "infinity"):
+            return "not a finite number"
+        if not _NUMBER.fullmatch(s) or ("," in s and not decimal_comma):
+            return None
+        x = float(s.replace(",", "."))
+    else:
+        return None
+    if not math.isfinite(x):
+        return "not a finite number"
+    return "out of range" if abs(x) > MAX_MAGNITUDE else None
+
+
 # --------------------------------------------------------------------------- XML
 
 

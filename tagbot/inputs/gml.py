@@ -11,9 +11,11 @@ hold several ``<tag>`` elements, each with several ``<drawing>`` elements: every
 the file becomes one trace, in document order, except pen-up moves (``isDrawing="false"``, as an
 attribute or a child), which are skipped. A point is a ``<pt>`` with ``<x>`` and ``<y>``; ``<z>``
 is not pressure and is ignored, as are pressure, thickness and brush data. Numbers may use a
-decimal comma (``0,532``); a point without numeric, finite ``x`` and ``y`` (of magnitude at most
-10¹⁵) is skipped. A stroke with a single usable point is kept (a dot); a file without any usable
-point is an error.
+decimal comma (``0,532``); a point without numeric ``x`` and ``y`` (missing, empty or text) is
+skipped, but a coordinate or time that is a number no reader can use (``NaN``, ``inf``, or of
+magnitude above 10¹⁵, e.g. ``1e308``) is refused with an error naming the stroke and point, as
+the point-file reader refuses it. A stroke with a single usable point is kept (a dot); a file
+without any usable point is an error.
 
 **#000000book JSON.** ``{"gml": {"tag": ...}}`` mirrors the XML, objects for elements, lists for
 repeated elements (a one-element list may collapse into a bare object: both read the same), and
@@ -93,9 +95,11 @@ from tagbot.inputs._common import (
     Node,
     XmlDocument,
     check_size,
+    cut,
     decode_text,
     json_to_node,
     make_trace,
+    number_problem,
     parse_json,
     parse_number,
     parse_xml,
@@ -219,18 +223,21 @@ def _traces(root: Node, name: str, cut: str) -> list[Trace]:
     times: list[float | None] = []
     lengths: list[int] = []
     n_pt = n_pen_up = 0
-    for stroke in _strokes(root):
+    for k, stroke in enumerate(_strokes(root), start=1):
         if (_field(stroke, "isdrawing") or "").strip().lower() in _PEN_UP:
             n_pen_up += 1
             continue
         before = len(xy)
+        i = 0
         for pt in stroke.children:
             if pt.name != "pt":
                 continue
             n_pt += 1
+            i += 1
             if not pt.closed:
                 continue
             fields = _point_fields(pt)
+            _refuse_unusable(fields, name, k, i)
             x = parse_number(fields.get("x"))
             y = parse_number(fields.get("y"))
             if x is None or y is None or abs(x) > MAX_MAGNITUDE or abs(y) > MAX_MAGNITUDE:
@@ -257,6 +264,18 @@ def _traces(root: Node, name: str, cut: str) -> list[Trace]:
         traces.append(make_trace(name, points[rows], None if t is None else t[rows], clock))
         start += n
     return traces
+
+
+def _refuse_unusable(fields: dict[str, str | None], name: str, stroke: int, point: int) -> None:
+    """Raise InputError if a point's x, y or time is NaN, infinite or beyond MAX_MAGNITUDE."""
+    for key in ("x", "y", "t", "time"):
+        text = fields.get(key)
+        problem = number_problem(text)
+        if problem is not None:
+            limit = f"; at most {MAX_MAGNITUDE:g} in magnitude" if problem == "out of range" else ""
+            raise InputError(
+                f"{name}: <stroke> {stroke}, <pt> {point}: {key} is {problem} ({cut(text)}{limit})"
+            )
 
 
 def _field(node: Node, name: str) -> str | None:

@@ -91,15 +91,53 @@ def test_namespaced_elements() -> None:
     assert xy(read_gml(data)) == [[[50, 50]]]
 
 
-def test_unusable_points_are_skipped() -> None:
-    data = gml(stroke((0.1, 0.1), ("abc", 0.2), (0.3, "nan"), (0.4, "inf"), (0.5, 0.5)))
+def test_points_without_numbers_are_skipped() -> None:
+    data = gml(stroke((0.1, 0.1), ("abc", 0.2), ("", 0.3), (0.5, 0.5)))
     data = data.replace(b"</stroke>", b"<pt><x>0.6</x></pt></stroke>")
     assert xy(read_gml(data)) == [[[10, 90], [50, 50]]]
 
 
-def test_huge_coordinates_are_unusable_and_huge_times_unreadable() -> None:
-    traces = read_gml(gml(stroke((1e16, 0.1, 0.0), (0.2, 0.2, "1e16"), (0.3, 0.3, 1.0))))
-    assert xy(traces) == [[[20, 80], [30, 70]]] and traces[0].t is None
+@pytest.mark.parametrize(
+    ("pt", "message"),
+    [
+        ((0.3, "nan"), "<stroke> 2, <pt> 2: y is not a finite number ('nan')"),
+        (("NaN", 0.3), "<stroke> 2, <pt> 2: x is not a finite number ('NaN')"),
+        ((0.4, "-inf"), "<stroke> 2, <pt> 2: y is not a finite number ('-inf')"),
+        (("Infinity", 0.4), "<stroke> 2, <pt> 2: x is not a finite number ('Infinity')"),
+        (("1e400", 0.4), "<stroke> 2, <pt> 2: x is not a finite number ('1e400')"),
+        (("1e308", 0.4), "<stroke> 2, <pt> 2: x is out of range ('1e308'; at most 1e+15 in "
+         "magnitude)"),
+        ((0.4, "-1,5e16"), "<stroke> 2, <pt> 2: y is out of range ('-1,5e16'; at most 1e+15"),
+        ((0.4, 0.4, "nan"), "<stroke> 2, <pt> 2: t is not a finite number ('nan')"),
+        ((0.4, 0.4, "1e16"), "<stroke> 2, <pt> 2: t is out of range ('1e16'"),
+    ],
+)  # fmt: skip
+def test_unusable_numbers_are_refused_naming_the_point(pt: tuple, message: str) -> None:
+    """NaN, infinities and magnitudes beyond 10¹⁵ are refused, as the point-file reader does."""
+    data = gml(stroke((0.1, 0.1, 0.0)), stroke((0.2, 0.2, 0.1), pt))
+    with pytest.raises(InputError) as e:
+        read_gml(data, "tag.gml")
+    assert str(e.value).startswith(f"tag.gml: {message}")
+    assert "\n" not in str(e.value)
+
+
+def test_unusable_time_element_is_refused() -> None:
+    data = gml(stroke((0.1, 0.1, 0.0))).replace(b"<t>0.0</t>", b"<time>inf</time>")
+    with pytest.raises(InputError, match=r"<stroke> 1, <pt> 1: time is not a finite number"):
+        read_gml(data, "tag.gml")
+
+
+def test_largest_magnitude_is_still_read() -> None:
+    """10¹⁵ itself is a usable coordinate and time (the bound is inclusive)."""
+    (tr,) = read_gml(gml(stroke((0.1, 0.1, 0.0), ("1e15", "-1e15", "1e15"))))
+    assert len(tr) == 2
+
+
+def test_unusable_numbers_in_000000book_json_are_refused() -> None:
+    pts = b'[{"x": 0.1, "y": 0.2}, {"x": 1e400, "y": 0}]'
+    data = b'{"gml": {"tag": {"drawing": {"stroke": {"pt": ' + pts + b"}}}}}"
+    with pytest.raises(InputError, match=r"tag.json: <stroke> 1, <pt> 2: x is not a finite number"):
+        read_gml(data, "tag.json")
 
 
 def test_decimal_commas() -> None:
