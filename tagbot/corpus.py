@@ -129,13 +129,14 @@ def fit_file(job: FileJob) -> dict[str, Any]:
 
 def fit_one(job: FileJob, row: dict[str, Any]) -> Tag:
     """:func:`fit_file`'s work, raising on a bad file: the tag, with its figures put in ``row``."""
-    from tagbot.gesture import fit
     from tagbot.inputs import load_traces
-    from tagbot.io.planfile import save_plan
 
     started = time.perf_counter()
-    traces = load_traces(job.source)
+    traces = load_traces(job.source)  # first: a bad file is refused before numba/scipy load
     loaded = time.perf_counter()
+    from tagbot.gesture import fit
+    from tagbot.io.planfile import save_plan
+
     opts = job.options
     tag = fit(traces, model=opts.get("model", "gamma"), **opts.get("fit", {}))
     fitted = time.perf_counter()

@@ -288,21 +288,30 @@ class FitReport:
     strokes_per_half_turn: float
     """Strokes per 180° of the input's turning (the paper adds one per 180°)."""
     velocity_snr_db: float | None
-    """Velocity SNR against the recorded timing (None when the input has none)."""
+    """Velocity SNR against the recorded timing trace by trace, each after its own best time
+    scale and offset (None when the input has none)."""
     clock: str | None = None
     """How the input's clock unit was read (``Trace.clock``), None when no reader decided it."""
+    velocity_snr_clock_db: float | None = None
+    """Velocity SNR on the tag's own clock, the one a machine draws: every plan against its
+    trace at the recorded instants, one time offset for the whole capture (within
+    ±:data:`CLOCK_REACH`) and no scaling (None when the input has no timing)."""
+    timing: str | None = None
+    """How the traces were timed (``"3 matched, 1 scaled"``), when the fit said."""
 
     def summary(self) -> str:
         """One line for people."""
-        snr = (
-            f", velocity SNR {self.velocity_snr_db:.1f} dB"
-            if self.velocity_snr_db is not None
-            else ""
-        )
+        snr = ""
+        if self.velocity_snr_clock_db is not None:
+            snr = f", velocity SNR {self.velocity_snr_clock_db:.1f} dB on the tag's clock"
+        if self.velocity_snr_db is not None:
+            snr += (", " if snr else ", velocity SNR ") + f"{self.velocity_snr_db:.1f} dB"
+            snr += " trace by trace" if self.velocity_snr_clock_db is not None else ""
+        timing = f"; timing: {self.timing}" if self.timing else ""
         return (
             f"{_count(self.traces, 'trace')} ({_count(self.points, 'point')}) ->"
             f" {_count(self.strokes, 'stroke')}; shape error mean {100 * self.shape.mean:.2f}%"
-            f" max {100 * self.shape.max:.2f}% of {self.shape.size:.4g}{snr}"
+            f" max {100 * self.shape.max:.2f}% of {self.shape.size:.4g}{snr}{timing}"
         )
 
 
@@ -310,10 +319,13 @@ def _count(n: int, noun: str) -> str:
     return f"{n} {noun}{'s' * (n != 1)}"
 
 
-def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitReport:
+def fit_report(
+    traces: Sequence[object], tag: Tag, dt: float = 0.005, timings: Sequence[Any] | None = None
+) -> FitReport:
     """Compare a reconstructed ``tag`` (one plan per trace) with its input ``traces``.
 
-    Traces are objects with ``xy`` and optional ``t`` (as :func:`tagbot.load_traces` returns).
+    Traces are objects with ``xy`` and optional ``t`` (as :func:`tagbot.load_traces` returns);
+    ``timings`` how the fit timed each (:attr:`tagbot.gesture.Reconstruction.timings`).
     """
     polylines = [np.asarray(getattr(tr, "xy", tr), dtype=float) for tr in traces]
     # Each plan sampled on its own grid: a pen lift shorter than dt cannot make the report fail.
@@ -329,7 +341,7 @@ def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitRepo
     reference = _joined(polylines)
     shape = _shape_error(reference, drawn)
     turning = kernels.turning(*reference) / np.pi
-    snr = None
+    snr = clock_snr = None
     timed = [tr for tr in traces if getattr(tr, "t", None) is not None]
     if timed and len(timed) == len(traces) == len(tag.plans):
         status, db, energy = kernels.velocity_snrs(
@@ -340,6 +352,7 @@ def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitRepo
         compared = status == kernels.OK  # the others too short to compare
         signal, noise = energy[compared].sum(), (energy / 10 ** (db / 10))[compared].sum()
         snr = float(10 * np.log10(signal / noise)) if noise > 0 else None
+        clock_snr = tag_clock_snr(traces, tag)
     return FitReport(
         traces=len(polylines),
         points=sum(len(p) for p in polylines),
@@ -348,7 +361,63 @@ def fit_report(traces: Sequence[object], tag: Tag, dt: float = 0.005) -> FitRepo
         strokes_per_half_turn=tag.n_strokes / turning if turning > 0 else float("nan"),
         velocity_snr_db=snr,
         clock=next((c for c in (getattr(tr, "clock", None) for tr in traces) if c), None),
+        velocity_snr_clock_db=clock_snr,
+        timing=timing_summary(timings),
     )
+
+
+def timing_summary(timings: Sequence[Any] | None) -> str | None:
+    """How many traces got each timing (``"3 matched, 1 scaled"``), None without timings."""
+    kinds = [getattr(timing, "kind", str(timing)) for timing in timings or ()]
+    return ", ".join(f"{kinds.count(k)} {k}" for k in dict.fromkeys(kinds)) or None
+
+
+CLOCK_REACH = 0.25
+"""The tag's own clock may be offset from the recording's by up to this, seconds
+(:func:`tag_clock_snr`)."""
+
+
+def tag_clock_snr(
+    traces: Sequence[Any], tag: Tag, cutoff: float | None = VELOCITY_CUTOFF
+) -> float | None:
+    """Velocity SNR in dB of ``tag`` (one plan per trace) against the timed ``traces`` on the
+    tag's own clock: each trace's velocity (:func:`recorded_velocity`, low-passed at
+    ``cutoff``) against its plan's at the same instants, with the one offset (within
+    ±:data:`CLOCK_REACH`, every 5 ms, then parabolic) that suits the whole capture best, and no
+    time scaling: what a machine drawing the tag on its clock reproduces. None when no trace is
+    long enough to compare."""
+    from tagbot.model.motion import evaluate_plan
+
+    step, fine = 0.005, 0.001
+    offsets = np.arange(-CLOCK_REACH, CLOCK_REACH + step / 2, step)
+    signal, errors = 0.0, np.zeros(len(offsets))
+    for plan, trace in zip(tag.plans, traces, strict=True):
+        try:
+            grid, v = recorded_velocity(trace.t, trace.xy, cutoff=cutoff)
+        except ValueError:
+            continue  # too short to compare
+        t = (
+            grid[0]
+            - CLOCK_REACH
+            + fine * np.arange(int(np.ceil((grid[-1] - grid[0] + 2 * CLOCK_REACH) / fine)) + 2)
+        )
+        _, model_v = evaluate_plan(plan, t, tag.size)
+        at = (grid[None, :] + offsets[:, None] - t[0]) / fine  # (offsets, grid) in fine steps
+        i = np.clip(np.floor(at).astype(np.intp), 0, len(t) - 2)
+        w = (at - i)[..., None]
+        shifted = model_v[i] * (1 - w) + model_v[i + 1] * w
+        signal += float(np.sum(v * v))
+        errors += np.sum((shifted - v[None]) ** 2, axis=(1, 2))
+    if signal <= 0:
+        return None
+    b = int(np.argmin(errors))
+    best = float(errors[b])
+    if 0 < b < len(errors) - 1:  # the parabola's vertex through the best and its neighbours
+        lo, hi = errors[b - 1], errors[b + 1]
+        curvature = lo - 2 * best + hi
+        if curvature > 0:
+            best = max(best - (hi - lo) ** 2 / (8 * curvature), 0.0)
+    return _db(signal, best)
 
 
 def recorded_velocity(
@@ -500,6 +569,7 @@ def compare_execution(
     spacing: float = 0.005,
     pauses: Sequence[tuple[float, float]] = (),
     until: float | None = None,
+    ramp: float = 0.0,
 ) -> ExecutionComparison:
     """Executed pen-down runs against the planned ones (``(t, xy)`` per run, in order).
 
@@ -509,7 +579,10 @@ def compare_execution(
       or motion held). They are taken out of the executed timeline first (samples inside
       dropped, later ones moved back by the length), so a pause costs no fidelity figure.
       Host stalls are *not* given here: they stay in the timeline as they ran and cost what
-      they cost (a stopped pen is a speed error);
+      they cost (a stopped pen is a speed error). ``ramp``: s a machine that kept its pen down
+      through a pause (a plotter's feed hold) takes to regain the planned speed after it; that
+      long after each pause (where the stop's deceleration, taken out with the pause, meets the
+      restart's acceleration) is left out of the velocity comparison;
     - ``until``: after a stop, the planned time the machine had drawn to; each planned run is
       cut there (one not begun is left out), so the drawn part is compared with the part of the
       plan it stands for.
@@ -522,6 +595,9 @@ def compare_execution(
     its first to its last movement.
     """
     runs_e = executed_runs(without_pauses(executed, pauses))
+    gone = np.cumsum([0.0, *(length for _, length in sorted(pauses))])
+    starts = [start - gone[k] for k, (start, _) in enumerate(sorted(pauses))]
+    skip = [(t - dt, t + ramp + dt) for t in starts] if ramp > 0 else []
     plans = list(range(len(planned))) if plans is None else list(plans)
     if until is not None:
         planned, plans = planned_until(planned, plans, until)
@@ -542,7 +618,7 @@ def compare_execution(
         from_path.append(d_plan)
         p_onset, p_end = _movement(tp, xyp)
         e_onset, e_end = _movement(te, xye)
-        offset, a, b = _align(tp, xyp, te, xye, e_onset - p_onset, dt)
+        offset, a, b = _align(tp, xyp, te, xye, e_onset - p_onset, dt, skip)
         signal, noise = signal + a, noise + b
         alignments.append(
             RunAlignment(
@@ -608,15 +684,45 @@ def _movement(t: Array, xy: Array) -> tuple[float, float]:
 
 
 def _align(
-    tp: Array, xyp: Array, te: Array, xye: Array, guess: float, dt: float
+    tp: Array,
+    xyp: Array,
+    te: Array,
+    xye: Array,
+    guess: float,
+    dt: float,
+    skip: Sequence[tuple[float, float]] = (),
 ) -> tuple[float, float, float]:
     """The offset (executed t − planned t) near ``guess`` that best matches the velocities,
-    with the planned velocity's energy and the error energy at that offset."""
+    with the planned velocity's energy and the error energy at that offset.
+
+    Executed instants inside a ``skip`` window are left out, and each piece between two
+    windows is aligned on its own (searched from the previous piece's offset: a machine
+    restarting after a pause may come back a little early or late); the first piece's offset
+    is returned, with the energies summed over the pieces."""
     if te[-1] - te[0] >= 3 * dt:
         grid, ve = recorded_velocity(te, xye, dt)
     else:
         grid, ve = te, np.zeros_like(xye)
     vp_full = np.gradient(xyp, tp, axis=0) if len(tp) > 2 else np.zeros_like(xyp)
+    cuts = sorted(skip)
+    piece = np.searchsorted([high for _, high in cuts], grid, side="left")
+    inside = np.zeros(len(grid), dtype=bool)
+    for low, high in cuts:
+        inside |= (grid >= low) & (grid <= high)
+    first: float | None = None
+    total_a = total_b = 0.0
+    for k in np.unique(piece[~inside]) if len(cuts) else [0]:
+        chosen = (piece == k) & ~inside if len(cuts) else slice(None)
+        offset, a, b = _best_offset(tp, vp_full, grid[chosen], ve[chosen], guess)
+        guess, total_a, total_b = offset, total_a + a, total_b + b
+        first = offset if first is None else first
+    return float(guess if first is None else first), total_a, total_b
+
+
+def _best_offset(
+    tp: Array, vp_full: Array, grid: Array, ve: Array, guess: float
+) -> tuple[float, float, float]:
+    """:func:`_align`'s search on one piece: the offset, planned and error energies."""
 
     def energies(offset: float) -> tuple[float, float]:
         t_plan = grid - offset

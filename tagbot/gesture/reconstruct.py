@@ -41,7 +41,15 @@ from tagbot.errors import PlanError
 from tagbot.gesture import contour, kernels
 from tagbot.gesture.refine import RefineOptions, refine
 from tagbot.gesture.strokes import Strokes
-from tagbot.gesture.timing import TIMINGS, Timing, TimingOptions, match
+from tagbot.gesture.timing import (
+    TIMINGS,
+    Timing,
+    TimingOptions,
+    TraceTiming,
+    implausible_clock,
+    match,
+    usable,
+)
 from tagbot.model.plan import (
     DEFAULT_MU,
     DEFAULT_SIGMA,
@@ -124,6 +132,26 @@ class FitOptions:
                 raise PlanError(f"{name}: must be a whole number >= 0, got {value!r}")
 
 
+@dataclass(frozen=True)
+class Reconstruction:
+    """A fitted tag and how each of its plans was timed."""
+
+    tag: Tag
+    timings: tuple[TraceTiming, ...] | None
+    """Per trace (:class:`~tagbot.gesture.timing.TraceTiming`), or None when the tag was fitted
+    by its shape alone (``timing="ignore"``, untimed input, or a clock no hand can produce)."""
+    note: str = ""
+    """Why a timed input was fitted by its shape alone, if it was."""
+
+    def notes(self) -> list[str]:
+        """One line per trace not matched to its recording (and for a whole clock refused)."""
+        lines = [self.note] if self.note else []
+        for k, timing in enumerate(self.timings or ()):
+            if timing.kind != "matched":
+                lines.append(timing.describe(k))
+        return lines
+
+
 def fit(
     traces: Sequence[Any],
     model: Model = "gamma",
@@ -140,10 +168,25 @@ def fit(
     ``timing``: ``"ignore"`` fits the shape only (the paper's method: plans move at its default
     rhythm, pen lifts of ``lift`` seconds); ``"match"`` then refits every trace's onsets,
     ``mu``, ``sigma``, tangents and targets so that the velocity follows the recorded one, plans
-    starting at their recorded times (:mod:`tagbot.gesture.timing`; every trace needs
-    timestamps); ``"auto"`` (the default) is ``"match"`` when every trace has timestamps and one
-    has a plausible sampling rate (:func:`tagbot.gesture.timing.usable`), else ``"ignore"``.
+    inking from their recorded touch-down to their lift-off (:mod:`tagbot.gesture.timing`;
+    every trace needs timestamps); ``"auto"`` (the default) is ``"match"`` when every trace has
+    timestamps and one has a plausible sampling rate (:func:`tagbot.gesture.timing.usable`),
+    trace by trace where the clock is one a hand can produce
+    (:func:`tagbot.gesture.timing.implausible_clock`), else ``"ignore"``. Whatever the option,
+    a timed plan that would miss the shape by more than the margins keeps the geometric plan on
+    the recorded span. :func:`reconstruct` also says how each trace was timed.
     """
+    return reconstruct(traces, model, timing, timing_options, **options).tag
+
+
+def reconstruct(
+    traces: Sequence[Any],
+    model: Model = "gamma",
+    timing: Timing = "auto",
+    timing_options: TimingOptions | None = None,
+    **options: Any,
+) -> Reconstruction:
+    """:func:`fit`, with how each trace was timed."""
     if model not in MODELS:
         raise PlanError(f"model: must be 'gamma' or 'sigma', got {model!r}")
     if timing not in TIMINGS:
@@ -163,14 +206,31 @@ def fit(
     if not size > _NO_SIZE:
         size = 1.0  # only dots, all at one place (or closer than a plan tells apart): any scale
     plans = fit_plans(polylines, size, model, opts)
+    note = ""
     timed = match(plans, traces, size, model, timing, timing_options)
     if timed is not None:
         try:
-            return Tag(tuple(timed), model)
-        except PlanError:  # e.g. a recorded tag longer than a tag may last
+            return Reconstruction(Tag(tuple(timed[0]), model), tuple(timed[1]))
+        except PlanError as e:  # e.g. a recorded tag longer than a tag may last
             if timing == "match":
                 raise
-    return sequence(plans, opts.lift, model)
+            note = f"timing ignored: {e}"
+    elif timing == "auto" and traces and all(getattr(tr, "t", None) is not None for tr in traces):
+        note = _untimed_why(plans, traces)
+    return Reconstruction(sequence(plans, opts.lift, model), None, note)
+
+
+def _untimed_why(plans: list[Plan], traces: list[Any]) -> str:
+    """Why ``auto`` fitted a timed capture by its shape alone ("" for a sampling rate too low
+    to follow, which nobody would expect matched)."""
+    from tagbot.metrics import turning_of
+
+    if not any(usable(tr) for tr in traces):
+        return ""
+    down = np.concatenate([[0.0], np.cumsum([float(tr.t[-1] - tr.t[0]) for tr in traces])])
+    turning = sum(turning_of([np.asarray(tr.xy, dtype=float)]) for tr in traces)
+    why = implausible_clock(sum(p.n_strokes for p in plans), turning, down)
+    return f"timing ignored, the capture's {why}" if why else ""
 
 
 _NO_SIZE = 1e-90

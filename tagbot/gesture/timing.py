@@ -70,7 +70,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.special import ndtri
 
 from tagbot.errors import PlanError
@@ -79,6 +79,7 @@ from tagbot.gesture.strokes import Strokes
 from tagbot.inputs.stamps import sample_instants
 from tagbot.model.plan import (
     MAX_DURATION,
+    MU_RANGE,
     Model,
     Plan,
 )
@@ -802,6 +803,69 @@ def _as_plan(strokes: Strokes, ink: tuple[float, float] | None = None) -> Plan:
     )
 
 
+MAX_STROKE_RATE = 40.0
+"""A hand draws at most this many lognormal strokes (of the geometric fit) per second of a
+trace, or of a whole capture. The fastest trace of the development data: 25 per second (a
+UNIPEN word's 2-stroke trace over 8 samples); graffiti tags 15, motion-captured letters 19
+(BENCHMARKS.md, session 16). A faster clock is not a writer's (e.g. a 29-stroke tag stamped
+within 0.38 s, eye-tracker clicks 6 ms apart)."""
+MAX_TURN_RATE = 40.0
+"""... and turns at most this many half turns (180°) per second (development data: at most
+25, a UNIPEN word's trace; rapid alternating movements of the hand top out near 10 Hz, 20 half
+turns per second)."""
+INK_TOLERANCE = 0.002
+"""A timed plan's ink runs from the first recorded sample to the last, widened to where its
+path left to travel (or travelled) is below this fraction of the tag's size: the lognormal
+tails beyond are drawn in the air (or not at all), never as ink that delays the next plan."""
+SHAPE_MARGIN_MEAN = 0.0005
+"""A timed plan's mean shape error may exceed the geometric fit's of the same trace by this
+fraction of the tag's size..."""
+SHAPE_MARGIN_MAX = (1.5, 0.005)
+"""... and its maximum by ``max(1.5 times, +0.5 %)`` of it; otherwise the trace keeps the geometric
+plan, its clock scaled to the recorded span (the shape exactly the geometric fit's)."""
+
+TimingKind = Literal["matched", "scaled", "geometric"]
+
+
+@dataclass(frozen=True)
+class TraceTiming:
+    """How one trace's plan was timed, and why it was not matched to the recording."""
+
+    kind: TimingKind
+    """``matched``: its velocity fitted to the recorded one; ``scaled``: the geometric plan,
+    its clock scaled to the recorded pen-down span; ``geometric``: the geometric plan at the
+    paper's rhythm."""
+    reason: str = ""
+    """Why it is not ``matched`` (empty when it is)."""
+
+    def describe(self, index: int) -> str:
+        """One line for people: ``trace 3: scaled (the timed fit ...)``."""
+        return f"trace {index}: {self.kind}" + (f" ({self.reason})" if self.reason else "")
+
+
+def implausible_clock(n_strokes: int, turning: float, t: ArrayLike) -> str:
+    """Why a trace (or a capture's pen-down time) stamped ``t`` cannot be a hand's drawing of
+    ``n_strokes`` geometric strokes turning ``turning`` half turns, or "" if it can. The span
+    counts one sampling interval more (the pen moved before the first sample and after the
+    last), so that short traces are not judged on a truncated span."""
+    t = np.asarray(t, dtype=float)
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    span = float(t[-1] - t[0]) + (float(np.median(steps)) if steps.size else 0.0)
+    if span <= 0:
+        return f"no time between its {len(t)} stamps"
+    for count, limit, noun in (
+        (n_strokes, MAX_STROKE_RATE, "strokes"),
+        (turning, MAX_TURN_RATE, "half turns"),
+    ):
+        if count > 1 and count / span > limit:
+            return (
+                f"clock implausible: {count:.3g} {noun} in {span:.3g} s, {count / span:.3g} per"
+                f" second; a hand draws at most {limit:g}"
+            )
+    return ""
+
+
 def match(
     plans: list[Plan],
     traces: list[Any],
@@ -809,54 +873,165 @@ def match(
     model: Model,
     timing: Timing,
     options: TimingOptions | None = None,
-) -> list[Plan] | None:
+) -> tuple[list[Plan], list[TraceTiming]] | None:
     """Plans refitted to their traces' timing and placed on the file's clock (see the module
-    doc), or None when ``timing`` says not to (``ignore``, or ``auto`` without usable timing on
-    every trace)."""
+    doc), with how each was timed, or None when ``timing`` says not to (``ignore``, or
+    ``auto`` without usable timing on every trace, or a whole capture whose clock no hand can
+    produce). Under ``auto`` a trace whose clock is implausible (:func:`implausible_clock`)
+    keeps its geometric plan; under either, a timed plan that would miss the shape by more
+    than the margins (:data:`SHAPE_MARGIN_MEAN`, :data:`SHAPE_MARGIN_MAX`) is replaced by the
+    geometric plan on the recorded span."""
+    from tagbot.metrics import turning_of
+
     if timing == "ignore":
         return None
     opts = options or TimingOptions()
     timed = [getattr(tr, "t", None) is not None for tr in traces]
     if not all(timed) or (timing == "auto" and not any(usable(tr) for tr in traces)):
         return None
+    turning = [turning_of([np.asarray(tr.xy, dtype=float)]) for tr in traces]
+    if timing == "auto":
+        down = np.concatenate([[0.0], np.cumsum([float(tr.t[-1] - tr.t[0]) for tr in traces])])
+        whole = implausible_clock(sum(p.n_strokes for p in plans), sum(turning), down)
+        if whole:
+            return None
+    verdicts = [
+        implausible_clock(plan.n_strokes, turn, tr.t) if timing == "auto" else ""
+        for plan, turn, tr in zip(plans, turning, traces, strict=True)
+    ]
     candidates = [
-        _match_trace(plan, trace, size, model, opts)
-        for plan, trace in zip(plans, traces, strict=True)
+        None if verdict else _match_trace(plan, trace, size, model, opts)
+        for plan, trace, verdict in zip(plans, traces, verdicts, strict=True)
     ]
     # Strokes in the air where they help most for the strokes they add, within the tag's budget
     # (max_stroke_ratio times the geometric strokes, less what the splits added).
-    chosen = [rest for rest, _, _ in candidates]
+    chosen = [plan if c is None else c[0] for plan, c in zip(plans, candidates, strict=True)]
     budget = math.floor(opts.max_stroke_ratio * sum(p.n_strokes for p in plans))
     budget -= sum(p.n_strokes for p in chosen)
     offers = [(gain / (air.n_strokes - chosen[k].n_strokes), k, air)
-              for k, (_, _, lifted) in enumerate(candidates) if lifted is not None
-              for air, gain in [lifted]]  # fmt: skip
+              for k, c in enumerate(candidates) if c is not None and c[2] is not None
+              for air, gain in [c[2]]]  # fmt: skip
     for _, k, air in sorted(offers, key=lambda offer: -offer[0]):
         extra = air.n_strokes - chosen[k].n_strokes
         if extra <= budget:
             chosen[k], budget = air, budget - extra
-    fitted = [(plan, t0) for plan, (_, t0, _) in zip(chosen, candidates, strict=True)]
-    points = np.concatenate([plan.targets for plan, _ in fitted])
+    points = np.concatenate([plan.targets for plan in chosen])
     tag_size = float(np.hypot(*np.ptp(points, axis=0)))  # what Tag measures its plans' ends by
     out: list[Plan] = []
-    previous_end = -np.inf
-    for plan, t0 in fitted:
-        start = t0 + plan.start
-        if start < previous_end + opts.min_lift:  # a tail outlasting the lift: wait for it
-            start = previous_end + opts.min_lift
-        placed = plan.at(start)
-        out.append(placed)
-        previous_end = placed.end(tag_size)
-    return out
+    timings: list[TraceTiming] = []
+    previous_lift = -np.inf
+    for k, (geometric, trace) in enumerate(zip(plans, traces, strict=True)):
+        t = np.asarray(trace.t, dtype=float)
+        if candidates[k] is None:
+            plan, timing_k = geometric.at(float(t[0])), TraceTiming("geometric", verdicts[k])
+        else:
+            plan, kind, reason = _kept_to_shape(chosen[k], geometric, trace, tag_size)
+            # A matched plan is on the clock of the instant behind the first stamp.
+            base = candidates[k][1] if kind == "matched" else float(t[0])
+            plan = _with_ink(plan.at(base + plan.start), t, tag_size)
+            if kind == "scaled" and implausible_clock(geometric.n_strokes, turning[k], t):
+                plan, kind = geometric.at(float(t[0])), "geometric"  # (under match)
+                reason += "; its recorded span is too short for the geometric plan"
+            timing_k = TraceTiming(kind, reason)
+        touch_down = plan.ink_window(tag_size)[0]
+        if touch_down < previous_lift + opts.min_lift:  # waits for the previous lift-off
+            plan = plan.at(plan.start + previous_lift + opts.min_lift - touch_down)
+        out.append(plan)
+        timings.append(timing_k)
+        previous_lift = plan.ink_window(tag_size)[1]
+    return out, timings
+
+
+def _with_ink(plan: Plan, t: Array, size: float) -> Plan:
+    """``plan`` (on the trace's clock) inking from the first recorded instant ``t[0]`` to the
+    last ``t[-1]``, widened to where the path left to travel (or travelled) is below
+    :data:`INK_TOLERANCE` of ``size``; a plan that already has an ``ink`` window (strokes in the
+    air) keeps it."""
+    if plan.ink is not None:
+        return plan
+    on, off = plan.windows(size, INK_TOLERANCE)
+    start, end = plan.start, plan.end(size)
+    down = min(max(min(float(t[0]), float(on.min())), start), end)
+    up = max(min(max(float(t[-1]), float(off.max())), end), down)
+    if not up > down:
+        return plan
+    return Plan(
+        plan.targets, plan.dt, plan.mu, plan.sigma, plan.phi1, plan.phi2, plan.start,
+        (down - start, up - start),
+    )  # fmt: skip
+
+
+def _drawn_error(plan: Plan, xy: Array, size: float) -> tuple[float, float]:
+    """Mean and max shape error of what ``plan`` inks against the polyline ``xy``, as fractions
+    of ``size`` (as :func:`tagbot.metrics.fit_report` samples a plan: every 5 ms)."""
+    from tagbot.metrics import shape_error
+    from tagbot.model.motion import evaluate_plan
+
+    down, up = plan.ink_window(size)
+    count = max(math.ceil((up - down) / 0.005 - 1e-9), 1)
+    drawn, _ = evaluate_plan(plan, np.minimum(down + np.arange(count + 1) * 0.005, up), size)
+    error = shape_error([xy], [drawn])
+    return error.mean * error.size / size, error.max * error.size / size
+
+
+def _kept_to_shape(
+    timed: Plan, geometric: Plan, trace: Any, size: float
+) -> tuple[Plan, TimingKind, str]:
+    """``timed`` (relative to the trace's first instant) if its ink keeps within the shape
+    margins of ``geometric``'s, else ``geometric`` scaled to the recorded span, and why."""
+    xy = np.asarray(trace.xy, dtype=float)
+    t = np.asarray(trace.t, dtype=float)
+    relative = t - t[0]
+    reference = _drawn_error(geometric, xy, size)
+    limit_mean = reference[0] + SHAPE_MARGIN_MEAN
+    limit_max = max(SHAPE_MARGIN_MAX[0] * reference[1], reference[1] + SHAPE_MARGIN_MAX[1])
+    distinct = int(np.count_nonzero(np.diff(t) > 0)) + 1
+    if distinct >= MIN_SAMPLES:
+        mean, largest = _drawn_error(_with_ink(timed, relative, size), xy, size)
+        if mean <= limit_mean and largest <= limit_max:
+            return timed, "matched", ""
+        reason = (
+            f"the timed fit missed the shape: mean {100 * mean:.2f} %, max {100 * largest:.2f} %"
+            f" of the size, against {100 * reference[0]:.2f} % and {100 * reference[1]:.2f} %"
+            " geometric"
+        )
+    else:
+        reason = f"{distinct} distinct time stamps, too few to fit a speed"
+    return _scaled(geometric, relative, size), "scaled", reason
+
+
+def _scaled(plan: Plan, t: Array, size: float) -> Plan:
+    """``plan`` with its clock scaled uniformly (the shape unchanged) so that its motion, from
+    where it has travelled :data:`INK_TOLERANCE` of ``size`` to where it has that much left,
+    spans the recorded instants ``t`` (unchanged for a span of no time)."""
+    on, off = plan.windows(size, INK_TOLERANCE)
+    begin, finish = float(on.min()), float(off.max())
+    span = float(t[-1] - t[0])
+    if not (span > 0 and finish > begin):
+        return plan.at(float(t[0]) - begin)
+    k = span / (finish - begin)
+    lo, hi = MU_RANGE
+    if not (lo <= float(plan.mu.min()) + math.log(k) and float(plan.mu.max()) + math.log(k) <= hi):
+        return plan.at(float(t[0]) - begin)
+    scaled = Plan(
+        plan.targets, plan.dt * k, plan.mu + math.log(k), plan.sigma, plan.phi1, plan.phi2,
+        plan.start * k,
+    )  # fmt: skip
+    return scaled.at(float(t[0]) - (begin - plan.start) * k)
 
 
 __all__ = [
+    "INK_TOLERANCE",
     "MAX_INTERVAL",
+    "MAX_STROKE_RATE",
+    "MAX_TURN_RATE",
     "MIN_SAMPLES",
     "TIMINGS",
     "Recording",
     "Timing",
     "TimingOptions",
+    "TraceTiming",
+    "implausible_clock",
     "initial_timing",
     "match",
     "match_trace",
