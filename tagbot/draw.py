@@ -126,6 +126,9 @@ class MachineRun:
     until: float | None = None
     """After a stop: the planned time the machine had drawn to (the comparison cuts the plan
     there); None when the job ran to its end."""
+    ramp: float = 0.0
+    """s the machine takes to regain the planned speed after a pause it holds with the pen down
+    (a plotter's feed hold): left out of the velocity comparison after each pause."""
 
 
 class PreparedRun(Protocol):
@@ -263,6 +266,7 @@ def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[s
                     plans=run.plans,
                     pauses=run.pauses,
                     until=run.until,
+                    ramp=run.ramp,
                 )
         except ValueError as e:  # nothing was drawn (a fault before the first pen-down)
             report["comparison_error"] = str(e)

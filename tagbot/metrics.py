@@ -657,13 +657,18 @@ def without_pauses(executed: ArrayLike, pauses: Sequence[tuple[float, float]]) -
 def planned_until(
     planned: Sequence[tuple[ArrayLike, ArrayLike]], plans: Sequence[int], until: float
 ) -> tuple[list[tuple[Array, Array]], list[int]]:
-    """The planned runs cut at planned time ``until`` (runs with fewer than two samples
-    before it left out), and their plans."""
+    """The planned runs cut at planned time ``until`` (a segment it falls in ends there, at the
+    planned position then; runs with fewer than two samples before it left out), and their
+    plans."""
     kept: list[tuple[Array, Array]] = []
     kept_plans: list[int] = []
     for (t, xy), plan in zip(planned, plans, strict=True):
         t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
         inside = t <= until + 1e-9
+        if inside.any() and until < t[-1]:  # the stop inside a planned segment: cut it there
+            cut = np.array([np.interp(until, t, xy[:, i]) for i in (0, 1)])
+            t, xy = np.append(t[inside], until), np.vstack([xy[inside], cut])
+            inside = np.ones(len(t), dtype=bool)
         if inside.sum() >= 2:
             kept.append((t[inside], xy[inside]))
             kept_plans.append(int(plan))

@@ -37,6 +37,7 @@ from tagbot.plotter.stream import (
     GrblStreamer,
     StreamOptions,
     StreamReport,
+    executed_where,
     resume_lines,
     resume_point,
 )
@@ -179,18 +180,20 @@ class PlotterJob:
                 moves=program.line_moves,
                 targets=program.line_xy,
                 control=control,
+                drawing=program.line_run >= 0,
             )
         except DeviceError as e:
             error = e
         except KeyboardInterrupt:
             stream = streamer.last_report if streamer is not None else None
-            error = Interrupted("interrupted", _where(stream, len(lines)))
+            error = Interrupted("interrupted", _where(stream))
         finally:
             link.close()
         stream = streamer.last_report if streamer is not None else None
         executed, runs = _executed(stream, device, program, first)
         planned_runs, plans, runs = _from_line(program, first, runs)
         done = stream.lines_executed if stream is not None else first
+        origin = stream.started if stream is not None else 0.0
         return MachineRun(
             device="grbl",
             motion=program.timeline(TIMELINE_STEP),
@@ -215,7 +218,12 @@ class PlotterJob:
             placement=placement_of(setpoints, program),
             port="simulator" if device is not None else url,
             details=_details(program, profile, stream, device),
+            warnings=list(stream.warnings) if stream is not None else [],
             error=error,
+            pauses=[(a - origin, n) for a, n in stream.pause_spans] if stream is not None else [],
+            stalls=[(a - origin, n) for a, n in stream.stall_spans] if stream is not None else [],
+            until=None if error is None else _drawn_until(program, done, executed),
+            ramp=_ramp(program, profile),
         )
 
 
@@ -242,16 +250,39 @@ def _from_line(
     return kept, kept_plans, runs
 
 
-def _where(stream: StreamReport | None, total: int) -> str:
-    done = stream.lines_executed if stream is not None else 0
-    if done == 0:
+def _where(stream: StreamReport | None) -> str:
+    if stream is None:
         return "before line 1 (nothing of the program was executed)"
-    if done >= total:
-        return "after the last line"
-    return (
-        f"after line {done} (the last line the machine executed; resume with "
-        f"--resume-from {done + 1} --position-known)"
-    )
+    return executed_where(stream, stream.lines_executed - stream.first_line)
+
+
+def _ramp(program: Program, profile: Profile) -> float:
+    """s Grbl takes to stop from, or regain, the fastest drawing speed of ``program`` at the
+    lower axis acceleration: what a feed hold costs the motion around it."""
+    runs = program.line_run >= 0
+    if not runs.any():
+        return 0.0
+    before = np.vstack([program.notes_start[None, :], program.line_xy[:-1]])
+    length = np.hypot(*(program.line_xy - before)[runs].T)
+    span = (program.line_end - program.line_start)[runs]
+    fastest = float(np.max(np.where(span > 0, length / np.where(span > 0, span, 1.0), 0.0)))
+    return fastest / float(min(profile.max_acceleration))
+
+
+def _drawn_until(program: Program, done: int, executed: np.ndarray) -> float:
+    """The planned job time the machine had drawn to when it stopped: inside line ``done``
+    (0-based, the one executing) at the last executed position's place along its move."""
+    if done >= len(program.lines):
+        return program.duration
+    start, end = float(program.line_start[done]), float(program.line_end[done])
+    if not len(executed) or not program.line_moves[done] or end <= start:
+        return start
+    a = program.line_xy[done - 1] if done else program.notes_start
+    b = program.line_xy[done]
+    d = b - a
+    length2 = float(d @ d)
+    along = float((executed[-1, 1:3] - a) @ d / length2) if length2 > 0 else 0.0
+    return start + min(1.0, max(0.0, along)) * (end - start)
 
 
 def _executed(
@@ -329,8 +360,7 @@ def _details(
                 "stream_rate_bytes_per_s": stream.bytes_sent / duration,
                 "baud_limit_bytes_per_s": baud / 10,
                 "status_reports": len(stream.statuses),
-                "pauses": stream.pauses,
-                "paused_s": stream.paused_s,
+                "outside_holds": stream.outside_holds,
             }
         )
     details["starvation_events"] = len(device.starvation) if device is not None else None

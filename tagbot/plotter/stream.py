@@ -86,6 +86,7 @@ __all__ = [
     "GrblStreamer",
     "StreamOptions",
     "StreamReport",
+    "executed_where",
     "line_effects",
     "resume_lines",
     "resume_point",
@@ -172,9 +173,31 @@ class StreamReport:
     """What told which line was executing: ``status Ln``, ``status Bf``, ``status position``."""
     executing: list[int] = field(default_factory=list)
     """Per status report, the program lines after ``first_line`` finished by then."""
-    pauses: int = 0
-    paused_s: float = 0.0
-    """Time spent in feed holds asked for with ``control``, s."""
+    pause_spans: list[tuple[float, float]] = field(default_factory=list)
+    """Feed holds, ``(start, length)`` s on the port's clock: asked for with ``control`` (from
+    the ``!`` to the ``~``), or seen in the status reports without tagbot asking (the machine's
+    own button, another program: from the first ``Hold`` report to the first report after it,
+    so to within one status period)."""
+    stall_spans: list[tuple[float, float]] = field(default_factory=list)
+    """A starved planner, ``(start, length)`` s on the port's clock: status reports saying
+    ``Idle`` with the pen down in the middle of a run (the host did not send the next lines in
+    time), from the first such report to the first report after it (to within one status
+    period)."""
+    outside_holds: int = 0
+    """Feed holds tagbot did not ask for."""
+    warnings: list[str] = field(default_factory=list)
+    """What the report must say though the job went on: outside holds, a starved planner."""
+    stop_requested: float | None = None
+    """When a fault or Ctrl-C started the safe stop, s on the port's clock."""
+
+    @property
+    def pauses(self) -> int:
+        return len(self.pause_spans)
+
+    @property
+    def paused_s(self) -> float:
+        """Time spent in feed holds, s."""
+        return sum(length for _, length in self.pause_spans)
 
     @property
     def duration(self) -> float:
@@ -215,6 +238,13 @@ class GrblStreamer:
         self._control: RunControl | None = None
         self._held = False
         self._held_since = 0.0
+        self._resumed_at = -math.inf
+        self._asked_hold = False
+        self._outside_since: float | None = None
+        self._starved_since: float | None = None
+        self._starved_line = 0
+        self._stopping = False
+        self._drawing: Sequence[bool] = ()
         self.last_report: StreamReport | None = None
         """The report of the latest :meth:`stream` call, also when it raised."""
         self.port.timeout = self.options.read_timeout
@@ -410,6 +440,17 @@ class GrblStreamer:
             self._requests.clear()
         for data in requests:
             self._write(data)
+            if self._report is not None:
+                self._asked(data == bytes([Realtime.FEED_HOLD]), self._report)
+
+    def _asked(self, hold: bool, report: StreamReport) -> None:
+        """Tagbot asked for a feed hold (``hold``) or a resume: its pause spans."""
+        now = self.clock.now()
+        if hold and not self._asked_hold:
+            self._asked_hold, self._held_since = True, now
+        elif not hold and self._asked_hold:
+            self._asked_hold, self._resumed_at = False, now
+            report.pause_spans.append((self._held_since, now - self._held_since))
 
     # -- streaming --------------------------------------------------------------------------
 
@@ -425,6 +466,7 @@ class GrblStreamer:
         moves: Sequence[bool] | None = None,
         targets: Sequence[Sequence[float]] | None = None,
         control: RunControl | None = None,
+        drawing: Sequence[bool] | None = None,
     ) -> StreamReport:
         """Send ``lines[first:]`` (each ending in ``"\\n"``) after ``preamble``; wait until done.
 
@@ -433,9 +475,13 @@ class GrblStreamer:
         with Grbl's parser when not given): they let :class:`ExecutionTracker` know which line
         the machine is executing. ``pen_up`` are the lines :meth:`safe_stop` sends after a fault
         or Ctrl-C. ``progress`` gets ``(lines executed, lines in the program)``. ``control``
-        pauses (feed hold) and resumes. With ``wait_idle`` the call returns once the machine has
-        finished moving. Any fault stops the stream (see the module docstring) and raises, naming
-        the last line the machine executed; the report so far is :attr:`last_report`.
+        pauses (feed hold) and resumes. ``drawing`` says, per line of ``lines``, whether it is a
+        pen-down drawing move (``Program.line_run >= 0``): with it, a machine reported ``Idle``
+        between two drawing lines is a starved planner (:attr:`StreamReport.stall_spans`, a
+        warning); a ``Hold`` tagbot did not ask for is a pause and a warning too. With
+        ``wait_idle`` the call returns once the machine has finished moving. Any fault stops the
+        stream (see the module docstring) and raises, naming the last line the machine executed;
+        the report so far is :attr:`last_report`.
         """
         entries = self._entries(lines, first, preamble, moves, targets)
         for entry in entries:
@@ -452,7 +498,10 @@ class GrblStreamer:
         self.tracker = tracker
         self._progress = progress
         self._control = control
-        self._held = False
+        self._held = self._asked_hold = False
+        self._outside_since = self._starved_since = None
+        self._stopping = False
+        self._drawing = drawing if drawing is not None else ()
         self._stall_after = max(self.options.stall_timeout, 1.5 * _longest_dwell(lines) + 1.0)
         self._report = report
         self.last_report = report
@@ -463,12 +512,13 @@ class GrblStreamer:
                 self._wait_idle(report)
         except KeyboardInterrupt:
             self._stop_after_fault(pen_up, report)
-            report.errors.append(f"interrupted {self._executed_where(report, tracker)}")
+            report.errors.append(f"interrupted {executed_where(report, tracker.program_done)}")
             raise
         except DeviceError as e:
             alarm = isinstance(e, DeviceFault) and "ALARM:" in str(e)
             self._stop_after_fault(pen_up, report, alarm=alarm)
-            fault = type(e)(str(e), self._executed_where(report, tracker))
+            lost = isinstance(e, ConnectionLost)
+            fault = type(e)(str(e), executed_where(report, tracker.program_done, lost=lost))
             report.errors.insert(0, str(fault))
             raise fault from e
         finally:
@@ -520,6 +570,71 @@ class GrblStreamer:
             report.executing.append(tracker.program_done)
         if self._progress is not None and tracker.done != before:
             self._progress(tracker.first + tracker.program_done, tracker.total)
+        if report is not None and not self._stopping:
+            self._note_holes(status, report, tracker)
+
+    def _inside_run(self, queue: list[_Entry], position: int) -> bool:
+        """The next line to send and the one before it are drawing lines of one run."""
+        if not 0 < position < len(queue):
+            return False
+        index, before = queue[position].index, queue[position - 1].index
+        drawing = self._drawing
+        return (
+            index is not None
+            and before is not None
+            and index < len(drawing)
+            and bool(drawing[index])
+            and bool(drawing[before])
+        )
+
+    def _host_stall(self, report: StreamReport, since: float, length: float, line: int) -> None:
+        """The host itself stood still mid-run (descheduled): a stall the status reports cannot
+        show (no ``?`` was sent meanwhile), named as one."""
+        report.stall_spans.append((since, length))
+        report.warnings.append(
+            f"host stall: nothing was sent for {length:.2f} s before line {line + 1}, "
+            f"{since - report.started:.2f} s into the job, while the pen was down (the machine "
+            "starved if its queue held less)"
+        )
+
+    def _note_holes(self, status: Status, report: StreamReport, tracker: ExecutionTracker) -> None:
+        """Feed holds tagbot did not ask for, and a planner starved mid-run, from one report."""
+        now = self.clock.now()
+        line = tracker.first + tracker.program_done  # the line executing, or the next to run
+        # A report sent before our own resume may still say Hold: one poll period's grace.
+        grace = now - self._resumed_at < 1.5 / self.options.poll_rate
+        outside = status.state == State.HOLD and not self._asked_hold and not grace
+        if outside and self._outside_since is None:
+            self._outside_since = now
+            report.outside_holds += 1
+            report.warnings.append(
+                f"feed hold not asked for by tagbot (the machine's button or another program) "
+                f"at line {line + 1}, {now - report.started:.2f} s into the job"
+            )
+        elif not outside and self._outside_since is not None:
+            report.pause_spans.append((self._outside_since, now - self._outside_since))
+            self._outside_since = None
+        # Idle: everything acknowledged has run; starved if the next line is inside a run.
+        drawing = self._drawing
+        following = tracker.first + max(0, tracker.acked - tracker.preamble)
+        starved = (
+            status.state == State.IDLE
+            and not self._asked_hold
+            and 0 < following < len(drawing)
+            and bool(drawing[following])
+            and bool(drawing[following - 1])
+        )
+        if starved and self._starved_since is None:
+            self._starved_since, self._starved_line = now, following
+        elif not starved and self._starved_since is not None:
+            length, stop = now - self._starved_since, self._starved_line
+            report.stall_spans.append((self._starved_since, length))
+            report.warnings.append(
+                f"starved planner: the machine stood with the pen down before line {stop + 1}"
+                f" for about {length:.2f} s, {self._starved_since - report.started:.2f} s into "
+                "the job (the host did not send lines in time)"
+            )
+            self._starved_since = None
 
     def _check_control(self, report: StreamReport) -> None:
         """Feed hold when ``control`` pauses, resume when it resumes."""
@@ -527,15 +642,9 @@ class GrblStreamer:
         if control is None or control.paused == self._held:
             return
         self._held = control.paused
-        now = self.clock.now()
-        if self._held:
-            self._write(bytes([Realtime.FEED_HOLD]))
-            report.pauses += 1
-            self._held_since = now
-        else:
-            self._write(bytes([Realtime.CYCLE_START]))
-            report.paused_s += now - self._held_since
-        self._last_change = now
+        self._write(bytes([Realtime.FEED_HOLD if self._held else Realtime.CYCLE_START]))
+        self._asked(self._held, report)
+        self._last_change = self.clock.now()
 
     def _watchdog(self, status: Status, queued: bool) -> None:
         """A machine that executes nothing while lines wait: a timeout (then the safe stop)."""
@@ -563,7 +672,12 @@ class GrblStreamer:
         self._last_rx = self._last_change = self.clock.now()
         self._last_key: object = None
         tracker = self.tracker
+        looped = self.clock.now()
         while position < len(queue) or in_flight:
+            now = self.clock.now()
+            if now - looped > HOST_GAP and self._inside_run(queue, position):
+                self._host_stall(report, looped, now - looped, queue[position].index)
+            looped = now
             self._send_requests()
             self._check_control(report)
             while position < len(queue):
@@ -621,19 +735,6 @@ class GrblStreamer:
                     f"no answer from the device for {self.options.silence_timeout:g} s"
                 )
 
-    @staticmethod
-    def _executed_where(report: StreamReport, tracker: ExecutionTracker) -> str:
-        """Where the machine stopped, in the program's line numbers, and how to go on."""
-        done = report.first_line + tracker.program_done
-        if done >= report.lines_total:
-            return "after the last line"
-        if done == 0:
-            return "before line 1 (nothing of the program was executed)"
-        return (
-            f"after line {done} (the last line the machine executed; resume with "
-            f"--resume-from {done + 1})"
-        )
-
     def _wait_idle(self, report: StreamReport) -> None:
         """Poll until every queued move has run (state Idle)."""
         poll_period = 1.0 / self.options.poll_rate
@@ -671,6 +772,8 @@ class GrblStreamer:
         self, pen_up: Sequence[str], report: StreamReport, *, alarm: bool = False
     ) -> None:
         self._progress = None  # the caller's callback is not called while stopping
+        self._stopping = True
+        report.stop_requested = self.clock.now()
         try:
             self.safe_stop(pen_up, alarm=alarm)
         except DeviceError as e:  # the first fault is the one to report
@@ -729,6 +832,32 @@ class GrblStreamer:
             self.command(line.strip(), timeout=deadline)
 
 
+def executed_where(report: StreamReport, done: int, *, lost: bool = False) -> str:
+    """Where the machine stopped, in the program's line numbers, and the command to go on.
+
+    ``done``: program lines after ``report.first_line`` the machine finished. With ``lost`` (the
+    port failed: nothing stopped the machine) the last line sent is named too, since the machine
+    may have gone on to it.
+    """
+    done += report.first_line
+    sent = report.first_line + report.lines_sent
+    resume = f"--resume-from {done + 1} --position-known"
+    if lost and sent > done:
+        known = f"line {done}" if done else "no line"
+        return (
+            f"after {known} at least (the last line known executed; lines up to {sent} were "
+            f"sent and the machine may have gone on to line {sent}: check where the pen "
+            f"stands, then resume with {resume}, or from the line after the one it reached)"
+        )
+    if done >= report.lines_total:
+        return "after the last line"
+    if done == 0:
+        return "before line 1 (nothing of the program was executed)"
+    return f"after line {done} (the last line the machine executed; resume with {resume})"
+
+
+HOST_GAP = 0.25
+"""s: the stream loop standing still this long (a descheduled host) mid-run is a host stall."""
 ALARM_DELAY = 0.5
 """s: Grbl 1.1h waits this long after printing ``ALARM:N`` (report_alarm_message)."""
 RESET_ATTEMPTS = 3

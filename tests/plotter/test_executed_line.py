@@ -118,7 +118,7 @@ def test_ctrl_c_names_the_executed_line_and_resuming_redraws_nothing_twice(mask)
     assert executed == truth or (mask == 1 and truth - 1 <= executed <= truth)
     assert report.errors[0] == (
         f"interrupted after line {executed} (the last line the machine executed; resume with "
-        f"--resume-from {executed + 1})"
+        f"--resume-from {executed + 1} --position-known)"
     )
     assert report.lines_acknowledged > executed + 5  # 'ok' had run well ahead
     first_part = device.trace(0.001)
