@@ -2,16 +2,19 @@
 
 ``tagbot gcode``, ``draw``, ``render`` and ``plot`` all accept ``INPUT|PLAN``: the file is read
 once through the bounded input reader, a tagbot plan is recognised by its ``format`` field, and
-anything else is read as traces (GML, #000000book JSON, SVG, points) and fitted.
+anything else is read as traces (GML, #000000book JSON, SVG, points, UNIPEN) and fitted.
 """
 
 from __future__ import annotations
 
 import json
+from typing import TYPE_CHECKING
 
 from tagbot.errors import PlanError
-from tagbot.inputs import Trace
-from tagbot.model.plan import Tag
+
+if TYPE_CHECKING:  # numba and scipy load only once a file is read and found usable
+    from tagbot.inputs import Trace
+    from tagbot.model.plan import Tag
 
 __all__ = ["load_source", "load_tag", "read_source"]
 
@@ -27,20 +30,22 @@ def load_source(path: str, model: str | None = None) -> tuple[Tag, list[Trace] |
 def read_source(data: bytes, name: str, model: str | None = None) -> tuple[Tag, list[Trace] | None]:
     """:func:`load_source` for a file's bytes already read (an upload); ``name`` is used in
     errors."""
-    from tagbot.gesture import fit
     from tagbot.inputs import read_traces_bytes
-    from tagbot.io.planfile import tag_from_dict
 
     try:
         document = json.loads(data.decode("utf-8-sig"))
     except (ValueError, UnicodeDecodeError):
         document = None
     if isinstance(document, dict) and document.get("format") == "tagbot-plan":
+        from tagbot.io.planfile import tag_from_dict
+
         try:
             return tag_from_dict(document), None
         except PlanError as e:
             raise type(e)(f"{name}: {e}") from e
     traces = read_traces_bytes(data, name)
+    from tagbot.gesture import fit  # after reading: a bad file is refused before numba/scipy load
+
     return fit(traces, model=model or "gamma"), traces
 
 

@@ -129,10 +129,10 @@ def _sniff(data: bytes, name: str) -> tuple[str, object]:
         keys = ", ".join(sorted(str(k) for k in obj)[:5]) if isinstance(obj, dict) else ""
         what = f"top-level fields: {keys}" if keys else f"a {type(obj).__name__}"
         raise InputError(f"{name}: JSON, but neither #000000book GML nor points ({what})")
+    if first == "." and looks_like_unipen(text):  # before CSV: ".COORD X Y" names x and y
+        return "unipen", None
     if looks_like_csv(text):
         return "csv", None
-    if first == "." and looks_like_unipen(text):
-        return "unipen", None
     raise InputError(f"{name}: not a GML, SVG, point or UNIPEN file (starts with {preview(data)})")
 
 
