@@ -316,7 +316,9 @@ def test_pty_write_latency():
             port.write(b"?")
             sent = time.monotonic()
             assert port.read_until(b">\r\n").startswith(b"<Idle|")
-            assert 0.2 <= time.monotonic() - sent < 1.5
+            # The latency is a floor at any host speed; a busy host may add any delay on top, so
+            # no upper bound is asserted (one of 1.5 s flaked on a loaded 2-core host).
+            assert time.monotonic() - sent >= 0.2
     finally:
         stop()
     with pytest.raises(ValueError):
