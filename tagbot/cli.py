@@ -2,18 +2,17 @@
 
 :func:`main` runs the click group and turns every expected failure into one line on stderr,
 ``tagbot: error: <message>``, with exit status 2 for bad input or usage, 1 for other tagbot errors
-and 130 when interrupted. Unexpected exceptions propagate: they are bugs.
+and 128 + the signal's number when stopped by one (130 Ctrl-C, 143 SIGTERM, 129 SIGHUP), the
+line naming it. Unexpected exceptions propagate: they are bugs.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 import signal
 import sys
-import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 import click
@@ -30,7 +29,6 @@ __all__ = ["cli", "main"]
 EXIT_OK = 0
 EXIT_ERROR = 1
 EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
 
 PROG = "tagbot"
 
@@ -416,9 +414,12 @@ def draw_command(
     import time
     from pathlib import Path
 
+    from tqdm.contrib.logging import logging_redirect_tqdm
+
     from tagbot.control import RunControl
     from tagbot.draw import draw, prepare
     from tagbot.errors import InputError
+    from tagbot.signals import machine_run
     from tagbot.source import load_source
 
     if resume_from is not None and not position_known:
@@ -457,15 +458,17 @@ def draw_command(
             bar.update(done - bar.n)
 
         try:
-            result = draw(
-                tag,
-                out,
-                prepared=job,
-                progress=progress,
-                control=keys.control,
-                pictures=not no_pictures,
-                recorded=traces,
-            )
+            # The machine's loop stops it safely on a signal; its log lines go above the bar.
+            with machine_run(), logging_redirect_tqdm(tqdm_class=type(bar)):
+                result = draw(
+                    tag,
+                    out,
+                    prepared=job,
+                    progress=progress,
+                    control=keys.control,
+                    pictures=not no_pictures,
+                    recorded=traces,
+                )
         except (TagbotError, KeyboardInterrupt):
             bar.close()
             click.echo(f"run folder (partial): {out}", err=True)
@@ -634,31 +637,19 @@ def _command_path(e: click.UsageError, args: list[str]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``tagbot`` command line with ``argv`` (default: ``sys.argv[1:]``); return the exit
-    status."""
+    status. Ctrl-C, SIGTERM and SIGHUP stop any command within a second (:mod:`tagbot.signals`):
+    a machine is stopped safely and its run folder written, and the last line names the signal.
+    """
+    from tagbot.signals import stop_signals
+
     args = list(sys.argv[1:] if argv is None else argv)
-    with _terminate_as_interrupt():
+    with stop_signals(PROG):
         return _main(args)
 
 
-@contextlib.contextmanager
-def _terminate_as_interrupt() -> Iterator[None]:
-    """SIGTERM (``kill``, ``timeout``, a service manager) stops a command as Ctrl-C does: a
-    machine is stopped safely and its run folder written, instead of the process vanishing."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 def _main(args: list[str]) -> int:
+    from tagbot.signals import exit_status, last_signal, message, signal_of
+
     try:
         rv = cli.main(args=args, prog_name=PROG, standalone_mode=False)
     except click.UsageError as e:
@@ -667,12 +658,13 @@ def _main(args: list[str]) -> int:
     except click.ClickException as e:
         _error(e.format_message())
         return e.exit_code
-    except (_Interrupted, click.Abort, KeyboardInterrupt):
-        _error("interrupted")
-        return EXIT_INTERRUPTED
+    except (_Interrupted, click.Abort, KeyboardInterrupt) as e:
+        signum = signal_of(e.__cause__ if isinstance(e, _Interrupted) else e)
+        _error(message(signum))
+        return exit_status(signum)
     except Interrupted as e:
         _error(str(e))
-        return EXIT_INTERRUPTED
+        return exit_status(last_signal() or signal.SIGINT)
     except TagbotError as e:
         _error(str(e))
         return EXIT_USAGE if isinstance(e, ValueError) else EXIT_ERROR

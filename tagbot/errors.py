@@ -65,5 +65,15 @@ class ConnectionLost(DeviceError, ConnectionError):
 
 
 class Interrupted(DeviceError):
-    """The user stopped a running machine (Ctrl-C); it was stopped safely. ``where`` names the
-    last line or tick the machine executed."""
+    """The user stopped a running machine (Ctrl-C, SIGTERM); it was stopped safely. ``where``
+    names the last line or tick the machine executed."""
+
+
+class SignalInterrupt(KeyboardInterrupt):
+    """A stop signal (Ctrl-C, SIGTERM, SIGHUP) received by the command line
+    (:mod:`tagbot.signals`). A KeyboardInterrupt, not a :class:`TagbotError`: everything that
+    stops a machine safely on Ctrl-C does so on it; ``str()`` names the signal (``SIGTERM``)."""
+
+    def __init__(self, signum: int, name: str) -> None:
+        super().__init__(name)
+        self.signum = signum

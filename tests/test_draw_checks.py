@@ -92,7 +92,7 @@ def test_ctrl_c_names_the_last_executed_line_and_keeps_the_run_folder(tmp_path, 
     assert 0 < done < report["sent"]
     assert last == (
         f"tagbot: error: after line {done} (the last line the machine executed; resume with "
-        f"--resume-from {done + 1} --position-known): interrupted"
+        f"--resume-from {done + 1} --position-known): interrupted (Ctrl-C)"
     )
     assert report["resume_from"] == done + 1 and report["completed"] is False
     for name in ("plan.json", "motion.csv", "program.gcode", "executed.csv"):

@@ -76,6 +76,7 @@ def sim_arm_command(
     from sim.dynamixel import serve_pty
     from tagbot.arm.profile import load_profile
     from tagbot.arm.run import simulated_chain
+    from tagbot.signals import label, signal_of
 
     machine = load_profile(profile, overrides)
     chain = simulated_chain(machine, real_time=True)
@@ -93,10 +94,11 @@ def sim_arm_command(
         f"serving servos {servos} at {machine['bus.baud']} bps on {path}{faults}; Ctrl-C stops",
         err=True,
     )
+    how = ""
     try:
         _wait_for_interrupt()
-    except KeyboardInterrupt:
-        pass
+    except KeyboardInterrupt as e:  # the normal way out
+        how = f" ({label(signal_of(e))})"
     finally:
         stop()
-    click.echo("stopped", err=True)
+    click.echo(f"stopped{how}", err=True)

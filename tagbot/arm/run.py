@@ -43,6 +43,7 @@ from tagbot.errors import DeviceError, InputError, Interrupted, ProfileError
 from tagbot.io.motionfile import MotionTable
 from tagbot.model import Tag
 from tagbot.ports import check_port
+from tagbot.signals import label, signal_of
 
 __all__ = [
     "ArmJob",
@@ -298,7 +299,8 @@ class ArmJob:
         outcome = _stream(program, profile, self.port, progress, control, self.sysfs)
         error = outcome.error
         if isinstance(error, KeyboardInterrupt):
-            error = Interrupted("interrupted (Ctrl-C): the arm stopped, pen up", outcome.where)
+            how = label(signal_of(error))
+            error = Interrupted(f"interrupted ({how}): the arm stopped, pen up", outcome.where)
         elif error is not None and not isinstance(error, DeviceError):
             raise error  # a bug: draw() writes a report saying so
         sp = program.setpoints

@@ -50,14 +50,16 @@ _G0, _G1, _G2, _G3, _G4, _G5 = (
 
 
 def compiled(function: F) -> F:
-    """Compile ``function`` with numba, cached on disk; float errors give inf/nan as in numpy."""
-    return njit(cache=True, error_model="numpy")(function)  # type: ignore[no-any-return]
+    """Compile ``function`` with numba, cached on disk; float errors give inf/nan as in numpy.
+    It runs without the GIL, so the command line's signal watchdog (:mod:`tagbot.signals`) can
+    act while a long loop runs."""
+    return njit(cache=True, error_model="numpy", nogil=True)(function)  # type: ignore[no-any-return]
 
 
 def inlined(function: F) -> F:
     """:func:`compiled`, and inlined into its callers: for small functions that take arrays and
     are called in hot loops, where a call's reference counting would cost more than the work."""
-    return njit(cache=True, error_model="numpy", inline="always")(function)  # type: ignore[no-any-return]
+    return njit(cache=True, error_model="numpy", nogil=True, inline="always")(function)  # type: ignore[no-any-return]
 
 
 # Segment constants, one row per segment.

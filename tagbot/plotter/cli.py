@@ -80,13 +80,18 @@ def sim_grbl_command(profile: str | None, overrides: tuple[str, ...]) -> None:
     from sim.grbl.transport import serve_pty
     from tagbot.plotter.machine import simulated_pen
     from tagbot.plotter.profile import device_settings, load_profile
+    from tagbot.signals import label, signal_of
 
     machine = load_profile(profile, overrides)
     device = SimulatedGrbl(device_settings(machine), clock="real", **simulated_pen(machine))
     path, stop = serve_pty(device)
+    how = ""
     try:
         click.echo(path)
         click.echo("simulated Grbl 1.1h serving; Ctrl-C stops it", err=True)
         threading.Event().wait()
+    except KeyboardInterrupt as e:  # the normal way out
+        how = f" ({label(signal_of(e))})"
     finally:
         stop()
+    click.echo(f"stopped{how}", err=True)

@@ -42,6 +42,7 @@ from tagbot.plotter.stream import (
     resume_point,
 )
 from tagbot.ports import check_port
+from tagbot.signals import label, signal_of
 
 __all__ = ["PlotterJob", "executed_from_statuses", "prepare", "simulated_pen"]
 
@@ -184,9 +185,9 @@ class PlotterJob:
             )
         except DeviceError as e:
             error = e
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as e:
             stream = streamer.last_report if streamer is not None else None
-            error = Interrupted("interrupted", _where(stream))
+            error = Interrupted(f"interrupted ({label(signal_of(e))})", _where(stream))
         finally:
             link.close()
         stream = streamer.last_report if streamer is not None else None

@@ -65,11 +65,11 @@ def studio_command(
     Serves 127.0.0.1 only; the URL printed holds the session's token, which every request needs.
     Without PLAN|INPUT the last design (autosaved) comes back. Ctrl-C stops the studio.
     """
-    import contextlib
     import webbrowser
 
     from tagbot.errors import PortError
     from tagbot.ports import check_port
+    from tagbot.signals import label, signal_of
     from tagbot.source import load_source
     from tagbot.studio.server import Studio, StudioServer, _decimated, default_autosave
 
@@ -98,7 +98,10 @@ def studio_command(
     click.echo("Ctrl-C stops it", err=True)
     if not no_browser:
         webbrowser.open(server.url)
-    # uvicorn shuts down cleanly on Ctrl-C, then passes it on: here, the normal way out.
-    with contextlib.suppress(KeyboardInterrupt):
+    # uvicorn shuts down cleanly on Ctrl-C or SIGTERM, then passes it on: the normal way out.
+    how = ""
+    try:
         server.run()
-    click.echo("studio stopped", err=True)
+    except KeyboardInterrupt as e:
+        how = f" ({label(signal_of(e))})"
+    click.echo(f"studio stopped{how}", err=True)
