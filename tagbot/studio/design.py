@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import base64
 import copy
-import itertools
 import math
 from collections.abc import Mapping
 from typing import Any
@@ -24,9 +23,10 @@ from typing import Any
 import numpy as np
 
 from tagbot.errors import PlanError, TagbotError
+from tagbot.gesture.vary import in_order, lifts
 from tagbot.io.planfile import json_kind
 from tagbot.model.lognormal import lognormal
-from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, MODELS, Plan, Tag, sequence
+from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, MODELS, Plan, Tag
 
 __all__ = [
     "MAX_OPS",
@@ -85,15 +85,14 @@ def empty_design(model: str = "gamma", units: str = "mm") -> Design:
 
 
 def design_from_tag(tag: Tag, base: Design | None = None) -> Design:
-    """A design holding ``tag``'s plans (lifts from their starts); globals from ``base`` or the
-    defaults, widened so that the tag's Δt fit in the range."""
+    """A design holding ``tag``'s plans (each lift from the previous plan's lift-off to its
+    touch-down, :func:`~tagbot.gesture.vary.lifts`); globals from ``base`` or the defaults,
+    widened so that the tag's Δt fit in the range."""
     design = copy.deepcopy(base) if base is not None else empty_design()
     design["model"], design["units"] = tag.model, tag.units
     design["plans"] = []
-    size = tag.size
-    for k, plan in enumerate(tag.plans):
-        lift = 0.0 if k == 0 else float(plan.start - tag.plans[k - 1].end(size))
-        design["plans"].append(_draft_of(plan, lift))
+    for plan, lift in zip(tag.plans, [0.0, *lifts(tag)], strict=True):
+        design["plans"].append(_draft_of(plan, float(lift)))
     design["plans"][0]["start"] = float(tag.plans[0].start)
     inner = [float(v) for p in tag.plans for v in p.dt[1:]]
     if inner:
@@ -126,9 +125,11 @@ def _draft_of(plan: Plan, lift: float) -> dict[str, Any]:
 
 
 def tag_of(design: Design) -> Tag | None:
-    """The design's tag (drafts with fewer than two targets left out), or None if it has none.
-    Raises :class:`StudioError` when the parameters make no valid tag."""
-    plans, lifts = [], []
+    """The design's tag (drafts with fewer than two targets left out), or None if it has none:
+    each plan touches down its draft's ``lift`` after the previous one lifts off
+    (:func:`~tagbot.gesture.vary.in_order`). Raises :class:`StudioError` when the parameters make
+    no valid tag."""
+    plans, gaps = [], []
     try:
         for k, draft in enumerate(design["plans"]):
             if len(draft["targets"]) < 2:
@@ -148,11 +149,11 @@ def tag_of(design: Design) -> Tag | None:
             except PlanError as e:
                 raise StudioError(f"plans[{k}].{e}") from e
             if plans:
-                lifts.append(float(draft["lift"]))
+                gaps.append(float(draft["lift"]))
             plans.append(plan)
         if not plans:
             return None
-        return sequence(plans, lifts or 0.0, design["model"], design["units"])
+        return in_order(plans, gaps, design["model"], design["units"])
     except PlanError as e:
         raise StudioError(str(e)) from e
 
@@ -541,11 +542,10 @@ def motion_view(tag: Tag, arrays: str = "packed") -> dict[str, Any]:
     """The trajectory the page draws: samples ``x, y, speed, pen`` of :meth:`Tag.sample` every
     ``dt`` from ``t0`` (:data:`VIEW_DT` s, finer if a pen lift is short, coarser if the tag is
     long); arrays :func:`pack`-ed, or JSON lists with ``arrays="json"`` (and ``t`` too)."""
-    size = tag.size
-    lifts = [b.start - a.end(size) for a, b in itertools.pairwise(tag.plans)]
+    gaps = lifts(tag)
     dt = max(VIEW_DT, (tag.end - tag.start) / MAX_VIEW_SAMPLES)
-    if lifts:
-        dt = min(dt, max(min(lifts) / 2.5, 1e-4))
+    if gaps:
+        dt = min(dt, max(min(gaps) / 2.5, 1e-4))
     motion = tag.sample(dt)
     columns = {"x": motion.xy[:, 0], "y": motion.xy[:, 1], "speed": motion.speed}
     out: dict[str, Any] = {"dt": dt, "n": len(motion.t), "t0": float(motion.t[0])}
