@@ -45,7 +45,7 @@ __all__ = [
     "write_summary",
 ]
 
-INPUT_SUFFIXES = (".gml", ".xml", ".json", ".js", ".svg", ".csv", ".txt")
+INPUT_SUFFIXES = (".gml", ".xml", ".json", ".js", ".svg", ".csv", ".txt", ".dat")
 """Files taken from a folder given as input (a file named on the command line is read whatever
 its name: formats are told from the content)."""
 
@@ -107,7 +107,7 @@ def output_paths(sources: Sequence[str], folder: str | os.PathLike[str], suffix:
     out = []
     for source in sources:
         stem = Path(source).name
-        for ext in (".json", ".plan", ".gml", ".svg", ".csv", ".txt", ".xml", ".js"):
+        for ext in (".json", ".plan", ".gml", ".svg", ".csv", ".txt", ".xml", ".js", ".dat"):
             stem = stem.removesuffix(ext)
         n = taken.get(stem.lower(), 0) + 1
         taken[stem.lower()] = n

@@ -327,3 +327,16 @@ def test_a_bad_file_is_refused_before_the_numeric_core_loads(
     assert result == {"code": 2, "heavy": []}
     (line,) = proc.stderr.splitlines()
     assert line.startswith(f"tagbot: error: {path}: {message}")
+
+
+def test_folders_in_corpus_mode_include_dat_files(tmp_path) -> None:
+    from tagbot.corpus import expand_inputs, output_paths
+
+    (tmp_path / "w").mkdir()
+    (tmp_path / "w" / "anton01.dat").write_bytes(unp(WORD))
+    (tmp_path / "notes.md").write_text("no")
+    (found,) = expand_inputs([str(tmp_path)])
+    assert found.endswith("anton01.dat") and len(load_traces(found)) == 2
+    assert output_paths([found], tmp_path / "out", ".json") == [
+        str(tmp_path / "out" / "anton01.json")
+    ]
