@@ -22,14 +22,15 @@ negated screen rows so that words read upright.
 and must not decrease through the file. Otherwise ``.POINTS_PER_SECOND`` (the sampling rate)
 gives sample k of the file, pen-up samples included, the time k / rate: a pen lift keeps its
 real duration, in-air samples counting in the clock. ``.DT`` (time elapsed while samples were
-elided, read as milliseconds like T) is added. Times are shifted so the first pen-down point is
-at 0; without T or a rate the traces are untimed.
+elided, read as milliseconds like T; not a component) is added. Times are shifted so the first
+pen-down point is at 0; without T or a rate the traces are untimed.
 
 **Segments.** ``.SEGMENT`` lines (e.g. ``.SEGMENT WORD 0-14 OK "abdomen"``) are listed by
 :func:`parse_unipen` and :meth:`UnipenFile.traces` reads one of them: components are numbered
 from 0 in order (empty ones are not counted; ``.START_SET`` restarts the count) and delineations
 follow the ``[A[:M]]-[B[:N]],[C]`` notation (component A from point M to component B point N,
-then component C). Loading a whole file reads every pen-down component.
+then component C); a selection is refused when several ``.START_SET`` hold components, each
+numbered from 0. Loading a whole file reads every pen-down component.
 
 **Untrusted input.** ``.INCLUDE`` is never followed: a file whose pen data lives in an included
 file is refused, naming it, so that it can be read directly. Files are at most 32 MB with at most
