@@ -917,6 +917,13 @@ def match(
             chosen[k], budget = air, budget - extra
     points = np.concatenate([plan.targets for plan in chosen])
     tag_size = float(np.hypot(*np.ptp(points, axis=0)))  # what Tag measures its plans' ends by
+    # The ink may outlast the recorded span (INK_TOLERANCE) only into the recorded lifts, each
+    # side into its half of what a lift has beyond min_lift: never pushing the next trace.
+    first = np.array([float(tr.t[0]) for tr in traces])
+    last = np.array([float(tr.t[-1]) for tr in traces])
+    spare = np.maximum(first[1:] - last[:-1] - opts.min_lift, 0.0) / 2
+    lows = first - np.r_[np.inf, spare]
+    highs = last + np.r_[spare, np.inf]
     out: list[Plan] = []
     timings: list[TraceTiming] = []
     previous_lift = -np.inf
@@ -925,10 +932,11 @@ def match(
         if candidates[k] is None:
             plan, timing_k = geometric.at(float(t[0])), TraceTiming("geometric", verdicts[k])
         else:
-            plan, kind, reason = _kept_to_shape(chosen[k], geometric, trace, tag_size)
+            limits = (float(lows[k] - t[0]), float(highs[k] - t[0]))
+            plan, kind, reason = _kept_to_shape(chosen[k], geometric, trace, tag_size, limits)
             # A matched plan is on the clock of the instant behind the first stamp.
             base = candidates[k][1] if kind == "matched" else float(t[0])
-            plan = _with_ink(plan.at(base + plan.start), t, tag_size)
+            plan = _with_ink(plan.at(base + plan.start), t, tag_size, (lows[k], highs[k]))
             if kind == "scaled" and implausible_clock(geometric.n_strokes, turning[k], t):
                 plan, kind = geometric.at(float(t[0])), "geometric"  # (under match)
                 reason += "; its recorded span is too short for the geometric plan"
@@ -942,17 +950,23 @@ def match(
     return out, timings
 
 
-def _with_ink(plan: Plan, t: Array, size: float) -> Plan:
+def _with_ink(
+    plan: Plan, t: Array, size: float, limits: tuple[float, float] = (-np.inf, np.inf)
+) -> Plan:
     """``plan`` (on the trace's clock) inking from the first recorded instant ``t[0]`` to the
     last ``t[-1]``, widened to where the path left to travel (or travelled) is below
-    :data:`INK_TOLERANCE` of ``size``; a plan that already has an ``ink`` window (strokes in the
-    air) keeps it."""
-    if plan.ink is not None:
-        return plan
+    :data:`INK_TOLERANCE` of ``size`` but not beyond ``limits``; where the pen touches down
+    or lifts off moving (strokes in the air, :meth:`~tagbot.model.plan.Plan.moving_ends`) the
+    window it has is kept."""
     on, off = plan.windows(size, INK_TOLERANCE)
     start, end = plan.start, plan.end(size)
-    down = min(max(min(float(t[0]), float(on.min())), start), end)
-    up = max(min(max(float(t[-1]), float(off.max())), end), down)
+    moving = plan.moving_ends(size)
+    down = min(max(min(float(t[0]), float(on.min())), limits[0], start), end)
+    up = max(min(max(float(t[-1]), float(off.max())), limits[1], end), down)
+    if any(moving):
+        window = plan.ink_window(size)
+        down = window[0] if moving[0] else min(down, window[1])
+        up = window[1] if moving[1] else max(up, down)
     if not up > down:
         return plan
     return Plan(
@@ -975,10 +989,11 @@ def _drawn_error(plan: Plan, xy: Array, size: float) -> tuple[float, float]:
 
 
 def _kept_to_shape(
-    timed: Plan, geometric: Plan, trace: Any, size: float
+    timed: Plan, geometric: Plan, trace: Any, size: float, limits: tuple[float, float]
 ) -> tuple[Plan, TimingKind, str]:
-    """``timed`` (relative to the trace's first instant) if its ink keeps within the shape
-    margins of ``geometric``'s, else ``geometric`` scaled to the recorded span, and why."""
+    """``timed`` (relative to the trace's first instant) if its ink (within ``limits``, relative
+    too) keeps within the shape margins of ``geometric``'s, else ``geometric`` scaled to the
+    recorded span, and why."""
     xy = np.asarray(trace.xy, dtype=float)
     t = np.asarray(trace.t, dtype=float)
     relative = t - t[0]
@@ -987,7 +1002,7 @@ def _kept_to_shape(
     limit_max = max(SHAPE_MARGIN_MAX[0] * reference[1], reference[1] + SHAPE_MARGIN_MAX[1])
     distinct = int(np.count_nonzero(np.diff(t) > 0)) + 1
     if distinct >= MIN_SAMPLES:
-        mean, largest = _drawn_error(_with_ink(timed, relative, size), xy, size)
+        mean, largest = _drawn_error(_with_ink(timed, relative, size, limits), xy, size)
         if mean <= limit_mean and largest <= limit_max:
             return timed, "matched", ""
         reason = (

@@ -373,11 +373,6 @@ class Tag:
                 f" than {MAX_DURATION:g} s"
             )
         for k in range(1, len(plans)):
-            if plans[k].start < plans[k - 1].start:
-                raise PlanError(
-                    f"plans[{k}].start: {plans[k].start:.6g} s is before plans[{k - 1}] starts"
-                    f" ({plans[k - 1].start:.6g} s); plans are drawn one after another"
-                )
             lift_off = plans[k - 1].ink_window(self.size)[1]
             touch_down = plans[k].ink_window(self.size)[0]
             if touch_down < lift_off:

@@ -325,3 +325,11 @@ def test_plans_overlapping_in_the_air_hand_over_between_lift_off_and_touch_down(
     assert np.all(motion.pen[first.stop : second.start] == 0)
     with pytest.raises(PlanError, match=r"dt: 0\.3 s is too coarse for the 0\.2 s pen lift"):
         tag.sample(0.3)
+    # A plan whose approach in the air starts before the previous plan even starts: its
+    # motion is cut at the handover all the same.
+    delays = b.dt.copy()
+    delays[0] += on + 0.5  # starts at -0.5 s, moves once the first has lifted off
+    early = Plan(b.targets, delays, b.mu, b.sigma, b.phi1, b.phi2, -0.5, (on + 0.5, on + 0.8))
+    motion = Tag((a, early)).sample(0.01)
+    assert [k for k, _ in motion.runs()] == [0, 1]
+    assert motion.t[0] == pytest.approx(0.0) and motion.plan[0] == 0
