@@ -665,7 +665,7 @@ def planned_until(
     for (t, xy), plan in zip(planned, plans, strict=True):
         t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
         inside = t <= until + 1e-9
-        if inside.any() and until < t[-1]:  # the stop inside a planned segment: cut it there
+        if inside.any() and t[inside][-1] + 1e-9 < until < t[-1]:  # inside a segment: cut
             cut = np.array([np.interp(until, t, xy[:, i]) for i in (0, 1)])
             t, xy = np.append(t[inside], until), np.vstack([xy[inside], cut])
             inside = np.ones(len(t), dtype=bool)

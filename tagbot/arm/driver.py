@@ -72,6 +72,7 @@ from __future__ import annotations
 import gc
 import logging
 import math
+import os
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -142,18 +143,26 @@ BUS_MARGIN = 0.0002
 SETTLE = 0.001
 """Seconds a USB adapter with a 1 ms latency timer may hold replies (see :class:`ReadBack`)."""
 
+FIFO_PRIORITY = 10
+"""``SCHED_FIFO`` priority of the tick loop when permitted (1..99): below the kernel's threaded
+interrupt handlers (50), which the serial port itself needs."""
+
 STATUS = 0x55
 """Protocol 2.0 status packet instruction."""
 
 
 class Scheduler:
-    """Absolute deadlines ``t_k = t_0 + k·period`` on a clock; lateness measured at each tick.
+    """Absolute deadlines ``t_k = t_0 + k·period`` on a clock; lateness measured where goals
+    leave the host.
 
-    :meth:`wait` sleeps until tick ``k``'s deadline and returns how late it woke (s). A tick later
-    than ``late_after`` (default a quarter period) counts as late. One later than
-    ``resync_after`` (default one period) moves ``t_0`` on so that it is on time (``resyncs``
-    counts this): the drawing pauses rather than sending the backlog in a burst, which would
-    overspeed the joints. Below that the next ticks catch up on their own deadlines.
+    :meth:`wait` sleeps until tick ``k``'s deadline and returns how late it woke (s). One that
+    wakes later than ``resync_after`` (default one period) moves ``t_0`` on so that it is on
+    time (``resyncs`` counts this): the drawing waits rather than sending the backlog in a
+    burst, which would overspeed the joints. Below that the next ticks catch up on their own
+    deadlines. :meth:`sent` is told when the tick's write returned: its lateness is measured
+    there, against the deadline the tick had before any resync (so a stall anywhere in the loop
+    shows), a tick later than ``late_after`` (default a quarter period) counts as late, and a
+    hole between two sends longer than a period plus ``resync_after`` is a host stall.
     """
 
     def __init__(
@@ -176,9 +185,18 @@ class Scheduler:
         """Seconds the deadlines moved on at resyncs, in all."""
         self.max_lateness = 0.0
         self.lateness: list[float] = []
-        """Per tick, seconds after its deadline that it woke."""
+        """Per tick sent, seconds after its deadline that its write returned."""
         self.woke: list[float] = []
-        """Per tick, the clock time it woke (for period jitter)."""
+        """Per tick, the clock time it woke."""
+        self.sends: list[float] = []
+        """Per tick sent, the clock time its write returned (period jitter, stalls)."""
+        self.stalls: list[tuple[float, float]] = []
+        """Host stalls: ``(clock time the next goals were due, seconds beyond one period)``
+        for each hole between two sends longer than a period plus ``resync_after``."""
+        self._due = 0.0
+        self._last_sent: float | None = None
+        self.floor = -math.inf
+        """No tick is due before this clock time (the end of the last pause)."""
         self.anchors: list[tuple[int, float, float | None]] = []
         """``(k, t0, held)``: from tick ``k`` on, the deadlines were ``t0 + k·period`` (the
         start, then each resync and each resume after a pause); ``held``: the clock time the
@@ -190,11 +208,17 @@ class Scheduler:
         self.anchors = [(0, self.t0, None)]
         return self.t0
 
-    def reanchor(self, k: int, at: float, held: float | None = None) -> None:
+    def reanchor(
+        self, k: int, at: float, held: float | None = None, floor: float = -math.inf
+    ) -> None:
         """Make tick ``k`` due at clock time ``at``, the ticks after it following (after a pause
-        that began at clock time ``held``)."""
+        that began at clock time ``held``); ticks due before ``floor`` (the pause's end) are
+        due then, sent at once without counting late."""
         self.t0 = float(at) - k * self.period
         self.anchors.append((k, self.t0, held))
+        self.floor = float(floor)
+        self._due = max(self.deadline(k), self.floor)
+        self._last_sent = None  # the hole before the next send is the hold, no stall
 
     def program_time(self, clock: NDArray[np.float64], lag: float = 0.0) -> NDArray[np.float64]:
         """The program time (tick ``k`` at ``k·period``) of clock instants whose state the goals
@@ -219,21 +243,34 @@ class Scheduler:
 
     def wait(self, k: int) -> float:
         """Sleep until tick ``k``'s deadline; returns the lateness (s) measured on waking."""
-        deadline = self.deadline(k)
+        deadline = max(self.deadline(k), self.floor)
+        self._due = deadline
         self.clock.sleep_until(deadline)
         woke = self.clock.now()
         late = max(0.0, woke - deadline)
         self.woke.append(woke)
         self.ticks += 1
-        self.lateness.append(late)
-        self.max_lateness = max(self.max_lateness, late)
-        if late > self.late_after:
-            self.late_ticks += 1
         if late > self.resync_after:
             self.t0 += late
             self.resyncs += 1
             self.resync_delay += late
             self.anchors.append((k, self.t0, None))
+        return late
+
+    def sent(self, t: float) -> float:
+        """The tick last waited for left the host at clock time ``t`` (its write returned);
+        returns its lateness (s)."""
+        late = max(0.0, t - self._due)
+        self.sends.append(t)
+        self.lateness.append(late)
+        self.max_lateness = max(self.max_lateness, late)
+        if late > self.late_after:
+            self.late_ticks += 1
+        if self._last_sent is not None:
+            hole = t - self._last_sent - self.period
+            if hole > self.resync_after:
+                self.stalls.append((self._last_sent + self.period, hole))
+        self._last_sent = t
         return late
 
 
@@ -262,6 +299,14 @@ class StreamResult:
     paused: float = 0.0
     """Seconds spent paused (pen up, pose held), in all."""
     pauses: int = 0
+    pause_spans: list[tuple[float, float]] = field(default_factory=list)
+    """``(start, length)`` of each pause in clock time: from when the arm stood at the last
+    goal before it, as long as the next tick was put off (its lift and drop of the pen
+    included)."""
+    first: int = 0
+    """Index of the program's row sent first (0, or where a resumed job started)."""
+    realtime: bool = False
+    """Whether the loop ran with real-time scheduling (SCHED_FIFO)."""
 
     def program_time(self, clock: NDArray[np.float64]) -> NDArray[np.float64]:
         """Program time of clock instants (NaN inside pauses and resync gaps)."""
@@ -335,6 +380,15 @@ class ReadBack:
         self.buffer = bytearray()
         self.heard = dict.fromkeys(self.ids, started)
         """Clock time of each servo's last reply (the stream's start before the first)."""
+        self.asked: dict[int, float | None] = dict.fromkeys(self.ids)
+        """Per servo, when the first request it has not answered yet was sent (None: none)."""
+        self.looked = started
+        """Clock time of the last :meth:`poll`."""
+        self.gap = 2.0 * p.period + 0.005
+        """A hole between two polls longer than this is a host stall (:attr:`host_stalls`)."""
+        self.host_stalls: list[tuple[float, float]] = []
+        """``(from, to)`` clock times the host did not look at the bus (a stall): no servo's
+        silence is counted there, the replies waiting in the port's buffer."""
         self.in_a_row = dict.fromkeys(self.ids, 0)
         self.samples: list[tuple[float, int, int, int]] = []
         self.requests = 0
@@ -358,15 +412,25 @@ class ReadBack:
         result = d._guard(self.group.txPacket, "read-back", where)
         self.port.is_using = False  # the SDK keeps it for a reply it is not going to wait for
         d._check(result, 0, None, "SYNC_READ of present positions", where)
+        for id in self.ids:
+            if self.asked[id] is None:
+                self.asked[id] = now
         self.open.append(_Request(tick, now, now + self.request_time))
         self.bus_free = now + self.busy + BUS_MARGIN
         self.requests += 1
 
     def poll(self, where: str) -> None:
-        """Take what has arrived, match it, and raise the faults (see the class docstring)."""
+        """Take what has arrived, match it, and raise the faults (see the class docstring).
+
+        Silence is counted only while requests were flowing: from a servo's first unanswered
+        request, less the host's own stalls in that time (the replies wait in the port's
+        buffer); a host stall is the host's, named in the run's report, never a servo's."""
+        d = self.driver
+        looked, self.looked = self.looked, d.clock.now()
+        if self.looked - looked > self.gap:
+            self.host_stalls.append((looked, self.looked))
         if not self.open:
             return  # nothing awaited: stale bytes, if any, wait for the next look
-        d = self.driver
         ser = self.port.ser
         waiting = d._guard(lambda: ser.in_waiting, "read-back", where)
         if waiting:
@@ -374,16 +438,26 @@ class ReadBack:
         now = d.clock.now()
         if self.buffer:
             self._parse(now, where)
-        silent = [id for id in self.ids if now - self.heard[id] > self.silence]
+        quiet = {
+            id: now - since - self.host_stalled(since, now)
+            for id, since in self.asked.items()
+            if since is not None
+        }
+        silent = [id for id, q in quiet.items() if q > self.silence]
         if silent:
             names = _and([d.who(id) for id in silent])
+            first = min(self.asked[id] or now for id in silent)
+            stalled = self.host_stalled(first, now)
+            host = f"; the host stalled {stalled:.2f} s meanwhile, not counted" if stalled else ""
             raise DeviceTimeout(
                 f"{names} did not answer SYNC_READ of present positions for"
-                f" {now - max(self.heard[id] for id in silent):.2f} s (bus.silence_timeout:"
-                f" {self.silence:g} s)",
+                f" {max(quiet[id] for id in silent):.2f} s while requests were flowing"
+                f" (bus.silence_timeout: {self.silence:g} s{host})",
                 where,
             )
-        while self.open and now - self.open[0].sent > self.silence:
+        while self.open and now - self.open[0].sent - self.host_stalled(self.open[0].sent, now) > (
+            self.silence
+        ):
             self._close(self.open.popleft(), where)  # given up: what it lacks counts as lost
 
     def _parse(self, now: float, where: str) -> None:
@@ -422,10 +496,15 @@ class ReadBack:
             value = int.from_bytes(bytes(packet[9:13]), "little", signed=True) if length == 8 else 0
             self._answer(id, value, error, now, where)
 
+    def host_stalled(self, start: float, end: float) -> float:
+        """Seconds of host stalls between clock times ``start`` and ``end``."""
+        return sum(max(0.0, min(b, end) - max(a, start)) for a, b in self.host_stalls)
+
     def _answer(self, id: int, value: int | None, error: int, now: float, where: str) -> None:
         """A reply from ``id`` (``value`` None: corrupt) seen at ``now``."""
         d = self.driver
         i = self.index[id]
+        self.asked[id] = None
         while self.open:
             r = self.open[0]
             if i > r.last:
@@ -507,17 +586,38 @@ class ReadBack:
 
 
 class _RealTime:
-    """What the tick loop changes in the interpreter while it runs, and puts back (:meth:`end`):
-    ``gc.freeze()``, so that everything allocated before the stream (the program's rows, the
-    profile, the caller's objects) leaves the collector's view and a full collection during the
-    stream looks at the stream's few new objects only, not for milliseconds at the whole heap.
+    """What the tick loop changes while it runs, and puts back (:meth:`end`):
+
+    - ``gc.freeze()``, so that everything allocated before the stream (the program's rows, the
+      profile, the caller's objects) leaves the collector's view and a full collection during
+      the stream looks at the stream's few new objects only, not for milliseconds at the whole
+      heap;
+    - on the wall clock, real-time scheduling for the loop's thread (``SCHED_FIFO``, priority
+      :data:`FIFO_PRIORITY`) where the system permits it (root or ``CAP_SYS_NICE``, an
+      ``rtprio`` limit), so that other programs on a busy host cannot hold it off the CPU;
+      quietly not where it does not (:attr:`fifo` says which).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Clock) -> None:
         gc.freeze()
+        self.fifo = False
+        self._before: tuple[int, os.sched_param] | None = None
+        if isinstance(clock, MonotonicClock) and hasattr(os, "sched_setscheduler"):
+            try:
+                before = (os.sched_getscheduler(0), os.sched_getparam(0))
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(FIFO_PRIORITY))
+            except OSError:  # not permitted: the ordinary scheduler
+                log.debug("real-time scheduling not permitted: running without it")
+            else:
+                self._before, self.fifo = before, True
 
     def end(self) -> None:
         gc.unfreeze()
+        if self._before is not None:
+            try:
+                os.sched_setscheduler(0, *self._before)
+            except OSError as e:  # pragma: no cover - lowering is always permitted
+                log.debug("restoring the scheduler: %s", e)
 
 
 def _and(names: list[str]) -> str:
@@ -895,12 +995,13 @@ class ArmDriver:
         goals: NDArray[np.int64],
         progress: Callable[[int, int], None] | None = None,
         control: RunControl | None = None,
+        first: int = 0,
     ) -> StreamResult:
         """Send ``goals`` ``(N, 3)`` (shoulder, elbow, pen ticks), one row per tick, reading
         present positions back on the side; obey ``control`` (pause: pen up, pose held). Stops
         safely on any error or KeyboardInterrupt and re-raises it, ``where`` naming the last tick
-        sent (from 1); :attr:`result` holds what was measured up to then. See the module
-        docstring."""
+        sent (from 1, counting ``first`` rows of the program before ``goals``); :attr:`result`
+        holds what was measured up to then. See the module docstring."""
         goals = np.asarray(goals, dtype=np.int64)
         if goals.ndim != 2 or goals.shape[1] != 3 or not len(goals):
             raise ValueError(f"goals: must be a non-empty (N, 3) array, got shape {goals.shape}")
@@ -910,13 +1011,14 @@ class ArmDriver:
         # Late by up to a quarter of the profile time, the servos are still on their way to the
         # last goal and catching up costs at most 25 % of speed for a moment; later, re-anchor.
         scheduler = Scheduler(self.clock, period, resync_after=max(period, lead / 4))
-        out = StreamResult(scheduler=scheduler, lead=lead)
+        out = StreamResult(scheduler=scheduler, lead=lead, first=first)
         self.result = out
         writer = sdk.GroupSyncWrite(self.port, self.ph, GOAL_POSITION, 4)
         for id, goal in zip(self.ids, goals[0], strict=True):
             writer.addParam(id, _u32(int(goal)))
         total = len(goals)
         notify = max(1, round(p["motion.rate"] / 10))
+        ticks = first + total
         dropped = self.drain()  # late replies from the setup
         if dropped:
             log.debug("dropped %d stale bytes before streaming", dropped)
@@ -927,19 +1029,21 @@ class ArmDriver:
         log.info("streaming %d ticks at %g Hz, read-back every %d", total, p["motion.rate"], every)
         rows = goals.tolist()
         k = 0
-        realtime = _RealTime()  # after the rows: frozen, out of the collector's way
+        realtime = _RealTime(self.clock)  # after the rows: frozen, out of the collector's way
+        out.realtime = realtime.fifo
         try:
             while k < total:
                 scheduler.wait(k)
                 if control is not None and control.paused:
                     self._pause(k, goals, readback, control, out)  # then tick k is due
-                where = f"tick {k + 1}"
+                where = f"tick {first + k + 1}"
                 if readback.bus_free > self.clock.now():  # slow bus: replies still on the line
                     self.clock.sleep_until(readback.bus_free)
                 for id, goal in zip(ids, rows[k], strict=True):
                     writer.changeParam(id, _u32(goal))
                 result = self._guard(writer.txPacket, "goal positions", where)
                 self._check(result, 0, None, "SYNC_WRITE of goal positions", where)
+                scheduler.sent(self.clock.now())
                 out.ticks_sent = k + 1
                 readback.poll(where)
                 if k % every == 0:
@@ -951,11 +1055,11 @@ class ArmDriver:
                         self.clock.sleep_until(settle)
                         readback.poll(where)
                 if progress is not None and (k % notify == 0 or k == total - 1):
-                    progress(k + 1, total)
+                    progress(first + k + 1, ticks)
                 k += 1
             # Let the last move finish before anything else (torque off, the recorder's end),
             # still watching the replies.
-            where = f"tick {total}"
+            where = f"tick {ticks}"
             last = scheduler.deadline(total - 1) + lead
             while self.clock.now() < last:
                 self.clock.sleep_until(min(last, self.clock.now() + period))
@@ -1006,7 +1110,7 @@ class ArmDriver:
         due now."""
         p, clock, scheduler = self.profile, self.clock, out.scheduler
         assert scheduler is not None
-        where = f"tick {k}"
+        where = f"tick {out.first + k}"
         began = clock.now()
         out.pauses += 1
         held = goals[k - 1] if k else None
@@ -1032,20 +1136,40 @@ class ArmDriver:
                 readback.poll(where)
                 clock.sleep_until(min(settled, clock.now() + p.period))
         resumed = clock.now()
-        scheduler.reanchor(k, resumed, began)
+        due = scheduler.deadline(k)  # before the pause
+        # The arm goes on as if it had never stopped: tick k - 1's pose, where it stands, is due
+        # now, so the goals after it go out at once up to the one due now, which the servos
+        # reach a profile time later, as in the steady stream (the first move from rest, then
+        # on time). In the executed timeline the pause is as long as the ticks were put off,
+        # from the arm's arrival at tick k - 1.
+        shift = resumed - p.lead - (due - p.period)
+        scheduler.reanchor(k, due + shift, began, floor=resumed)
+        out.pause_spans.append((due - p.period + p.lead, shift))
         out.paused += resumed - began
         log.info("resumed at %s after %.1f s", where, resumed - began)
 
-    def _pen_ramp(self, start: int, end: int, readback: ReadBack, where: str) -> None:
+    def _pen_ramp(
+        self, start: int, end: int, readback: ReadBack | None, where: str, *, settle: bool = False
+    ) -> None:
         """Move the pen alone from ``start`` to ``end`` ticks in ``pen.move_time``, one goal a
-        tick (as the program's pen moves), the read-back still watching."""
+        tick (as the program's pen moves), the read-back (if any) still watching; with
+        ``settle``, until the last goal's own move is over."""
         p, clock = self.profile, self.clock
         steps = max(1, math.ceil(p["pen.move_time"] / p.period - 1e-9))
         t0 = clock.now()
         for i in range(1, steps + 1):
-            clock.sleep_until(max(t0 + (i - 1) * p.period, readback.bus_free))
+            free = readback.bus_free if readback is not None else -math.inf
+            clock.sleep_until(max(t0 + (i - 1) * p.period, free))
             self._goals({p["pen.id"]: round(start + (end - start) * i / steps)}, where)
-            readback.poll(where)
+            if readback is not None:
+                readback.poll(where)
+        if settle:
+            clock.sleep_until(clock.now() + p.lead)
+
+    def lower_pen(self, pen: int, where: str = "resume") -> None:
+        """From up, put the pen to ``pen`` ticks as a pause's resume does (before streaming)."""
+        if pen != self.profile["pen.up"]:
+            self._pen_ramp(self.profile["pen.up"], pen, None, where, settle=True)
 
     def finish(self) -> None:
         """After a successful stream: torque off if ``servo.torque_off_at_end``."""

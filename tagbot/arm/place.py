@@ -812,14 +812,20 @@ def check_program(program: ArmProgram, profile: ArmProfile) -> None:
 # -- the move to the first pose, from wherever the arm is --------------------------------------
 
 
-def approach(present: NDArray[np.int64], profile: ArmProfile) -> tuple[NDArray[np.int64], float]:
-    """The park goals (shoulder, elbow, pen ticks) and how long the arm may take to get there from
-    ``present`` (ticks), seconds: the servos' own time-based move (ramps a quarter of the time
-    each way, peak rate 4/3 of the mean) within every joint's speed and acceleration limits,
-    at least 0.2 s. The pen is lifted first, in ``pen.move_time``.
+def approach(
+    present: NDArray[np.int64], profile: ArmProfile, to: NDArray[np.int64] | None = None
+) -> tuple[NDArray[np.int64], float]:
+    """The park goals (shoulder, elbow, pen ticks), or ``to`` (shoulder, elbow ticks) with the
+    pen up, and how long the arm may take to get there from ``present`` (ticks), seconds: the
+    servos' own time-based move (ramps a quarter of the time each way, peak rate 4/3 of the
+    mean) within every joint's speed and acceleration limits, at least 0.2 s. The pen is
+    lifted first, in ``pen.move_time``.
     """
     joints = profile.joints
-    park = np.array(profile.park)
+    if to is None:
+        park = np.array(profile.park)
+    else:
+        park = np.array([float(ticks_to_angles(to[i], joints[i])) for i in range(2)])
     duration = 0.2
     for i, joint in enumerate(joints):
         d = abs(float(park[i] - ticks_to_angles(present[i], joint)))
@@ -828,11 +834,8 @@ def approach(present: NDArray[np.int64], profile: ArmProfile) -> tuple[NDArray[n
             4.0 * d / (3.0 * joint.max_speed),
             math.sqrt(16.0 * d / (3.0 * joint.max_acceleration)),
         )
-    goals = np.array(
-        [*(int(angles_to_ticks(park[i], joints[i])) for i in range(2)), profile["pen.up"]],
-        dtype=np.int64,
-    )
-    return goals, duration
+    arm = [int(angles_to_ticks(park[i], joints[i])) for i in range(2)] if to is None else to[:2]
+    return np.array([*arm, profile["pen.up"]], dtype=np.int64), duration
 
 
 # -- what the program spends near the ends of its runs -----------------------------------------

@@ -16,7 +16,11 @@ the port is a USB serial adapter whose latency timer is above 1 ms
 
 The executed trace is the simulator's 1 ms pen-tip recorder when the port is an in-process
 simulator, else the read-back present positions through forward kinematics; either way on the
-program's clock (0 = the pen at the first setpoint), with pauses and resync gaps taken out.
+executed clock: the job's (0 = the pen due at the first setpoint) as it ran, pauses and host
+stalls in (the report names both; its comparison leaves pauses out and keeps stalls, see
+:func:`tagbot.metrics.compare_execution`). After a stop, the plan is compared up to where the
+pen had drawn to; a resumed job (``resume_from``) travels pen up to where the stop left it,
+puts the pen as it was and sends the rest.
 """
 
 from __future__ import annotations
@@ -74,8 +78,9 @@ class ArmRun:
       ``pen``; with ``mm_per_unit`` and ``time_scale`` of the placement);
     - ``joints``: ``(N, 4)`` planned goals per tick: ``t`` (s), shoulder, elbow, pen (ticks);
     - ``executed``: ``(M, 4)`` ``t, x, y, pen``: the simulator's pen-tip recorder (1 ms) when
-      simulated, else the read-back present positions through FK; ``t`` is on the setpoints'
-      clock (0 = when the pen should be at the first setpoint), pauses and resync gaps left out;
+      simulated, else the read-back present positions through FK; ``t`` is on the executed
+      clock (0 = when the pen should be at the first setpoint), pauses and host stalls in, as
+      they happened;
     - ``stats``: the arm's own figures (see :func:`arm_figures`): ``ticks_sent``,
       ``late_ticks``, ``max_lateness_ms``, ``lateness_p50_ms``, ``lateness_p99_ms``,
       ``loop_rate_hz``, ``resyncs``, ``readbacks``, the read-back's misses, late and corrupt
@@ -189,6 +194,8 @@ class _Outcome:
     error: BaseException | None = None
     warnings: list[str] = field(default_factory=list)
     where: str = "connect"
+    until: float | None = None
+    """After a stop: the program time the pen had drawn to (see :func:`_drawn_to`)."""
 
 
 def _stream(
@@ -198,9 +205,11 @@ def _stream(
     progress: Callable[[int, int], None] | None,
     control: RunControl | None,
     sysfs: str | os.PathLike[str] = "/sys",
+    first: int = 0,
 ) -> _Outcome:
-    """Connect, approach, stream: the executed trace and figures, and the error if one stopped it
-    (the arm already stopped safely)."""
+    """Connect, approach, stream (from row ``first`` of the program: a resumed job travels pen
+    up to the pose of the row before it and puts the pen as it was there): the executed trace
+    and figures, and the error if one stopped it (the arm already stopped safely)."""
     outcome = _Outcome(program)
     name = None
     if port is None:
@@ -220,23 +229,31 @@ def _stream(
                 driver.connect()
                 outcome.where = "approach"
                 present = driver.read_present()
-                goals, outcome.approach_s = approach(present, profile)
+                at = program.goals[first - 1] if first else None
+                to = None if at is None else at[:2]
+                goals, outcome.approach_s = approach(present, profile, to)
                 outcome.warnings += _outside_limits(present, profile)
                 driver.move_to(goals, outcome.approach_s)
-                outcome.where = "tick 0"
-                driver.stream(program.goals, progress, control)
+                if at is not None:
+                    driver.lower_pen(int(at[2]))
+                outcome.where = f"tick {first}"
+                driver.stream(program.goals[first:], progress, control, first)
             except BaseException as e:
                 driver.safe_stop(error=True)
                 outcome.error = e
             outcome.result = getattr(driver, "result", None)
             chain = _recorder(driver, profile)
             outcome.recorder = chain is not None
-            if outcome.result is not None:
-                outcome.where = f"tick {outcome.result.ticks_sent}"
+            result = outcome.result
+            if result is not None:
+                outcome.where = f"tick {result.first + result.ticks_sent}"
                 if chain is not None:
-                    outcome.executed = _recorded(chain, outcome.result, program)
+                    trace = np.asarray(chain.pen_trace(RECORDER_DT), dtype=float).reshape(-1, 4)
                 else:
-                    outcome.executed = executed_from_reads(outcome.result.reads, profile)
+                    trace = executed_from_reads(result.read_clock, profile)
+                outcome.executed = _executed(trace, result, program)
+                if outcome.error is not None:
+                    outcome.until = _drawn_to(trace, result, program)
     except (DeviceError, KeyboardInterrupt) as e:  # opening or closing the port
         outcome.error = outcome.error or e
     finally:
@@ -269,6 +286,8 @@ def draw_arm(
     if outcome.error is not None:
         raise outcome.error
     stats = arm_figures(outcome, profile, port)
+    if outcome.result is not None:
+        stats["paused_s"], stats["pauses"] = outcome.result.paused, outcome.result.pauses
     return ArmRun(program.setpoints, program.joints, outcome.executed, stats, program)
 
 
@@ -283,6 +302,8 @@ class ArmJob:
     planned: MotionTable
     sysfs: str | os.PathLike[str] = "/sys"
     device: str = "dynamixel"
+    resume_from: int | None = None
+    """The tick (row of ``joints.csv``, from 1) a resumed job starts with, or None."""
 
     def run(
         self,
@@ -296,7 +317,8 @@ class ArmJob:
         executed)."""
         program, profile = self.program, self.profile
         _write_joints(program.joints, Path(out) / "joints.csv")
-        outcome = _stream(program, profile, self.port, progress, control, self.sysfs)
+        first = 0 if self.resume_from is None else self.resume_from - 1
+        outcome = _stream(program, profile, self.port, progress, control, self.sysfs, first)
         error = outcome.error
         if isinstance(error, KeyboardInterrupt):
             how = label(signal_of(error))
@@ -304,22 +326,36 @@ class ArmJob:
         elif error is not None and not isinstance(error, DeviceError):
             raise error  # a bug: draw() writes a report saying so
         sp = program.setpoints
-        down = [k for k in range(len(self.tag.plans)) if np.any(sp.plan == k)]
         result = outcome.result
-        sent = result.ticks_sent if result is not None else 0
+        sent = first + (result.ticks_sent if result is not None else 0)
+        if error is not None and first < sent < len(program):
+            error = _with_resume(error, sent)
         figures = arm_figures(outcome, profile, self.port)
         executed_duration = 0.0
+        pauses: list[tuple[float, float]] = []
+        stalls: list[tuple[float, float]] = []
         if result is not None and result.scheduler is not None:
-            executed_duration = max(0.0, result.end - result.start - result.lead - result.paused)
+            zero = origin(result, program)
+            executed_duration = max(0.0, result.end - result.start - result.lead)
+            pauses = [(a - zero, length) for a, length in result.pause_spans]
+            stalls = [(a - zero, hole) for a, hole in result.scheduler.stalls]
+            outcome.warnings += _stall_warnings(stalls, outcome.executed, program)
         if outcome.recorder:
             source = f"simulator recorder, {RECORDER_DT * 1e3:g} ms"
         else:
             source = f"read-back, {profile['motion.rate'] / profile.readback_every:g} Hz"
+        begin = float(program.joints[first - 1, 0]) if first else -math.inf
+        planned_runs, plans = [], []
+        for k in range(len(self.tag.plans)):
+            rest = (sp.plan == k) & (sp.t >= begin - 1e-9)
+            if rest.sum() >= 2:  # what is left of it to draw
+                planned_runs.append((sp.t[rest], sp.xy[rest]))
+                plans.append(k)
         return MachineRun(
             device=self.device,
             motion=self.planned,
-            planned_runs=[(sp.t[sp.plan == k], sp.xy[sp.plan == k]) for k in down],
-            plans=down,
+            planned_runs=planned_runs,
+            plans=plans,
             executed=outcome.executed,
             executed_source=source,
             sparse=False,
@@ -328,7 +364,7 @@ class ArmJob:
             total=len(program),
             sent=sent,
             executed_steps=sent,
-            resume_from=None,
+            resume_from=sent + 1 if error is not None and first < sent < len(program) else None,
             planned_duration=sp.duration,
             executed_duration=executed_duration,
             placement=placement_of(sp),
@@ -336,7 +372,40 @@ class ArmJob:
             details=figures,
             warnings=list(outcome.warnings),
             error=error,
+            pauses=pauses,
+            stalls=stalls,
+            until=outcome.until,
         )
+
+
+def _with_resume(error: BaseException, sent: int) -> BaseException:
+    """``error`` (a DeviceError naming ``tick N``) naming also the command that resumes it."""
+    if not isinstance(error, DeviceError):
+        return error
+    where = error.where or ""
+    message = str(error)[len(where) + 2 :] if where and str(error).startswith(where) else str(error)
+    return type(error)(
+        message,
+        f"tick {sent} (the last tick executed; resume with --resume-from {sent + 1})",
+    )
+
+
+def _stall_warnings(
+    stalls: list[tuple[float, float]], executed: Array, program: ArmProgram
+) -> list[str]:
+    """One warning per host stall that left the pen standing on the paper."""
+    out = []
+    t, pen = executed[:, 0], executed[:, 3] > 0.5
+    for start, hole in stalls:
+        inside = (t >= start) & (t <= start + hole)
+        if inside.any() and pen[inside].any():
+            out.append(
+                f"the host stalled {1e3 * hole:.0f} ms at {start:.3f} s (executed clock) with"
+                " the pen down: no goal left for that long and the pen stood on the paper; a busy"
+                " host (see details.realtime)"
+            )
+            log.warning("%s", out[-1])
+    return out
 
 
 def placement_of(sp: Setpoints) -> dict[str, Any]:
@@ -391,14 +460,21 @@ def prepare(
     """The ``dynamixel`` back end of :func:`tagbot.draw.prepare`: load the profile, place,
     retime and check the program (PlacementError), check the port's name (PortError), all before
     anything is written or sent. ``sysfs`` is where to look for USB adapters' latency timers."""
+    resume_from = options.pop("resume_from", None)
     if options:
         raise InputError(f"{', '.join(sorted(options))}: not an option of the arm")
     arm = load_profile(profile, overrides)
     check_bus(arm)
     program = build_program(tag, arm)
+    if resume_from is not None and not 2 <= resume_from <= len(program):
+        raise InputError(
+            f"--resume-from: tick {resume_from} is not in the program (ticks 2 to {len(program)})"
+        )
     if port is not None:
         check_port(port)
-    return ArmJob(tag, arm, program, port, planned_motion(program), sysfs)
+    job = ArmJob(tag, arm, program, port, planned_motion(program), sysfs)
+    job.resume_from = resume_from
+    return job
 
 
 def arm_figures(outcome: _Outcome, profile: ArmProfile, port: str | None) -> dict[str, Any]:
@@ -418,15 +494,16 @@ def arm_figures(outcome: _Outcome, profile: ArmProfile, port: str | None) -> dic
         return figures
     s = result.scheduler
     lateness = np.array(s.lateness) * 1e3 if s.lateness else np.zeros(1)
-    woke = np.array(s.woke)
+    sends = np.array(s.sends)
     loop_rate = math.nan
     jitter99 = math.nan
-    if len(woke) > 1:
-        span = woke[-1] - woke[0] - result.paused
-        loop_rate = (len(woke) - 1) / span if span > 0 else math.nan
-        gaps = np.diff(woke)
-        if result.pauses:  # a pause is no jitter: leave out the longest gaps, one per pause
-            gaps = np.sort(gaps)[: -result.pauses] if len(gaps) > result.pauses else gaps[:0]
+    if len(sends) > 1:
+        span = sends[-1] - sends[0] - result.paused
+        loop_rate = (len(sends) - 1) / span if span > 0 else math.nan
+        across = np.zeros(len(sends) - 1, dtype=bool)
+        for began, _ in result.pause_spans:  # a pause is no jitter (a stall is)
+            across |= (sends[:-1] < began) & (sends[1:] > began)
+        gaps = np.diff(sends)[~across]
         if len(gaps):
             jitter99 = float(np.percentile(np.abs(gaps - s.period), 99) * 1e3)
     reads = np.array(result.reads, dtype=float).reshape(-1, 4)
@@ -441,8 +518,7 @@ def arm_figures(outcome: _Outcome, profile: ArmProfile, port: str | None) -> dic
             "late_ticks": s.late_ticks,
             "resyncs": s.resyncs,
             "resync_delay_s": s.resync_delay,
-            "paused_s": result.paused,
-            "pauses": result.pauses,
+            "realtime": result.realtime,
             "wall_duration_s": result.end - result.start,
             "readbacks": len(result.read_clock),
             "corrupt_replies": result.corrupt_replies,
@@ -468,14 +544,37 @@ def _recorder(driver: ArmDriver, profile: ArmProfile) -> Any:
     return chain
 
 
-def _recorded(chain: Any, result: StreamResult, program: ArmProgram) -> Array:
-    """The simulator's pen-tip trace on the program's clock (pauses and resync gaps left out),
-    from the program's start to its end, or to the safe stop after a fault."""
-    trace = np.asarray(chain.pen_trace(RECORDER_DT), dtype=float).reshape(-1, 4).copy()
-    trace[:, 0] = result.program_time(trace[:, 0])
-    end = program.joints[-1, 0]
-    keep = np.isfinite(trace[:, 0]) & (trace[:, 0] >= -1e-9) & (trace[:, 0] <= end + 1e-9)
+def origin(result: StreamResult, program: ArmProgram) -> float:
+    """Clock time of the executed clock's 0 (the job's: the first row sent is due at its own
+    program time, the servos there ``lead`` after it was sent)."""
+    return result.start + result.lead - float(program.joints[result.first, 0])
+
+
+def _executed(trace: Array, result: StreamResult, program: ArmProgram) -> Array:
+    """``t, x, y, pen`` samples on clock times as the job ran: from when the first row sent is
+    due to the end of the stream (the last move over, or the safe stop after a fault), on the
+    executed clock (:func:`origin`): pauses and host stalls stay in, as they happened."""
+    trace = np.array(trace, dtype=float).reshape(-1, 4)
+    zero = origin(result, program)
+    t = trace[:, 0] - zero
+    begin = float(program.joints[result.first, 0])
+    keep = (t >= begin - 1e-9) & (trace[:, 0] <= result.end + 1e-9)
+    trace[:, 0] = t
     return trace[keep]
+
+
+def _drawn_to(trace: Array, result: StreamResult, program: ArmProgram) -> float | None:
+    """After a stop: the program time the pen drew to, or None if it never drew: that of the
+    last pen-down sample (clock times in ``trace``) through the deadlines as they were (resyncs
+    and pauses), at most the last goal sent's (the arm goes no further)."""
+    trace = np.asarray(trace, dtype=float).reshape(-1, 4)
+    down = trace[(trace[:, 3] > 0.5) & (trace[:, 0] <= result.end + 1e-9)]
+    t = result.program_time(down[:, 0])
+    t = t[np.isfinite(t)]
+    if not len(t) or not result.ticks_sent:
+        return None
+    last = float(program.joints[result.first + result.ticks_sent - 1, 0])
+    return min(float(t.max()) + float(program.joints[result.first, 0]), last)
 
 
 def _outside_limits(present: NDArray[np.int64], profile: ArmProfile) -> list[str]:

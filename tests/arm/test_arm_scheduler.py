@@ -54,6 +54,7 @@ def test_lateness_is_measured_and_late_ticks_catch_up() -> None:
     overrun = {3: 0.014, 10: 0.0141, 20: 0.0259}
     for k in range(30):
         scheduler.wait(k)
+        scheduler.sent(clock.now())  # the write returns at once
         clock.work(overrun.get(k, 0.001))
     lateness = np.array(scheduler.lateness)
     assert lateness[4] == pytest.approx(0.004)  # tick 3 ended at 0.044: tick 4 is 4 ms late
@@ -62,6 +63,9 @@ def test_lateness_is_measured_and_late_ticks_catch_up() -> None:
     assert lateness[21] == pytest.approx(0.0159)  # > one period: resync
     assert scheduler.late_ticks == 3 and scheduler.resyncs == 1
     assert scheduler.max_lateness == pytest.approx(0.0159)
+    # The hole on the wire before tick 21 (25.9 ms) is a host stall: 15.9 ms beyond a period.
+    assert len(scheduler.stalls) == 1
+    assert scheduler.stalls[0] == pytest.approx((0.21, 0.0159))
     # After the resync the deadlines moved by the lateness: tick 22 is due 10 ms after tick 21's
     # waking, and nothing is late any more.
     assert scheduler.deadline(22) == pytest.approx(0.22 + 0.0159)
@@ -73,14 +77,48 @@ def test_resync_threshold_is_configurable() -> None:
     scheduler = Scheduler(clock, 0.002, late_after=0.001, resync_after=0.005)
     scheduler.start(0.0)
     scheduler.wait(0)
+    scheduler.sent(clock.now())
     clock.work(0.006)  # ticks 1 and 2 wake 4 and 2 ms late, then catch up: tick 3 on time
     for k in range(1, 5):
         scheduler.wait(k)
-    assert scheduler.late_ticks == 2 and scheduler.resyncs == 0
+        scheduler.sent(clock.now())
+    assert scheduler.late_ticks == 2 and scheduler.resyncs == 0 and not scheduler.stalls
     assert scheduler.lateness[3] == 0.0
     clock.work(0.0075)
     scheduler.wait(5)
     assert scheduler.resyncs == 1
+
+
+def test_lateness_is_measured_where_the_goals_leave() -> None:
+    """A stall between waking and the write (a blocked port, a collection) is lateness."""
+    clock = FakeClock(0.0)
+    scheduler = Scheduler(clock, 0.01)
+    scheduler.start(0.0)
+    for k in range(3):
+        woke = scheduler.wait(k)  # ticks 0 and 1 wake on time...
+        assert woke == (0.0 if k < 2 else pytest.approx(0.02))
+        clock.work(0.03 if k == 1 else 0.0)  # ...then the write took 30 ms for tick 1
+        scheduler.sent(clock.now())
+    assert scheduler.lateness[:2] == [0.0, pytest.approx(0.03)]
+    assert scheduler.max_lateness == pytest.approx(0.03) and scheduler.late_ticks >= 1
+    assert scheduler.stalls == [pytest.approx((0.01, 0.03))]  # tick 1 left 40 ms after tick 0
+    np.testing.assert_allclose(scheduler.sends, [0.0, 0.04, 0.04 + 0.0], atol=1e-12)
+
+
+def test_a_pause_is_no_stall_and_its_catch_up_is_not_late() -> None:
+    clock = FakeClock(0.0)
+    scheduler = Scheduler(clock, 0.01)
+    scheduler.start(0.0)
+    for k in range(3):
+        scheduler.wait(k)
+        scheduler.sent(clock.now())
+    clock.work(5.0)  # paused before tick 3; the ticks due before 5.03 go out at once
+    scheduler.reanchor(3, 5.01, held=0.03, floor=5.03)
+    for k in range(3, 8):
+        scheduler.wait(k)
+        scheduler.sent(clock.now())
+    assert scheduler.sends[3:] == pytest.approx([5.03, 5.03, 5.03, 5.04, 5.05])
+    assert scheduler.late_ticks == 0 and scheduler.resyncs == 0 and scheduler.stalls == []
 
 
 def test_bad_period_is_refused() -> None:
