@@ -11,8 +11,15 @@ within half a nib width of it along the path (``h = w_nib / 2``), over the lengt
 window::
 
     u = (t(s + h) − t(s − h)) / (min(s + h, L) − max(s − h, 0))    seconds per unit length
-    r = u · v̄                v̄: the mean pen-down speed, so r = 1 at the mean speed (≈ v̄ / v)
+    r = u · v̂                v̂: the line's speed, so r = 1 at that speed (≈ v̂ / v)
     e = Brush.flow · r       ink laid, in units that fill the nib once
+
+The line's speed ``v̂ = Σ d² / Δt / Σ d`` over the pen-down path's segments (length ``d``, time
+``Δt``) is the mean speed at which the line was drawn, each stretch weighted by its length: where
+a pen creeps or rests it lays almost no line, so it cannot pull ``v̂`` down. (The mean over time,
+path over time, could: a fitted capture whose lognormal tails creep for a second made every real
+stroke "fast", so thin, and the ends where the pen does slow down reached the cap: beads 2-3 times
+the stroke's width.)
 
 A pen passing at speed v has ``u = 1/v``; one that stops stays in its window and ``u`` grows
 with the time it stays. The width follows the laid ink and saturates: the nib fills, then the
@@ -24,7 +31,7 @@ ink spreads a little beyond it, then stops::
 pooled ink spreads beyond the nib (the cap ``w_nib · (1 + spread)`` for a pen at rest: a
 lingering pen pools a little, never a disc), and ``k(θ) = aspect + (1 − aspect)·|sin(θ − angle)|``
 the chisel's calligraphic width for direction of travel θ (1 for a round nib). Measuring time
-relative to ``v̄`` makes the picture independent of the tag's units and clock.
+relative to ``v̂`` makes the picture independent of the tag's units and clock.
 
 **Drips** (paper §5: drips "where the velocity is under a certain threshold"): ink beyond
 ``Brush.drip_ink`` is excess that the wall cannot hold. Each maximal run of consecutive samples
@@ -87,8 +94,8 @@ class Brush:
 
     nib: float = 0.011
     """Nib width, as a fraction of the tag's size: the line a fully inked nib lays."""
-    flow: float = 1.5
-    """Ink flow: the ink laid while the nib crosses its own width at the mean speed (1 fills
+    flow: float = 1.0
+    """Ink flow: the ink laid while the nib crosses its own width at the line's speed (1 fills
     the nib)."""
     thin: float = 0.3
     """Width of a starved line (a very fast pen), as a fraction of the nib."""
@@ -103,8 +110,8 @@ class Brush:
     overspray: float = 0.0
     """Overspray (spray): density of the fine dots around the stroke, in [0, 1]."""
     drip_ink: float = 4.0
-    """Ink ``e`` beyond which pooled ink is excess that may drip (4 ≈ a pen 2.7 times slower than
-    the mean)."""
+    """Ink ``e`` beyond which pooled ink is excess that may drip (4 ≈ a pen 4 times slower than
+    the line's speed)."""
     drip_chance: float = 0.8
     """Probability that a pool holding the most excess (q → 1) drips."""
     drip_length: float = 0.1
@@ -305,7 +312,9 @@ class Painting:
     size: float
     """The tag's size ``S`` (pen-down bounding-box diagonal), tag units."""
     mean_speed: float
-    """``v̄``, tag units per second."""
+    """The mean pen-down speed (path over time), tag units per second: the texture's pace."""
+    line_speed: float
+    """``v̂``, the length-weighted mean speed the ink is laid relative to, units per second."""
     t0: float
     """The motion's first sample time."""
     t1: float
@@ -399,6 +408,22 @@ def _directions(xy: Array, v: Array) -> Array:
     return direction[nearest]
 
 
+def _speeds(t: Array, xy: Array, slices: list[slice]) -> tuple[float, float]:
+    """The pen-down path's mean speed over time and its line speed ``v̂`` (the module docstring),
+    each 1.0 where it is not a positive number (a path that never moves)."""
+    d = [np.hypot(*np.diff(xy[s], axis=0).T) for s in slices]
+    dt = [np.diff(t[s]) for s in slices]
+    path = sum(float(x.sum()) for x in d)
+    time = sum(float(x.sum()) for x in dt)
+    swept = sum(float(np.sum(x[y > 0] ** 2 / y[y > 0])) for x, y in zip(d, dt, strict=True))
+    mean_speed = path / time if time > 0 else 1.0
+    line_speed = swept / path if path > 0 else 1.0
+    return (
+        mean_speed if mean_speed > 0 and math.isfinite(mean_speed) else 1.0,
+        line_speed if line_speed > 0 and math.isfinite(line_speed) else 1.0,
+    )
+
+
 def paint(
     motion: MotionLike,
     brush: Brush | None = None,
@@ -424,17 +449,13 @@ def paint(
     size = float(np.hypot(*np.ptp(down, axis=0)))
     if not size > 0:
         raise RenderError("motion: the pen-down samples have no extent to paint")
-    path = sum(float(np.hypot(*np.diff(xy[s], axis=0).T).sum()) for s in slices)
-    time = sum(float(t[s][-1] - t[s][0]) for s in slices)
-    mean_speed = path / time if time > 0 else 1.0
-    if not mean_speed > 0:
-        mean_speed = 1.0
+    mean_speed, line_speed = _speeds(t, xy, slices)
     h = 0.5 * brush.nib * size
     runs = []
     for rows in slices:
         run_speed = np.hypot(v[rows, 0], v[rows, 1])
         direction = _directions(xy[rows], v[rows])
-        ink = brush.flow * mean_speed * dwell(t[rows], xy[rows], h)
+        ink = brush.flow * line_speed * dwell(t[rows], xy[rows], h)
         runs.append(
             Run(
                 rows=rows,
@@ -452,6 +473,7 @@ def paint(
         brush=brush,
         size=size,
         mean_speed=mean_speed,
+        line_speed=line_speed,
         t0=float(t[0]),
         t1=float(t[-1]),
         seed=seed,
