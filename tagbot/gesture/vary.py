@@ -90,8 +90,8 @@ def in_order(
     plans: Sequence[Plan], lifts: Sequence[float], model: Model = "gamma", units: str = "mm"
 ) -> Tag:
     """A tag drawing ``plans`` in order, plan ``k + 1`` touching down ``lifts[k]`` seconds after
-    plan ``k`` lifts off (the first keeps its start). A plan never starts before the one before it:
-    where its approach in the air would need that, it starts with it and its lift is longer."""
+    plan ``k`` lifts off (the first keeps its start; an approach in the air may start before the
+    previous plan's motion, or the previous plan, does)."""
     if len(lifts) != len(plans) - 1:
         raise PlanError(f"lifts: expected {len(plans) - 1} (one per pen lift), got {len(lifts)}")
     gaps = np.asarray(lifts, dtype=float)
@@ -103,7 +103,7 @@ def in_order(
     for plan, gap in zip(plans[1:], gaps.tolist(), strict=True):
         down = plan.ink[0] if plan.ink is not None else 0.0
         lift_off = placed[-1].ink_window(size)[1]
-        placed.append(plan.at(max(lift_off + gap - down, placed[-1].start)))
+        placed.append(plan.at(lift_off + gap - down))
     return Tag(tuple(placed), model, units)
 
 
