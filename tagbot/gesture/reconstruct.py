@@ -42,12 +42,16 @@ from tagbot.gesture import contour, kernels
 from tagbot.gesture.refine import RefineOptions, refine
 from tagbot.gesture.strokes import Strokes
 from tagbot.gesture.timing import (
+    MAX_INTERVAL,
+    MIN_SAMPLES,
     TIMINGS,
     Timing,
     TimingOptions,
     TraceTiming,
     implausible_clock,
     match,
+    pen_down_span,
+    plan_turning,
     usable,
 )
 from tagbot.model.plan import (
@@ -216,21 +220,23 @@ def reconstruct(
                 raise
             note = f"timing ignored: {e}"
     elif timing == "auto" and traces and all(getattr(tr, "t", None) is not None for tr in traces):
-        note = _untimed_why(plans, traces)
+        note = _untimed_why(plans, traces, size)
     return Reconstruction(sequence(plans, opts.lift, model), None, note)
 
 
-def _untimed_why(plans: list[Plan], traces: list[Any]) -> str:
-    """Why ``auto`` fitted a timed capture by its shape alone ("" for a sampling rate too low
-    to follow, which nobody would expect matched)."""
-    from tagbot.metrics import turning_of
-
+def _untimed_why(plans: list[Plan], traces: list[Any], size: float) -> str:
+    """Why ``auto`` fitted a timed capture by its shape alone."""
+    turning = sum(plan_turning(plan, size) for plan in plans)
+    span = sum(pen_down_span(tr.t) for tr in traces)
+    why = implausible_clock(sum(p.n_strokes for p in plans), turning, span)
+    if why:
+        return f"timing ignored, the capture's {why}"
     if not any(usable(tr) for tr in traces):
-        return ""
-    down = np.concatenate([[0.0], np.cumsum([float(tr.t[-1] - tr.t[0]) for tr in traces])])
-    turning = sum(turning_of([np.asarray(tr.xy, dtype=float)]) for tr in traces)
-    why = implausible_clock(sum(p.n_strokes for p in plans), turning, down)
-    return f"timing ignored, the capture's {why}" if why else ""
+        return (
+            f"timing ignored: no trace has {MIN_SAMPLES} distinct time stamps at"
+            f" {1 / MAX_INTERVAL:g} Hz or more"
+        )
+    return ""
 
 
 _NO_SIZE = 1e-90

@@ -843,17 +843,33 @@ class TraceTiming:
         return f"trace {index}: {self.kind}" + (f" ({self.reason})" if self.reason else "")
 
 
-def implausible_clock(n_strokes: int, turning: float, t: ArrayLike) -> str:
-    """Why a trace (or a capture's pen-down time) stamped ``t`` cannot be a hand's drawing of
-    ``n_strokes`` geometric strokes turning ``turning`` half turns, or "" if it can. The span
-    counts one sampling interval more (the pen moved before the first sample and after the
-    last), so that short traces are not judged on a truncated span."""
+def plan_turning(plan: Plan, size: float) -> float:
+    """How much ``plan``'s path turns, in half turns (180°): its motion sampled at 512 instants
+    (the model's path, smooth where a recording's points carry noise that would add turning)."""
+    from tagbot.metrics import turning_of
+    from tagbot.model.motion import evaluate_plan
+
+    on, off = plan.windows(size, INK_TOLERANCE)
+    xy, _ = evaluate_plan(plan, np.linspace(float(on.min()), float(off.max()), 512), size)
+    return turning_of([xy])
+
+
+def pen_down_span(t: ArrayLike) -> float:
+    """How long a trace stamped ``t`` was drawn: its stamps' span and one sampling interval more
+    (the pen moved before the first sample and after the last), so that a short trace is not
+    judged on a truncated span."""
     t = np.asarray(t, dtype=float)
     steps = np.diff(t)
     steps = steps[steps > 0]
-    span = float(t[-1] - t[0]) + (float(np.median(steps)) if steps.size else 0.0)
+    return float(t[-1] - t[0]) + (float(np.median(steps)) if steps.size else 0.0)
+
+
+def implausible_clock(n_strokes: int, turning: float, span: float) -> str:
+    """Why a drawing of ``n_strokes`` geometric strokes turning ``turning`` half turns in
+    ``span`` seconds of pen-down time (:func:`pen_down_span`) cannot be a hand's, or "" if it
+    can (:data:`MAX_STROKE_RATE`, :data:`MAX_TURN_RATE`)."""
     if span <= 0:
-        return f"no time between its {len(t)} stamps"
+        return "clock implausible: no time between its stamps"
     for count, limit, noun in (
         (n_strokes, MAX_STROKE_RATE, "strokes"),
         (turning, MAX_TURN_RATE, "half turns"),
@@ -881,23 +897,21 @@ def match(
     keeps its geometric plan; under either, a timed plan that would miss the shape by more
     than the margins (:data:`SHAPE_MARGIN_MEAN`, :data:`SHAPE_MARGIN_MAX`) is replaced by the
     geometric plan on the recorded span."""
-    from tagbot.metrics import turning_of
-
     if timing == "ignore":
         return None
     opts = options or TimingOptions()
     timed = [getattr(tr, "t", None) is not None for tr in traces]
     if not all(timed) or (timing == "auto" and not any(usable(tr) for tr in traces)):
         return None
-    turning = [turning_of([np.asarray(tr.xy, dtype=float)]) for tr in traces]
+    turning = [plan_turning(plan, size) for plan in plans]
+    spans = [pen_down_span(tr.t) for tr in traces]
     if timing == "auto":
-        down = np.concatenate([[0.0], np.cumsum([float(tr.t[-1] - tr.t[0]) for tr in traces])])
-        whole = implausible_clock(sum(p.n_strokes for p in plans), sum(turning), down)
+        whole = implausible_clock(sum(p.n_strokes for p in plans), sum(turning), sum(spans))
         if whole:
             return None
     verdicts = [
-        implausible_clock(plan.n_strokes, turn, tr.t) if timing == "auto" else ""
-        for plan, turn, tr in zip(plans, turning, traces, strict=True)
+        implausible_clock(plan.n_strokes, turn, span) if timing == "auto" else ""
+        for plan, turn, span in zip(plans, turning, spans, strict=True)
     ]
     candidates = [
         None if verdict else _match_trace(plan, trace, size, model, opts)
@@ -937,7 +951,7 @@ def match(
             # A matched plan is on the clock of the instant behind the first stamp.
             base = candidates[k][1] if kind == "matched" else float(t[0])
             plan = _with_ink(plan.at(base + plan.start), t, tag_size, (lows[k], highs[k]))
-            if kind == "scaled" and implausible_clock(geometric.n_strokes, turning[k], t):
+            if kind == "scaled" and implausible_clock(geometric.n_strokes, turning[k], spans[k]):
                 plan, kind = geometric.at(float(t[0])), "geometric"  # (under match)
                 reason += "; its recorded span is too short for the geometric plan"
             timing_k = TraceTiming(kind, reason)
@@ -977,13 +991,15 @@ def _with_ink(
 
 def _drawn_error(plan: Plan, xy: Array, size: float) -> tuple[float, float]:
     """Mean and max shape error of what ``plan`` inks against the polyline ``xy``, as fractions
-    of ``size`` (as :func:`tagbot.metrics.fit_report` samples a plan: every 5 ms)."""
+    of ``size``: the ink sampled every 5 ms (as :func:`tagbot.metrics.fit_report` does), or
+    1000 times if that is finer (a fast plan's chords would cut its corners)."""
     from tagbot.metrics import shape_error
     from tagbot.model.motion import evaluate_plan
 
     down, up = plan.ink_window(size)
-    count = max(math.ceil((up - down) / 0.005 - 1e-9), 1)
-    drawn, _ = evaluate_plan(plan, np.minimum(down + np.arange(count + 1) * 0.005, up), size)
+    drawn, _ = evaluate_plan(
+        plan, np.linspace(down, up, max(math.ceil((up - down) / 0.005), 1000) + 1), size
+    )
     error = shape_error([xy], [drawn])
     return error.mean * error.size / size, error.max * error.size / size
 
@@ -1050,6 +1066,8 @@ __all__ = [
     "initial_timing",
     "match",
     "match_trace",
+    "pen_down_span",
+    "plan_turning",
     "resample",
     "simulated_capture",
     "usable",

@@ -1,0 +1,236 @@
+"""The timed fit can be trusted: the shape is never traded for timing, clocks no hand can produce
+fall back to the geometric timing and say so, and the tag keeps the writer's own clock."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tagbot.gesture import reconstruct
+from tagbot.gesture.timing import (
+    MAX_STROKE_RATE,
+    SHAPE_MARGIN_MAX,
+    SHAPE_MARGIN_MEAN,
+    implausible_clock,
+    pen_down_span,
+    simulated_capture,
+)
+from tagbot.inputs import Trace
+from tagbot.io.planfile import tag_to_dict
+from tagbot.metrics import fit_report, shape_error
+from tagbot.model.easing import EASE
+from tagbot.model.motion import sample_ink
+from tagbot.model.plan import Plan, random_timed_plan
+
+
+def trace_errors(traces: list[Trace], tag) -> list[tuple[float, float]]:
+    """Each trace's mean and max shape error against what its plan inks, as fractions of the
+    tag's size (as the fit's margins are stated)."""
+    out = []
+    for k, trace in enumerate(traces):
+        down, up = tag.plans[k].ink_window(tag.size)
+        ((_, xy, _),) = sample_ink(tag, min(0.005, (up - down) / 1000), [k])
+        error = shape_error([trace.xy], [xy])
+        out.append((error.mean * error.size / tag.size, error.max * error.size / tag.size))
+    return out
+
+
+def assert_within_margin(traces: list[Trace], timing: str) -> object:
+    """Fit ``traces`` with ``timing`` and check every trace's shape against the geometric fit's
+    of the same trace; returns the reconstruction."""
+    geometric = reconstruct(traces, timing="ignore").tag
+    fitted = reconstruct(traces, timing=timing)
+    for k, ((mean, largest), (mean_g, max_g)) in enumerate(
+        zip(trace_errors(traces, fitted.tag), trace_errors(traces, geometric), strict=True)
+    ):
+        # The geometric errors are measured on the geometric tag's size; both tags' sizes are
+        # their targets' spans, within a few percent of each other.
+        slack = 1.05
+        assert mean <= slack * mean_g + SHAPE_MARGIN_MEAN, (k, timing, mean, mean_g)
+        assert largest <= slack * max(SHAPE_MARGIN_MAX[0] * max_g, max_g + SHAPE_MARGIN_MAX[1]), (
+            k,
+            timing,
+            largest,
+            max_g,
+        )
+    return fitted
+
+
+def capture(plan: Plan, rng: np.random.Generator, **digitiser) -> Trace:
+    """``plan`` recorded by a simulated digitiser while it visibly moves (from where it has
+    travelled 0.5 % of its path to where it has that much left), as a writer's pen is down."""
+    trace = simulated_capture(plan, rng, **digitiser)
+    xy = np.asarray(trace.xy)
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
+    keep = (s >= 0.005 * s[-1]) & (s <= 0.995 * s[-1])
+    return Trace(xy[keep], np.asarray(trace.t)[keep])
+
+
+def distorted(trace: Trace, how: str, rng: np.random.Generator) -> Trace:
+    """``trace`` as a faulty or odd digitiser would have recorded it."""
+    t, xy = np.asarray(trace.t), np.asarray(trace.xy)
+    if how == "compressed":  # a clock ten times too fast
+        return Trace(xy, t * 0.1)
+    if how == "burst":  # twenty times: faster than any hand
+        return Trace(xy, t * 0.05)
+    if how == "stretched":  # ten times too slow: a slow, careful hand
+        return Trace(xy, t * 10.0)
+    if how == "repeated":  # stamps delivered in bursts of three
+        return Trace(xy, t[(np.arange(len(t)) // 3) * 3])
+    if how == "dropped":  # a third of the samples lost
+        keep = np.sort(rng.choice(len(t), size=2 * len(t) // 3, replace=False))
+        keep[0], keep[-1] = 0, len(t) - 1
+        return Trace(xy[np.unique(keep)], t[np.unique(keep)])
+    if how == "clicks":  # an eye tracker: a few clicks, milliseconds apart
+        keep = np.linspace(0, len(t) - 1, 6).astype(int)
+        return Trace(xy[keep], np.cumsum(np.r_[0.0, rng.uniform(0.005, 0.02, 5)]))
+    raise AssertionError(how)
+
+
+DISTORTIONS = ("compressed", "stretched", "repeated", "dropped", "clicks")
+
+
+@pytest.mark.parametrize("how", DISTORTIONS)
+def test_every_clock_keeps_the_shape_whatever_the_timing_option(how: str) -> None:
+    rng = np.random.default_rng(29)
+    for _ in range(2):
+        trace = distorted(capture(random_timed_plan(rng), rng), how, rng)
+        for timing in ("auto", "match"):
+            assert_within_margin([trace], timing)
+
+
+@pytest.mark.parametrize(
+    ("how", "why"),
+    [
+        ("burst", "timing ignored, the capture's clock implausible: "),
+        ("clicks", "timing ignored: no trace has 8 distinct time stamps at 10 Hz or more"),
+    ],
+)
+def test_a_clock_no_hand_can_produce_falls_back_and_says_why(how: str, why: str) -> None:
+    rng = np.random.default_rng(3)
+    traces = [distorted(capture(random_timed_plan(rng), rng), how, rng) for _ in range(2)]
+    traces[1] = Trace(traces[1].xy + 90.0, traces[1].t + traces[0].t[-1] + 0.5)
+    fitted = reconstruct(traces)
+    geometric = reconstruct(traces, timing="ignore")
+    assert fitted.timings is None  # the paper's rhythm
+    assert tag_to_dict(fitted.tag) == tag_to_dict(geometric.tag)
+    assert len(fitted.notes()) == 1 and fitted.notes()[0].startswith(why)
+    if how == "burst":
+        assert "per second; a hand draws at most 40" in fitted.notes()[0]
+    assert fit_report(traces, fitted.tag, timings=fitted.timings).timing is None
+
+
+def test_a_plausible_clock_keeps_its_timing() -> None:
+    """Ordinary digitisers (100 Hz, 60 Hz with jitter, a slow hand): matched, and the velocity
+    on the tag's own clock follows the recording."""
+    rng = np.random.default_rng(5)
+    for rate, jitter, slow in ((100.0, 0.0005, 1.0), (60.0, 0.004, 1.0), (100.0, 0.0, 3.0)):
+        truth = random_timed_plan(rng)
+        trace = capture(truth, rng, rate=rate, jitter=jitter)
+        trace = Trace(trace.xy, trace.t * slow)
+        fitted = reconstruct([trace])
+        assert fitted.timings is not None and fitted.timings[0].kind == "matched"
+        report = fit_report([trace], fitted.tag, timings=fitted.timings)
+        assert report.timing == "1 matched"
+        assert report.velocity_snr_clock_db is not None and report.velocity_snr_clock_db > 15.0
+        # The tag's own clock scores no better than each trace's own best mapping.
+        assert report.velocity_snr_clock_db <= report.velocity_snr_db + 1e-6
+
+
+def test_one_implausible_trace_falls_back_alone() -> None:
+    """Two traces on one clock, the second stamped in a burst no hand makes: the first keeps its
+    timing, the second is drawn at the geometric timing, and the fit says which and why."""
+    rng = np.random.default_rng(8)
+    first = capture(random_timed_plan(rng), rng)
+    second = capture(random_timed_plan(rng), rng)
+    start = float(first.t[-1]) + 0.4
+    burst = Trace(second.xy + 80.0, start + np.linspace(0.0, 0.03, len(second.t)))
+    fitted = reconstruct([first, burst])
+    assert [t.kind for t in fitted.timings] == ["matched", "geometric"]
+    why = fitted.timings[1].reason
+    assert why.startswith("clock implausible: ") and "strokes in" in why
+    assert fitted.notes() == [f"trace 1: geometric ({why})"]
+    report = fit_report([first, burst], fitted.tag, timings=fitted.timings)
+    assert report.timing == "1 matched, 1 geometric"
+    assert "timing: 1 matched, 1 geometric" in report.summary()
+    # The geometric plan touches down where its trace was recorded.
+    assert fitted.tag.plans[1].ink_window(fitted.tag.size)[0] >= start - 1e-9
+
+
+def test_implausible_clock_bounds() -> None:
+    """At and just beyond the limits; a span counts one sampling interval more."""
+    assert pen_down_span(np.linspace(0.0, 0.9, 10)) == pytest.approx(1.0)
+    assert pen_down_span([0.0, 0.0, 0.0]) == 0.0
+    assert implausible_clock(int(MAX_STROKE_RATE), 0.0, 1.0) == ""
+    assert implausible_clock(41, 0.0, 1.0) == (
+        "clock implausible: 41 strokes in 1 s, 41 per second; a hand draws at most 40"
+    )
+    assert implausible_clock(1, 0.0, 0.0) == "clock implausible: no time between its stamps"
+    assert "45 half turns in 1 s" in implausible_clock(2, 45.0, 1.0)
+    assert implausible_clock(2, 40.0, 1.0) == ""
+
+
+def test_a_timed_plan_that_would_break_the_shape_keeps_the_geometric_plan(monkeypatch) -> None:
+    """If the timed fit comes out wrecked (here: its targets scattered), the trace keeps the
+    geometric plan on the recorded span, says so with the figures, and keeps its shape."""
+    import tagbot.gesture.timing as timing
+
+    real = timing._match_trace
+
+    def wrecked(plan, trace, size, model, options):
+        rest, t0, _ = real(plan, trace, size, model, options)
+        targets = rest.targets + np.random.default_rng(0).normal(0, 0.05 * size, rest.targets.shape)
+        bad = Plan(targets, rest.dt, rest.mu, rest.sigma, rest.phi1, rest.phi2, rest.start)
+        return bad, t0, None
+
+    monkeypatch.setattr(timing, "_match_trace", wrecked)
+    rng = np.random.default_rng(12)
+    trace = capture(random_timed_plan(rng), rng)
+    fitted = assert_within_margin([trace], "match")
+    assert fitted.timings[0].kind == "scaled"
+    assert fitted.timings[0].reason.startswith("the timed fit missed the shape: mean ")
+    # On the recorded span: the ink from the first sample to the last (within 1 % of it).
+    down, up = fitted.tag.plans[0].ink_window(fitted.tag.size)
+    span = trace.t[-1] - trace.t[0]
+    assert down == pytest.approx(trace.t[0], abs=0.01 * span)
+    assert up == pytest.approx(trace.t[-1], abs=0.01 * span)
+
+
+def test_runs_touch_down_and_lift_off_on_the_recorded_clock() -> None:
+    """A capture with several pen lifts of 80-300 ms: every plan inks from its trace's first
+    sample to its last (within one 10 ms grid step and the machines' easing), and no lift
+    drifts."""
+    rng = np.random.default_rng(30)
+    traces, clock = [], 0.0
+    for k in range(4):
+        recorded = capture(random_timed_plan(rng), rng)
+        t = np.asarray(recorded.t) - recorded.t[0] + clock
+        traces.append(Trace(np.asarray(recorded.xy) + 70.0 * k, t))
+        clock = float(t[-1]) + rng.uniform(0.08, 0.3)
+    fitted = reconstruct(traces)
+    assert [t.kind for t in fitted.timings] == ["matched"] * 4
+    for plan, trace in zip(fitted.tag.plans, traces, strict=True):
+        down, up = plan.ink_window(fitted.tag.size)
+        # One 10 ms grid step, plus the machine's easing from rest (half of EASE of the plan's
+        # clock) where the plan moves before the first sample.
+        assert abs(down - trace.t[0]) <= 0.01 + EASE / 2 + 1e-9
+        # The pen lifts at the last sample, or earlier once the writer's pen rests (within
+        # 1 % of the tag's size of where it lifted): never later.
+        assert up <= trace.t[-1] + 0.01 + 1e-9
+        at_lift = [np.interp(up, trace.t, trace.xy[:, i]) for i in (0, 1)]
+        assert np.hypot(*(at_lift - trace.xy[-1])) <= 0.01 * fitted.tag.size
+    assert fitted.tag.sample(0.01)  # the lifts sample
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    scale=st.sampled_from([0.05, 0.3, 1.0, 4.0]),
+    timing=st.sampled_from(["auto", "match"]),
+)
+def test_the_shape_margin_holds_over_random_plans_and_clocks(seed, scale, timing) -> None:
+    rng = np.random.default_rng(seed)
+    recorded = capture(random_timed_plan(rng), rng, jitter=0.002)
+    assert_within_margin([Trace(recorded.xy, recorded.t * scale)], timing)
