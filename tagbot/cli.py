@@ -366,10 +366,11 @@ cli.add_command(studio_command)
 )
 @click.option(
     "--resume-from",
-    metavar="LINE",
+    metavar="N",
     type=click.IntRange(min=2),
     default=None,
-    help="Grbl: resume an interrupted job at this line of program.gcode (needs --position-known).",
+    help="Resume an interrupted job at this line of program.gcode (Grbl, needs "
+    "--position-known) or tick of joints.csv (arm: its encoders know where it is).",
 )
 @click.option(
     "--position-known",
@@ -422,7 +423,7 @@ def draw_command(
     from tagbot.signals import machine_run
     from tagbot.source import load_source
 
-    if resume_from is not None and not position_known:
+    if resume_from is not None and not position_known and device == "grbl":
         raise InputError(
             "--resume-from: the machine's position must be known first (home it or check it), "
             "then add --position-known"
@@ -434,8 +435,10 @@ def draw_command(
             "unlock": unlock or "never",
             "resume_from": resume_from,
         }
-    elif send_and_wait or unlock or resume_from:
-        raise InputError("--send-and-wait, --unlock, --home and --resume-from are Grbl options")
+    elif send_and_wait or unlock:
+        raise InputError("--send-and-wait, --unlock and --home are Grbl options")
+    elif resume_from is not None:
+        options = {"resume_from": resume_from}
     tag, traces = load_source(source)  # a trace file's traces: the report compares with them
     if recording is not None:
         traces = _recording(recording, len(tag.plans))

@@ -1022,8 +1022,13 @@ class ArmDriver:
         dropped = self.drain()  # late replies from the setup
         if dropped:
             log.debug("dropped %d stale bytes before streaming", dropped)
-        out.start = scheduler.start(self.clock.now() + period)
-        readback = ReadBack(self, out.start)
+        now = self.clock.now()
+        if first:  # resumed where the arm stands: the row before is due now, as after a pause
+            out.start = scheduler.start(now - lead + period)
+            scheduler.floor = now
+        else:
+            out.start = scheduler.start(now + period)
+        readback = ReadBack(self, now)
         out.readback = readback
         ids = self.ids
         log.info("streaming %d ticks at %g Hz, read-back every %d", total, p["motion.rate"], every)
@@ -1177,7 +1182,9 @@ class ArmDriver:
             self.set_torque(self.ids, False, "end")
 
     def safe_stop(self, *, error: bool) -> None:
-        """Pen up, arm joints holding their last goal; after an error, arm torque off (policy).
+        """Pen up once the arm has reached its last goal (``lead`` after it was sent: what was
+        sent is drawn, so a resume from the next tick skips nothing), arm joints holding it;
+        after an error, arm torque off (policy).
 
         Best effort: failures are logged, never raised (the original error matters more).
         """
@@ -1187,7 +1194,10 @@ class ArmDriver:
         p = self.profile
         self.port.is_using = False  # an interrupted SDK call may have left it set
         pen = p["pen.id"]
+        result = getattr(self, "result", None)
         try:
+            if result is not None and result.scheduler is not None and result.scheduler.sends:
+                self.clock.sleep_until(result.scheduler.sends[-1] + p.lead)
             group = sdk.GroupSyncWrite(self.port, self.ph, GOAL_POSITION, 4)
             group.addParam(pen, _u32(p["pen.up"]))
             self._guard(group.txPacket, "pen up", "stop")

@@ -551,13 +551,14 @@ def origin(result: StreamResult, program: ArmProgram) -> float:
 
 
 def _executed(trace: Array, result: StreamResult, program: ArmProgram) -> Array:
-    """``t, x, y, pen`` samples on clock times as the job ran: from when the first row sent is
-    due to the end of the stream (the last move over, or the safe stop after a fault), on the
-    executed clock (:func:`origin`): pauses and host stalls stay in, as they happened."""
+    """``t, x, y, pen`` samples (clock times) from when the first row sent is due (resumed:
+    the row before it, where the arm stood) to the end of the stream (the last move over, or
+    the safe stop after a fault), on the executed clock (:func:`origin`): pauses and host
+    stalls stay in, as they happened."""
     trace = np.array(trace, dtype=float).reshape(-1, 4)
     zero = origin(result, program)
     t = trace[:, 0] - zero
-    begin = float(program.joints[result.first, 0])
+    begin = float(program.joints[max(0, result.first - 1), 0])  # resumed: where the arm stood
     keep = (t >= begin - 1e-9) & (trace[:, 0] <= result.end + 1e-9)
     trace[:, 0] = t
     return trace[keep]
