@@ -8,6 +8,7 @@ line naming it. Unexpected exceptions propagate: they are bugs.
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import signal
@@ -233,6 +234,10 @@ def fit_command(
 
         click.echo(json.dumps(tag_to_dict(tag), indent=1))
     elapsed = time.perf_counter() - started
+    from tagbot.corpus import NOTES_JOINER
+
+    for note in filter(None, row["timing_notes"].split(NOTES_JOINER)):
+        click.echo(f"{PROG}: warning: {source}: {note}", err=True)
     figures = row.get("summary", f"{row['traces']} traces -> {row['strokes']} strokes")
     clock = f"; clock {row['clock']}" if row["clock"] not in ("untimed", "s") else ""
     click.echo(
@@ -646,8 +651,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     from tagbot.signals import stop_signals
 
     args = list(sys.argv[1:] if argv is None else argv)
-    with stop_signals(PROG):
-        return _main(args)
+    fit_log = logging.getLogger("tagbot.fit")
+    handler = _Warnings()
+    fit_log.addHandler(handler)
+    try:
+        with stop_signals(PROG):
+            return _main(args)
+    finally:
+        fit_log.removeHandler(handler)
+
+
+class _Warnings(logging.Handler):
+    """A library's warnings (:data:`tagbot.source.log`) as ``tagbot: warning: …`` lines on
+    stderr."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        click.echo(f"{PROG}: warning: {record.getMessage()}", err=True)
 
 
 def _main(args: list[str]) -> int:

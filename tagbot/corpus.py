@@ -134,11 +134,13 @@ def fit_one(job: FileJob, row: dict[str, Any]) -> Tag:
     started = time.perf_counter()
     traces = load_traces(job.source)  # first: a bad file is refused before numba/scipy load
     loaded = time.perf_counter()
-    from tagbot.gesture import fit
+    from tagbot.gesture import reconstruct
     from tagbot.io.planfile import save_plan
+    from tagbot.metrics import timing_summary
 
     opts = job.options
-    tag = fit(traces, model=opts.get("model", "gamma"), **opts.get("fit", {}))
+    fitted_tag = reconstruct(traces, model=opts.get("model", "gamma"), **opts.get("fit", {}))
+    tag = fitted_tag.tag
     fitted = time.perf_counter()
     if job.output is not None:
         save_plan(tag, job.output)
@@ -150,14 +152,17 @@ def fit_one(job: FileJob, row: dict[str, Any]) -> Tag:
         clock=_clock_of(traces),
         load_s=round(loaded - started, 4),
         fit_s=round(fitted - loaded, 4),
+        timing=timing_summary(fitted_tag.timings) or "shape only",
+        timing_notes=NOTES_JOINER.join(fitted_tag.notes()),
     )
     if opts.get("report", True):
         from tagbot.metrics import fit_report
 
-        report = fit_report(traces, tag)
+        report = fit_report(traces, tag, timings=fitted_tag.timings)
         row.update(
             shape_error_mean=report.shape.mean,
             shape_error_max=report.shape.max,
+            velocity_snr_clock_db=report.velocity_snr_clock_db,
             velocity_snr_db=report.velocity_snr_db,
             summary=report.summary(),
         )
@@ -362,6 +367,9 @@ def _map_dask(
 
 # --------------------------------------------------------------------------- summary
 
+NOTES_JOINER = " | "
+"""Between a fit's notes in a summary row's ``timing_notes``."""
+
 SUMMARY_FIELDS = (
     "input",
     "status",
@@ -374,7 +382,10 @@ SUMMARY_FIELDS = (
     "clock",
     "shape_error_mean",
     "shape_error_max",
+    "velocity_snr_clock_db",
     "velocity_snr_db",
+    "timing",
+    "timing_notes",
     "seconds",
     "load_s",
     "fit_s",

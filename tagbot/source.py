@@ -8,6 +8,7 @@ anything else is read as traces (GML, #000000book JSON, SVG, points, UNIPEN) and
 from __future__ import annotations
 
 import json
+import logging
 from typing import TYPE_CHECKING
 
 from tagbot.errors import PlanError
@@ -17,6 +18,10 @@ if TYPE_CHECKING:  # numba and scipy load only once a file is read and found usa
     from tagbot.model.plan import Tag
 
 __all__ = ["load_source", "load_tag", "read_source"]
+
+log = logging.getLogger("tagbot.fit")
+"""Where a fit says how it timed the traces it could not match (one line each, naming the
+file); the command line prints them as ``tagbot: warning: …``."""
 
 
 def load_source(path: str, model: str | None = None) -> tuple[Tag, list[Trace] | None]:
@@ -44,9 +49,12 @@ def read_source(data: bytes, name: str, model: str | None = None) -> tuple[Tag, 
         except PlanError as e:
             raise type(e)(f"{name}: {e}") from e
     traces = read_traces_bytes(data, name)
-    from tagbot.gesture import fit  # after reading: a bad file is refused before numba/scipy load
+    from tagbot.gesture import reconstruct  # after reading: a bad file is refused first
 
-    return fit(traces, model=model or "gamma"), traces
+    fitted = reconstruct(traces, model=model or "gamma")
+    for note in fitted.notes():  # e.g. a clock no hand can produce, and what the fit did
+        log.warning("%s: %s", name, note)
+    return fitted.tag, traces
 
 
 def load_tag(path: str, model: str | None = None) -> Tag:
