@@ -50,13 +50,29 @@ from tagbot.render.raster import (
     texture_field,
 )
 
-__all__ = ["MAX_GIF_FPS", "Timing", "frame_times", "gif_delays", "paint_frames", "write_animation"]
+__all__ = [
+    "MAX_FRAMES",
+    "MAX_FRAME_PIXELS",
+    "MAX_GIF_FPS",
+    "Timing",
+    "check_frame_pixels",
+    "frame_times",
+    "gif_delays",
+    "paint_frames",
+    "write_animation",
+]
 
 MAX_GIF_FPS = 50.0
 """GIF frames shorter than 20 ms are slowed down by browsers."""
 
 MAX_FRAMES = 20_000
 """Refuse animations with more frames than this."""
+
+MAX_FRAME_PIXELS = 2_000_000_000
+"""Most pixels of all an animation's frames together (frames times width times height): a GIF keeps
+every distinct frame in memory, a byte a pixel (so about 2 GB at most), and painting costs about
+as much per pixel of every frame. The default 1200-pixel square allows about 1,390 frames (55 s
+at 25 fps)."""
 
 Progress = Callable[[int, int], None]
 """Called with (frames done, frames in all) as frames are painted."""
@@ -101,6 +117,17 @@ def frame_times(
         )
     times = t0 + np.arange(1, drawing + 1) * (speed / fps)
     return Timing(float(fps), float(speed), drawing, held, times)
+
+
+def check_frame_pixels(timing: Timing, view: View) -> None:
+    """Refuse an animation of more than :data:`MAX_FRAME_PIXELS` before any frame is painted."""
+    pixels = timing.frames * view.width * view.height
+    if pixels > MAX_FRAME_PIXELS:
+        raise RenderError(
+            f"size: {timing.frames:,} frames of {view.width}x{view.height} pixels is "
+            f"{pixels:,} pixels to paint (max {MAX_FRAME_PIXELS:,}); lower --size or --fps, "
+            "or raise --speed"
+        )
 
 
 def gif_delays(frames: int, fps: float) -> list[int]:

@@ -14,6 +14,7 @@ from tagbot.model.plan import Tag
 from tagbot.render.animate import (
     Progress,
     check_animation,
+    check_frame_pixels,
     frame_times,
     paint_frames,
     write_animation,
@@ -25,10 +26,24 @@ from tagbot.render.svg import svg_document, write_svg
 if TYPE_CHECKING:
     from tagbot.model.motion import Motion
 
-__all__ = ["DEFAULT_DT", "FORMATS", "Rendered", "prepare", "render", "render_array"]
+__all__ = [
+    "DEFAULT_DT",
+    "FORMATS",
+    "MAX_PAINT_SAMPLES",
+    "Rendered",
+    "check_samples",
+    "prepare",
+    "render",
+    "render_array",
+]
 
 DEFAULT_DT = 0.002
 """Seconds between the samples a tag is painted from (smooth outlines at any usual size)."""
+
+MAX_PAINT_SAMPLES = 250_000
+"""Most samples one picture or animation is painted from: each costs about 3.5 KB of brush
+geometry while painting (so about 0.9 GB at most), 500 s of drawing at :data:`DEFAULT_DT`. A
+longer tag is refused before it is sampled; a coarser ``dt`` paints it."""
 
 FORMATS = ("png", "svg", "gif", "mp4")
 """What :func:`render` writes, told by the file's suffix."""
@@ -80,6 +95,29 @@ def format_of(path: str | os.PathLike[str]) -> str:
     return suffix
 
 
+def check_samples(source: Tag | Motion | MotionLike, dt: float = DEFAULT_DT) -> int:
+    """The samples ``source`` is painted from (a tag's every ``dt`` seconds); refuses more than
+    :data:`MAX_PAINT_SAMPLES` before any is made."""
+    if not isinstance(source, Tag):
+        samples = len(source.t)
+        if samples > MAX_PAINT_SAMPLES:
+            raise RenderError(
+                f"the motion has {samples:,} samples to paint (max {MAX_PAINT_SAMPLES:,})"
+            )
+        return samples
+    if not (isinstance(dt, int | float) and dt > 0 and np.isfinite(dt)):
+        raise RenderError(f"dt: must be a positive number of seconds, got {dt!r}")
+    duration = source.end - source.start
+    samples = int(np.ceil(duration / dt)) + 1
+    if samples > MAX_PAINT_SAMPLES:
+        coarser = duration / (MAX_PAINT_SAMPLES - 1)
+        raise RenderError(
+            f"dt: {duration:.6g} s of drawing every {dt:g} s is {samples:,} samples to paint "
+            f"(max {MAX_PAINT_SAMPLES:,}); a dt of {coarser:.2g} s or more paints it"
+        )
+    return samples
+
+
 def prepare(
     source: Tag | Motion | MotionLike,
     *,
@@ -92,6 +130,7 @@ def prepare(
     """Sample a tag (every ``dt`` seconds) or take a motion as is, and paint it with ``brush`` (a
     :class:`Brush` or a preset's name, see :data:`.brush.PRESETS`). A seed is drawn when drips or
     texture need one and none is given (it is in ``painting.seed``)."""
+    check_samples(source, dt)
     if isinstance(source, Tag):
         motion: MotionLike = source.sample(dt)
         units = source.units
@@ -202,6 +241,7 @@ def render(
             physical = (view.xmax - view.xmin, view.ymax - view.ymin, painting.units)
         return Rendered(**common, physical=physical)
     timing = frame_times(painting.t0, painting.duration, fps, speed, hold)
+    check_frame_pixels(timing, view)
     frames = paint_frames(painting, view, timing, texture=texture, seed=seed, progress=progress)
     written = write_animation(frames, path, view, timing, color=color, background=background)
     return Rendered(**common, frames=written, seconds=timing.seconds)

@@ -223,17 +223,23 @@ def render_file(
     ``output`` with :func:`tagbot.render.render`'s keyword ``options`` (a progress bar for
     animations on a terminal)."""
     from tagbot.render.api import format_of, render
+    from tagbot.render.brush import RenderError
 
     tag, _ = load_source(source, model)
-    if format_of(output) in ("gif", "mp4") and sys.stderr.isatty():
-        with click.progressbar(length=1, label="frames", file=sys.stderr) as bar:
+    try:
+        if format_of(output) in ("gif", "mp4") and sys.stderr.isatty():
+            with click.progressbar(length=1, label="frames", file=sys.stderr) as bar:
 
-            def progress(done: int, total: int) -> None:
-                bar.length = total
-                bar.update(done - bar.pos)
+                def progress(done: int, total: int) -> None:
+                    bar.length = total
+                    bar.update(done - bar.pos)
 
-            return render(tag, output, progress=progress, **options)
-    return render(tag, output, **options)
+                return render(tag, output, progress=progress, **options)
+        return render(tag, output, **options)
+    except RenderError as e:  # e.g. a cost over its bound, refused before painting: whose
+        if str(e).startswith(output):
+            raise
+        raise RenderError(f"{source}: {e}") from None
 
 
 @click.command(name="plot")
