@@ -126,6 +126,9 @@ class MachineRun:
     until: float | None = None
     """After a stop: the planned time the machine had drawn to (the comparison cuts the plan
     there); None when the job ran to its end."""
+    judge: Callable[[dict[str, Any]], list[str]] | None = None
+    """The device's own budgets: given the report (with its comparison), the warnings for
+    every figure outside them, each naming the run, the figure and the cause."""
     ramp: float = 0.0
     """s the machine takes to regain the planned speed after a pause it holds with the pen down
     (a plotter's feed hold): left out of the velocity comparison after each pause."""
@@ -272,6 +275,8 @@ def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[s
             report["comparison_error"] = str(e)
         else:
             report.update(comparison.as_dict())
+            if run.judge is not None:
+                report["warnings"] += run.judge(report)
     else:
         report["comparison_error"] = "nothing was executed"
     if recorded is not None and run.sparse:

@@ -500,6 +500,9 @@ class RunAlignment:
     executed_duration: float
     """From the first to the last executed movement, s."""
     snr_db: float
+    deviation_max: float = math.nan
+    """Largest distance either way between this run's executed and planned paths, mm (NaN
+    where it is not measured)."""
 
 
 @dataclass(frozen=True)
@@ -539,6 +542,7 @@ class ExecutionComparison:
                     "planned_duration": r.planned_duration,
                     "executed_duration": r.executed_duration,
                     "speed_snr_db": r.snr_db,
+                    "path_deviation_max_mm": r.deviation_max,
                 }
                 for r in self.runs
             ],
@@ -628,6 +632,7 @@ def compare_execution(
                 planned_duration=float(p_end - p_onset),
                 executed_duration=float(e_end - e_onset),
                 snr_db=_db(a, b),
+                deviation_max=float(max(d_exec.max(), d_plan.max())),
             )
         )
     d_exec_all = np.concatenate(to_path)

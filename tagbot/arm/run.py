@@ -36,15 +36,17 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from tagbot.arm.driver import ArmDriver, StreamResult
-from tagbot.arm.kinematics import Arm, angles_to_ticks, ticks_to_angles
+from tagbot.arm.kinematics import RAD_PER_TICK, Arm, angles_to_ticks, ticks_to_angles
 from tagbot.arm.place import ArmProgram, Setpoints, approach, build_program
 from tagbot.arm.profile import ArmProfile, load_profile
 from tagbot.control import RunControl
 from tagbot.draw import MachineRun
 from tagbot.errors import DeviceError, InputError, Interrupted, ProfileError
 from tagbot.io.motionfile import MotionTable
+from tagbot.metrics import densify
 from tagbot.model import Tag
 from tagbot.ports import check_port
 from tagbot.signals import label, signal_of
@@ -375,7 +377,103 @@ class ArmJob:
             pauses=pauses,
             stalls=stalls,
             until=outcome.until,
+            judge=Budget(program, profile, stalls, _late(result, program)),
         )
+
+
+MIN_SPEED_SNR_DB = 25.0
+"""Per-run speed SNR below this gets a warning naming its cause."""
+
+
+def _late(result: StreamResult | None, program: ArmProgram) -> Array:
+    """``(n, 2)``: executed-clock time each late tick's goal was due at the pen, and its
+    lateness (s)."""
+    if result is None or result.scheduler is None or not result.scheduler.sends:
+        return np.zeros((0, 2))
+    s = result.scheduler
+    late = np.array(s.lateness)
+    at = np.array(s.sends) - late + result.lead - origin(result, program)
+    keep = late > s.late_after
+    return np.column_stack([at[keep], late[keep]])
+
+
+@dataclass(frozen=True, eq=False)
+class Budget:
+    """The arm's budgets for :attr:`tagbot.draw.MachineRun.judge`: each pen-down run's path
+    deviation within ``motion.max_deviation`` and speed SNR at least :data:`MIN_SPEED_SNR_DB`,
+    or a warning naming the run, the figure and its cause: host stalls with the pen down, late
+    goals, the goals' rounding to whole ticks (small slow strokes: the plan itself, rounded,
+    falls short), else the servos' follow beyond the retiming's model."""
+
+    program: ArmProgram
+    profile: ArmProfile
+    stalls: list[tuple[float, float]]
+    late: Array
+
+    def __call__(self, report: dict[str, Any]) -> list[str]:
+        budget = float(self.profile["motion.max_deviation"])
+        out = []
+        for i, run in enumerate(report.get("runs", [])):
+            deviation, snr = run["path_deviation_max_mm"], run["speed_snr_db"]
+            over = []
+            if deviation is not None and deviation > budget:
+                over.append(
+                    f"path deviation {deviation:.3f} mm over motion.max_deviation ({budget:g} mm)"
+                )
+            if snr is not None and snr < MIN_SPEED_SNR_DB:
+                over.append(f"speed SNR {snr:.1f} dB below {MIN_SPEED_SNR_DB:g} dB")
+            if over:
+                far = deviation is not None and deviation > budget
+                cause = self.cause(run, far, snr is not None and snr < MIN_SPEED_SNR_DB)
+                out.append(f"run {i + 1} (plan {run['plan']}): {' and '.join(over)}: {cause}")
+                log.warning("%s", out[-1])
+        return out
+
+    def cause(self, run: dict[str, Any], far: bool, slow: bool) -> str:
+        """Why ``run`` (a report's entry) left the budget, as far as the run's record tells."""
+        start = run["executed_start"]
+        end = start + run["planned_duration"] + 1.0
+        held = [h for a, h in self.stalls if start - 0.05 <= a <= end]
+        if held:
+            return (
+                f"{len(held)} host stall{'s' * (len(held) > 1)} ({1e3 * sum(held):.0f} ms) with"
+                " the pen down"
+            )
+        late = self.late[(self.late[:, 0] >= start) & (self.late[:, 0] <= end)]
+        if len(late):
+            return f"{len(late)} late goals (up to {1e3 * late[:, 1].max():.1f} ms)"
+        deviation, snr = self.rounded(int(run["plan"]))
+        budget = float(self.profile["motion.max_deviation"])
+        causes = []
+        if far and deviation > budget:
+            causes.append(f"the goals as sent lie up to {deviation:.3f} mm from the path")
+        if slow and snr < MIN_SPEED_SNR_DB + 3.0:
+            causes.append(f"the plan's speed, rounded so, has {snr:.1f} dB (a small or slow run)")
+        if causes:
+            tick = math.degrees(RAD_PER_TICK)
+            return f"the goals' rounding to whole ticks ({tick:.3f}°): {'; '.join(causes)}"
+        return "the servos' follow beyond the retiming's model (motion.max_deviation)"
+
+    def rounded(self, plan: int) -> tuple[float, float]:
+        """The run's goals as sent (whole ticks, through FK) against its plan: their largest
+        distance from the planned path (mm) and their speed SNR (dB)."""
+        sp, profile = self.program.setpoints, self.profile
+        rows = np.flatnonzero(sp.plan == plan)
+        if len(rows) < 3:
+            return 0.0, math.inf
+        goals = self.program.goals[rows]
+        shoulder, elbow = profile.joints
+        q = np.column_stack(
+            [ticks_to_angles(goals[:, 0], shoulder), ticks_to_angles(goals[:, 1], elbow)]
+        )
+        xy = Arm.from_profile(profile).fk(q).reshape(-1, 2)
+        t = sp.t[rows]
+        v = np.gradient(sp.xy[rows], t, axis=0)
+        error = np.gradient(xy, t, axis=0) - v
+        noise = float(np.sum(error * error))
+        snr = 10.0 * math.log10(float(np.sum(v * v)) / noise) if noise > 0 else math.inf
+        distance, _ = cKDTree(densify(sp.xy[rows], 0.005)).query(xy)
+        return float(distance.max()), snr
 
 
 def _with_resume(error: BaseException, sent: int) -> BaseException:

@@ -161,7 +161,39 @@ def test_a_host_stall_mid_ink_is_named_and_blamed_on_the_host(record, tmp_path, 
         clean["executed_duration_s"] + report["stalled_s"], abs=0.011
     )
     assert report["speed_snr_db"] < clean["speed_snr_db"] - 3
-    assert report["pauses"] == 0 and clean["stalls"] == 0 and clean["warnings"] == []
+    assert report["pauses"] == 0 and clean["stalls"] == 0
+    assert not any("stall" in w for w in clean["warnings"])
+    # The stalled run leaves the speed budget, and its warning says why.
+    snr = report["runs"][0]["speed_snr_db"]
+    assert (
+        snr < 25
+        and (
+            f"run 1 (plan 0): speed SNR {snr:.1f} dB below 25 dB: 1 host stall"
+            f" ({1e3 * report['longest_stall_s']:.0f} ms) with the pen down"
+        )
+        in report["warnings"]
+    )
+
+
+def test_a_run_over_the_arms_budget_carries_a_warning_naming_the_cause(record, tmp_path):
+    """motion.max_deviation (0.15 mm) is finer than half a tick at the pen where the second
+    plan is drawn: the goals as sent already lie 0.19 mm from the path. The report says so."""
+    reports = {}
+    for budget in ("0.15", "0.3"):
+        sim = record(simulated_chain(load_profile()))
+        job = prepare(two_plan_tag(), port=sim.url, overrides=(f"motion.max_deviation={budget}",))
+        (tmp_path / budget).mkdir()
+        reports[budget] = run_report(job.run(tmp_path / budget))
+    report = reports["0.15"]
+    deviation = report["runs"][1]["path_deviation_max_mm"]
+    assert 0.15 < deviation < 0.25 and report["runs"][0]["path_deviation_max_mm"] <= 0.15
+    assert report["warnings"] == [
+        f"run 2 (plan 1): path deviation {deviation:.3f} mm over motion.max_deviation (0.15 mm):"
+        " the goals' rounding to whole ticks (0.088°): the goals as sent lie up to"
+        f" {deviation:.3f} mm from the path"
+    ]
+    assert max(r["path_deviation_max_mm"] for r in reports["0.3"]["runs"]) < 0.3
+    assert reports["0.3"]["warnings"] == []
 
 
 def test_silence_while_requests_flow_is_still_the_servos(record, tmp_path) -> None:
