@@ -28,16 +28,23 @@ Three parts, each printed as a table:
    it) and serves the default chain (1 Mbps bus) on a pty, clean or with every reply 16 ms late
    (an FTDI adapter's default latency timer) plus up to 2 ms of jitter and 2 % of replies lost
    (``--reply-latency 0.016 --reply-jitter 0.002 --drop 0.02``). The ``--timing-tag`` is drawn
-   there through ``prepare(..., port=PATH).run`` at each rate; reported from the run's figures:
-   the loop rate, the period jitter p99 (|interval between tick starts − period|), lateness
-   p99, late ticks, resyncs, read-back replies late / missed.
+   there through ``prepare(..., port=PATH).run`` at each rate, on an idle host and beside
+   ``--hogs`` busy processes (a CPU load on the other core), with the loop's real-time
+   scheduling (``SCHED_FIFO``, where permitted) and without it; reported from the run's report:
+   the host's load average, whether the loop ran real-time, the period jitter p99 (|interval
+   between goals leaving the host − period|), lateness p99 and max (goals leaving after their
+   deadline), late ticks, resyncs, host stalls (count, total, longest), read-back replies late /
+   missed, the path deviation max against ``motion.max_deviation`` and the speed SNR (from the
+   100 Hz read-back: positions the servos reported), the warnings, and how the run ended.
 3. **IK throughput**: :meth:`tagbot.arm.Arm.ik` on 10⁶ reachable points, points per second.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+import os
 import signal
 import subprocess
 import sys
@@ -53,6 +60,7 @@ import tagbot
 from tagbot.arm import Arm, build_program, load_profile
 from tagbot.arm.place import time_at_ends
 from tagbot.arm.run import prepare
+from tagbot.draw import run_report
 from tagbot.metrics import compare_execution
 from tagbot.source import load_tag
 
@@ -122,7 +130,9 @@ def _draw(tag: tagbot.Tag, overrides: tuple[str, ...]) -> dict[str, Any]:
         run = job.run(Path(out))
     if run.error is not None:
         raise run.error
-    comparison = compare_execution(run.planned_runs, run.executed, plans=run.plans)
+    comparison = compare_execution(
+        run.planned_runs, run.executed, plans=run.plans, pauses=run.pauses, until=run.until
+    )
     resting, down = time_at_ends(job.program, job.profile, tag)
     near, _ = time_at_ends(job.program, job.profile)
     return {
@@ -137,6 +147,7 @@ def _draw(tag: tagbot.Tag, overrides: tuple[str, ...]) -> dict[str, Any]:
         "dev_max": comparison.deviation_max,
         "runs": f"{comparison.executed_runs}/{comparison.planned_runs}",
         "scales": job.program.setpoints.run_scales,
+        "warnings": run.warnings + (run.judge(comparison.as_dict()) if run.judge else []),
     }
 
 
@@ -204,6 +215,9 @@ def print_fidelity(rows: list[dict[str, Any]]) -> None:
         )
         print(f"{head} before |{_fidelity_cells(b)} |")
         print(f"| | | | | | | | | | now |{_fidelity_cells(n)} {mark(ok)} |")
+    for row in rows:
+        for warning in row["now"]["warnings"]:
+            print(f"  {row['tag']} at {row['rate']} Hz, now: {warning}")
     if ratios:
         print(
             f"\nJob time now ÷ before: median {np.median(ratios):.3f}, range"
@@ -216,43 +230,99 @@ def print_fidelity(rows: list[dict[str, Any]]) -> None:
 # -- loop timing --------------------------------------------------------------------------------
 
 
-def timing(rates: list[int], tag: tagbot.Tag) -> list[dict[str, Any]]:
-    """Draw ``tag`` over a ``tagbot sim arm`` pty at each rate, clean and with late replies."""
+@contextlib.contextmanager
+def hogs(count: int):
+    """``count`` busy processes (``while True: pass``) for the duration."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
+    try:
+        yield
+    finally:
+        for proc in procs:
+            proc.kill()
+            proc.wait(timeout=10)
+
+
+@contextlib.contextmanager
+def without_fifo(off: bool):
+    """With ``off``, real-time scheduling refused as on a host that does not permit it."""
+    if not off:
+        yield
+        return
+    original = os.sched_setscheduler
+
+    def refuse(*args: Any) -> None:
+        raise PermissionError("benchmark: not permitted")
+
+    os.sched_setscheduler = refuse  # type: ignore[assignment]
+    try:
+        yield
+    finally:
+        os.sched_setscheduler = original
+
+
+def timing(
+    rates: list[int], tag: tagbot.Tag, loads: list[int], fifo: list[bool]
+) -> list[dict[str, Any]]:
+    """Draw ``tag`` over a ``tagbot sim arm`` pty at each rate, clean and with late replies, on
+    an idle host and beside busy processes, with and without real-time scheduling."""
     rows = []
-    for fault, options in FAULTS.items():
-        for rate in rates:
-            rate_option = f"motion.rate={rate}"
-            server = subprocess.Popen(
-                [sys.executable, "-m", "tagbot", "sim", "arm", "--set", rate_option, *options],
-                stdout=subprocess.PIPE,
-                stderr=subprocess.DEVNULL,
-            )
-            try:
-                assert server.stdout is not None
-                path = server.stdout.readline().decode().strip()
-                job = prepare(tag, overrides=(rate_option,), port=path)
-                with tempfile.TemporaryDirectory() as out:
-                    run = job.run(Path(out))
-            finally:
-                server.send_signal(signal.SIGINT)
-                server.wait(timeout=10)
-            d = run.details
-            rows.append(
-                {
-                    "fault": fault,
-                    "rate": rate,
-                    "ticks": d.get("ticks_sent", 0),
-                    "error": None if run.error is None else str(run.error),
-                    **{key: d.get(key, math.nan) for key in _TIMING_KEYS},
-                }
-            )
+    for load in loads:
+        for fault, options in FAULTS.items():
+            for rate in rates:
+                for realtime in fifo:
+                    rows.append(_timed(tag, rate, fault, options, load, realtime))
     return rows
 
 
+def _timed(
+    tag: tagbot.Tag, rate: int, fault: str, options: tuple[str, ...], load: int, realtime: bool
+) -> dict[str, Any]:
+    rate_option = f"motion.rate={rate}"
+    server = subprocess.Popen(
+        [sys.executable, "-m", "tagbot", "sim", "arm", "--set", rate_option, *options],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        assert server.stdout is not None
+        path = server.stdout.readline().decode().strip()
+        job = prepare(tag, overrides=(rate_option,), port=path)
+        with hogs(load), without_fifo(not realtime), tempfile.TemporaryDirectory() as out:
+            run = job.run(Path(out))
+            loadavg = os.getloadavg()[0]
+    finally:
+        server.send_signal(signal.SIGINT)
+        server.wait(timeout=10)
+    report = run_report(run)
+    d = run.details
+    return {
+        "fault": fault,
+        "rate": rate,
+        "load": load,
+        "loadavg": loadavg,
+        "ticks": d.get("ticks_sent", 0),
+        "error": None if run.error is None else str(run.error),
+        "budget": job.profile["motion.max_deviation"],
+        **{key: report.get(key, math.nan) for key in _REPORT_KEYS},
+        **{key: d.get(key, math.nan) for key in _TIMING_KEYS},
+    }
+
+
+_REPORT_KEYS = (
+    "stalls",
+    "stalled_s",
+    "longest_stall_s",
+    "path_deviation_max_mm",
+    "speed_snr_db",
+    "warnings",
+)
+
 _TIMING_KEYS = (
+    "realtime",
     "loop_rate_hz",
     "period_jitter_p99_ms",
     "lateness_p99_ms",
+    "max_lateness_ms",
     "late_ticks",
     "resyncs",
     "readback_requests",
@@ -262,23 +332,39 @@ _TIMING_KEYS = (
 )
 
 
+def _number(value: Any, digits: int) -> str:
+    return (
+        "-"
+        if value is None or (isinstance(value, float) and math.isnan(value))
+        else (f"{value:.{digits}f}")
+    )
+
+
 def print_timing(rows: list[dict[str, Any]], tag: str) -> None:
     print(f"Loop timing over a pty (tagbot sim arm in its own process), drawing {tag}")
     print(
-        "| line | rate Hz | ticks | loop rate Hz | jitter p99 ms | lateness p99 ms | late ticks"
-        " | resyncs | read-backs | late / missed replies (per servo) | reply delay p99 ms"
-        " | result |"
+        "| line | busy procs (load avg) | FIFO | rate Hz | ticks | jitter p99 ms | lateness"
+        " p99 / max ms | late ticks | resyncs | stalls (s, longest ms) | late / missed replies"
+        " | dev max mm (budget) | SNR dB | warnings | result |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---|")
+    print("|---|---|---|---:|---:|---:|---|---:|---:|---|---|---|---:|---:|---|")
     for row in rows:
         result = "completed" if row["error"] is None else f"stopped: {row['error']}"
+        warnings = row["warnings"] if isinstance(row["warnings"], list) else []
         print(
-            f"| {row['fault']} | {row['rate']} | {row['ticks']} | {row['loop_rate_hz']:.1f} |"
-            f" {row['period_jitter_p99_ms']:.3f} | {row['lateness_p99_ms']:.3f} |"
-            f" {row['late_ticks']} | {row['resyncs']} | {row['readback_requests']} |"
+            f"| {row['fault']} | {row['load']} ({row['loadavg']:.1f}) |"
+            f" {'on' if row['realtime'] else 'off'} | {row['rate']} | {row['ticks']} |"
+            f" {_number(row['period_jitter_p99_ms'], 3)} | {_number(row['lateness_p99_ms'], 2)}"
+            f" / {_number(row['max_lateness_ms'], 1)} | {row['late_ticks']} | {row['resyncs']} |"
+            f" {row['stalls']} ({_number(row['stalled_s'], 3)},"
+            f" {_number(1e3 * row['longest_stall_s'], 0)}) |"
             f" {row['readback_late_replies']} / {row['readback_missed_replies']} |"
-            f" {row['reply_delay_p99_ms']:.1f} | {result} |"
+            f" {_number(row['path_deviation_max_mm'], 3)} ({row['budget']:g}) |"
+            f" {_number(row['speed_snr_db'], 1)} | {len(warnings)} | {result} |"
         )
+    for row in rows:
+        for warning in row["warnings"] if isinstance(row["warnings"], list) else []:
+            print(f"  {row['fault']}, {row['load']} busy, FIFO {row['realtime']}: {warning}")
 
 
 # -- IK -----------------------------------------------------------------------------------------
@@ -303,7 +389,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--gml", type=int, default=4, help="GML tags from ../shared/data")
     parser.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
-    parser.add_argument("--rates", default="100,200,500", help="loop rates of the timing, Hz")
+    parser.add_argument("--rates", default="100", help="loop rates of the timing, Hz")
+    parser.add_argument("--hogs", default="0,1", help="busy processes beside the timing runs")
+    parser.add_argument(
+        "--fifo", default="on,off", help="real-time scheduling of the loop: on (if permitted), off"
+    )
     parser.add_argument("--fidelity-rates", default="100", help="loop rates of part 1, Hz")
     parser.add_argument("--timing-tag", default="letter-b.json", help="example drawn over the pty")
     parser.add_argument("--skip-timing", action="store_true", help="no real-time pty part")
@@ -317,7 +407,9 @@ def main() -> None:
         print()
     if not args.skip_timing:
         tag = load_tag(str(EXAMPLES / args.timing_tag))
-        print_timing(timing(rates, tag), args.timing_tag)
+        loads = [int(n) for n in args.hogs.split(",")]
+        fifo = [word == "on" for word in args.fifo.split(",")]
+        print_timing(timing(rates, tag, loads, fifo), args.timing_tag)
         print()
     print(f"IK throughput: {ik_throughput() / 1e6:.1f} M points/s")
 

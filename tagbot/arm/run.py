@@ -449,10 +449,14 @@ class Budget:
             causes.append(f"the goals as sent lie up to {deviation:.3f} mm from the path")
         if slow and snr < MIN_SPEED_SNR_DB + 3.0:
             causes.append(f"the plan's speed, rounded so, has {snr:.1f} dB (a small or slow run)")
-        if causes:
-            tick = math.degrees(RAD_PER_TICK)
-            return f"the goals' rounding to whole ticks ({tick:.3f}°): {'; '.join(causes)}"
-        return "the servos' follow beyond the retiming's model (motion.max_deviation)"
+        follow = "the servos' follow beyond the retiming's model (motion.max_deviation)"
+        if not causes:
+            return follow
+        tick = math.degrees(RAD_PER_TICK)
+        rounding = f"the goals' rounding to whole ticks ({tick:.3f}°): {'; '.join(causes)}"
+        if far and deviation < 0.9 * run["path_deviation_max_mm"]:
+            return f"{rounding}; the rest, {follow}"
+        return rounding
 
     def rounded(self, plan: int) -> tuple[float, float]:
         """The run's goals as sent (whole ticks, through FK) against its plan: their largest
