@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tagbot import metrics_kernels as kernels
 from tagbot.inputs.stamps import BLENDS, GAP, REGULAR, SMOOTHING
-from tagbot.model.motion import Motion, sample_ink, sampled_plans
+from tagbot.model.motion import Motion, sampled_plans
 from tagbot.model.plan import Plan, Tag
 
 Array = NDArray[np.float64]
@@ -329,15 +329,10 @@ def fit_report(
     """
     polylines = [np.asarray(getattr(tr, "xy", tr), dtype=float) for tr in traces]
     # Each plan sampled on its own grid: a pen lift shorter than dt cannot make the report fail.
-    model_t, model_xy, model_v, first = sampled_plans(tag, dt)
-    # The shape is what the plans ink: a plan that touches down moving only within its window.
-    drawn = (model_xy, first[1:])
-    lifted = [k for k, plan in enumerate(tag.plans) if plan.ink is not None]
-    if lifted:
-        parts = np.split(model_xy, first[1:-1])
-        for k, (_, xy, _) in zip(lifted, sample_ink(tag, dt, lifted), strict=True):
-            parts[k] = xy
-        drawn = _joined(parts)
+    model_t, _, model_v, first = sampled_plans(tag, dt)
+    # The shape is what the plans ink: a plan that touches down moving only within its window,
+    # sampled finely enough that its chords cut no corner (ink_polyline).
+    drawn = _joined([ink_polyline(plan, tag.size, dt) for plan in tag.plans])
     reference = _joined(polylines)
     shape = _shape_error(reference, drawn)
     turning = kernels.turning(*reference) / np.pi
@@ -364,6 +359,38 @@ def fit_report(
         velocity_snr_clock_db=clock_snr,
         timing=timing_summary(timings),
     )
+
+
+def ink_polyline(plan: Plan, size: float, dt: float = 0.005) -> Array:
+    """What ``plan`` inks (:meth:`~tagbot.model.plan.Plan.ink_window`) as a polyline, sampled
+    every ``dt`` seconds and, where a chord between samples would cut the path by more than the
+    shape error's precision (1/(2·:data:`DENSITY`) of ``size``, judged at its middle instant),
+    halved until none does: a fast plan's corners are measured, not cut."""
+    from tagbot.model.motion import evaluate_plan
+
+    down, up = plan.ink_window(size)
+    t = np.minimum(down + dt * np.arange(max(math.ceil((up - down) / dt - 1e-9), 1) + 1), up)
+    xy, _ = evaluate_plan(plan, t, size)
+    tolerance = size / (2 * DENSITY)
+    check = np.arange(len(t) - 1)
+    for _ in range(24):  # each round halves the chords still too far from the path
+        middle = 0.5 * (t[check] + t[check + 1])
+        at, _ = evaluate_plan(plan, middle, size)
+        a, b = xy[check], xy[check + 1]
+        ab = b - a
+        length2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300)
+        u = np.clip(np.einsum("ij,ij->i", at - a, ab) / length2, 0.0, 1.0)
+        off = np.hypot(*(at - a - u[:, None] * ab).T)
+        bad = np.flatnonzero(off > tolerance)
+        if not bad.size:
+            break
+        where = check[bad] + 1
+        t = np.insert(t, where, middle[bad])
+        xy = np.insert(xy, where, at[bad], axis=0)
+        inserted = where + np.arange(bad.size)
+        check = np.concatenate([inserted - 1, inserted])
+        check.sort()
+    return xy
 
 
 def timing_summary(timings: Sequence[Any] | None) -> str | None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import shapely
@@ -286,3 +288,32 @@ def test_a_report_imports_no_kd_tree_it_does_not_use() -> None:
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "False"
+
+
+def test_the_ink_is_measured_without_cutting_corners():
+    """A fast plan sampled every 5 ms would cut its corners by its chords: the measured ink's
+    chords keep within the shape error's precision of the path (checked at 20 instants inside
+    each), from its touch-down to its lift-off; a straight stroke keeps its 5 ms samples."""
+    from tagbot.metrics import DENSITY, ink_polyline
+    from tagbot.model.motion import evaluate_plan
+    from tagbot.model.plan import Plan
+
+    fast = Plan([[0, 0], [100, 0], [100, 100], [0, 100]], [0, 0.01, 0.01], [-4.0] * 3, [0.3] * 3,
+                [0.0, 0.5, -0.5], [0.0] * 3, 0.0, (0.005, 0.05))  # fmt: skip
+    size = float(np.hypot(100, 100))
+    xy = ink_polyline(fast, size)
+    down, up = fast.ink_window(size)
+    dense = np.linspace(down, up, 200_001)
+    path, _ = evaluate_plan(fast, dense, size)
+    # Each path point's distance to the polyline (its nearest chord) within the precision.
+    from shapely import LineString, Point
+
+    line = LineString(xy)
+    worst = max(line.distance(Point(p)) for p in path[::50])
+    assert worst <= size / (2 * DENSITY) * 1.05
+    every_5ms = evaluate_plan(fast, np.minimum(down + 0.005 * np.arange(11), up), size)[0]
+    assert max(LineString(every_5ms).distance(Point(p)) for p in path[::50]) > 10 * worst
+    ends, _ = evaluate_plan(fast, [down, up], size)
+    np.testing.assert_allclose(xy[[0, -1]], ends, atol=1e-9)
+    slow = Plan([[0, 0], [100, 0]], [0.0], [np.log(2.0)], [0.3], [0.0], [0.0])
+    assert len(ink_polyline(slow, 100.0)) == math.ceil(slow.end(100.0) / 0.005 - 1e-9) + 1

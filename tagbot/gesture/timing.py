@@ -66,7 +66,8 @@ lift; each plan's own rhythm is kept.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -264,9 +265,20 @@ def resample(t: Array, xy: Array, options: TimingOptions) -> Recording:
     # The first and last samples' instants are grid instants too: where the ink starts and ends.
     grid = np.union1d(_grid(t, step, max(options.stall, 4.0 * width), options.pad), t[[0, -1]])
     out = timing_kernels.local_quadratic(t, xy[:, 0].copy(), xy[:, 1].copy(), grid, width)
-    return Recording(
-        grid, out[:, 0:2].copy(), out[:, 2:4].copy(), out[:, 4].copy(), float(grid[-1])
-    )
+    return Recording(grid, _through(t, xy, grid), out[:, 2:4].copy(), out[:, 4].copy(),
+                     float(grid[-1]))  # fmt: skip
+
+
+def _through(t: Array, xy: Array, grid: Array) -> Array:
+    """Positions at the ``grid`` instants on the recorded polyline itself, the samples joined in
+    time order (samples sharing an instant averaged): a sharp corner sampled sparsely stays
+    sharp, where the smoothing regression would round it by as much as the samples are apart,
+    and the shape is what the fit is held to."""
+    instants, which = np.unique(t, return_inverse=True)
+    count = np.bincount(which, minlength=len(instants))
+    x = np.bincount(which, xy[:, 0], len(instants)) / count
+    y = np.bincount(which, xy[:, 1], len(instants)) / count
+    return np.column_stack([np.interp(grid, instants, x), np.interp(grid, instants, y)])
 
 
 def _grid(t: Array, step: float, stall: float, pad: float) -> Array:
@@ -824,7 +836,10 @@ SHAPE_MARGIN_MAX = (1.5, 0.005)
 """... and its maximum by ``max(1.5 times, +0.5 %)`` of it; otherwise the trace keeps the geometric
 plan, its clock scaled to the recorded span (the shape exactly the geometric fit's)."""
 
-TimingKind = Literal["matched", "scaled", "geometric"]
+TimingKind = Literal["matched", "restrained", "mapped", "scaled", "geometric"]
+RESTRAINT = 8.0
+"""Where the timed fit would miss the shape, it is tried again with the positions weighing this
+many times more (:attr:`TimingOptions.position_weight`)."""
 
 
 @dataclass(frozen=True)
@@ -832,9 +847,12 @@ class TraceTiming:
     """How one trace's plan was timed, and why it was not matched to the recording."""
 
     kind: TimingKind
-    """``matched``: its velocity fitted to the recorded one; ``scaled``: the geometric plan,
-    its clock scaled to the recorded pen-down span; ``geometric``: the geometric plan at the
-    paper's rhythm."""
+    """How much of the recorded timing it keeps, the most first: ``matched``: its velocity
+    fitted to the recorded one; ``restrained``: fitted again with the shape weighing more (the
+    first fit missed the shape); ``mapped``: the geometric plan's strokes moved onto the
+    recording's clock by arc length; ``scaled``: the geometric plan, its clock scaled to the
+    recorded pen-down span (the geometric fit's shape exactly); ``geometric``: the geometric
+    plan at the paper's rhythm (a clock no hand can produce)."""
     reason: str = ""
     """Why it is not ``matched`` (empty when it is)."""
 
@@ -947,10 +965,17 @@ def match(
             plan, timing_k = geometric.at(float(t[0])), TraceTiming("geometric", verdicts[k])
         else:
             limits = (float(lows[k] - t[0]), float(highs[k] - t[0]))
-            plan, kind, reason = _kept_to_shape(chosen[k], geometric, trace, tag_size, limits)
-            # A matched plan is on the clock of the instant behind the first stamp.
-            base = candidates[k][1] if kind == "matched" else float(t[0])
+            enough = int(np.count_nonzero(np.diff(t) > 0)) + 1 >= MIN_SAMPLES
+            options = _shape_first(
+                chosen[k] if enough else None, candidates[k][1], geometric, trace, size, model,
+                opts,
+            )  # fmt: skip
+            plan, kind, base, reason, window = _kept_to_shape(
+                options, geometric, trace, tag_size, limits
+            )
             plan = _with_ink(plan.at(base + plan.start), t, tag_size, (lows[k], highs[k]))
+            if window[1] == np.inf:  # the shape needs more ink than the recorded lift leaves
+                plan = _with_ink(plan, t, tag_size)
             if kind == "scaled" and implausible_clock(geometric.n_strokes, turning[k], spans[k]):
                 plan, kind = geometric.at(float(t[0])), "geometric"  # (under match)
                 reason += "; its recorded span is too short for the geometric plan"
@@ -991,44 +1016,72 @@ def _with_ink(
 
 def _drawn_error(plan: Plan, xy: Array, size: float) -> tuple[float, float]:
     """Mean and max shape error of what ``plan`` inks against the polyline ``xy``, as fractions
-    of ``size``: the ink sampled every 5 ms (as :func:`tagbot.metrics.fit_report` does), or
-    1000 times if that is finer (a fast plan's chords would cut its corners)."""
-    from tagbot.metrics import shape_error
-    from tagbot.model.motion import evaluate_plan
+    of ``size``, as :func:`tagbot.metrics.fit_report` measures them."""
+    from tagbot.metrics import ink_polyline, shape_error
 
-    down, up = plan.ink_window(size)
-    drawn, _ = evaluate_plan(
-        plan, np.linspace(down, up, max(math.ceil((up - down) / 0.005), 1000) + 1), size
-    )
-    error = shape_error([xy], [drawn])
+    error = shape_error([xy], [ink_polyline(plan, size)])
     return error.mean * error.size / size, error.max * error.size / size
 
 
 def _kept_to_shape(
-    timed: Plan, geometric: Plan, trace: Any, size: float, limits: tuple[float, float]
-) -> tuple[Plan, TimingKind, str]:
-    """``timed`` (relative to the trace's first instant) if its ink (within ``limits``, relative
-    too) keeps within the shape margins of ``geometric``'s, else ``geometric`` scaled to the
-    recorded span, and why."""
+    candidates: Iterator[tuple[Plan, TimingKind, float]],
+    geometric: Plan,
+    trace: Any,
+    size: float,
+    limits: tuple[float, float],
+) -> tuple[Plan, TimingKind, float, str, tuple[float, float]]:
+    """The first of ``candidates`` (plans relative to the instant ``t0`` each comes with, their
+    kind) whose ink, within ``limits`` (relative to the trace's first stamp) or else without
+    them, keeps within the shape margins of ``geometric``'s, else ``geometric`` scaled to the
+    recorded span; with its ``t0``, why the first candidate was not kept, and the limits its
+    ink keeps to (relative to its ``t0``)."""
     xy = np.asarray(trace.xy, dtype=float)
     t = np.asarray(trace.t, dtype=float)
-    relative = t - t[0]
     reference = _drawn_error(geometric, xy, size)
     limit_mean = reference[0] + SHAPE_MARGIN_MEAN
     limit_max = max(SHAPE_MARGIN_MAX[0] * reference[1], reference[1] + SHAPE_MARGIN_MAX[1])
     distinct = int(np.count_nonzero(np.diff(t) > 0)) + 1
-    if distinct >= MIN_SAMPLES:
-        mean, largest = _drawn_error(_with_ink(timed, relative, size, limits), xy, size)
-        if mean <= limit_mean and largest <= limit_max:
-            return timed, "matched", ""
-        reason = (
-            f"the timed fit missed the shape: mean {100 * mean:.2f} %, max {100 * largest:.2f} %"
-            f" of the size, against {100 * reference[0]:.2f} % and {100 * reference[1]:.2f} %"
-            " geometric"
-        )
-    else:
-        reason = f"{distinct} distinct time stamps, too few to fit a speed"
-    return _scaled(geometric, relative, size), "scaled", reason
+    reason = f"{distinct} distinct time stamps, too few to fit a speed"
+    for k, (plan, kind, t0) in enumerate(candidates):
+        # Inking within the recorded lifts, else as long as the shape needs (which may delay
+        # the next plan a little: the shape comes first).
+        for window in ((limits[0] + t[0] - t0, limits[1] + t[0] - t0), (-np.inf, np.inf)):
+            mean, largest = _drawn_error(_with_ink(plan, t - t0, size, window), xy, size)
+            if mean <= limit_mean and largest <= limit_max:
+                return plan, kind, t0, ("" if k == 0 and kind == "matched" else reason), window
+        if k == 0 and kind == "matched":
+            reason = (
+                f"the timed fit missed the shape: mean {100 * mean:.2f} %, max"
+                f" {100 * largest:.2f} % of the size, against {100 * reference[0]:.2f} % and"
+                f" {100 * reference[1]:.2f} % geometric"
+            )
+    return _scaled(geometric, t - t[0], size), "scaled", float(t[0]), reason, limits
+
+
+def _shape_first(
+    timed: Plan | None,
+    t0: float,
+    geometric: Plan,
+    trace: Any,
+    size: float,
+    model: Model,
+    options: TimingOptions,
+) -> Iterator[tuple[Plan, TimingKind, float]]:
+    """The plans a trace may be drawn with, the most timing first: the timed fit (if it has
+    one), the timed fit again with positions weighing :data:`RESTRAINT` times more, then the
+    geometric plan moved onto the recording's clock by arc length (:func:`initial_timing`)."""
+    if timed is not None:
+        yield timed, "matched", t0
+        stronger = replace(options, position_weight=options.position_weight * RESTRAINT)
+        restrained, t0, _ = _match_trace(geometric, trace, size, model, stronger)
+        yield restrained, "restrained", t0
+    xy = np.asarray(trace.xy, dtype=float)
+    t, _ = sample_instants(trace.t, xy)
+    rec = resample(t - t[0], xy, options)
+    try:
+        yield _as_plan(initial_timing(geometric, rec, size, options)), "mapped", float(t[0])
+    except PlanError:
+        return
 
 
 def _scaled(plan: Plan, t: Array, size: float) -> Plan:
