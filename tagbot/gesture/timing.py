@@ -171,7 +171,9 @@ class TimingOptions:
     """Stop once a step lowers the cost by less than this fraction."""
     work: float = 4e8
     """Floating-point operations a solver stage may spend, about: traces whose strokes overlap
-    so much that the normal equations' band is wide get fewer iterations (at least one)."""
+    so much that the normal equations' band is wide get fewer iterations, and none where one
+    would cost more than this (thousands of strokes at once, e.g. random points: the trace then
+    keeps the timing it has)."""
     max_stroke_ratio: float = 1.5
     """Strokes may be added up to this many times the geometric fit's count (at least 2)."""
     split_rounds: int = 3
@@ -780,6 +782,8 @@ def _levenberg_marquardt(
         if iteration == 0:  # bound the work: a step costs about params·band² (and the rows')
             band = a.shape[1]
             work = problem.params * band * band + jac[0].size * band
+            if work > options.work:  # strokes overlapping so much that one step is too dear:
+                return x, cost  # the trace keeps the timing it has (see _shape_first)
             iterations = int(np.clip(options.work / (7 * work), 1, options.iterations))
         diag = np.maximum(a[:, 0], 1e-12 * max(float(np.max(a[:, 0])), 1e-300))
         accepted = False
