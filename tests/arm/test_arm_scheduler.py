@@ -154,3 +154,24 @@ def test_program_time_leaves_out_resync_gaps_and_pauses() -> None:
     t = scheduler.program_time(clock_times, lag=0.005)
     expected = [-0.105, 0.015, 0.04, np.nan, 0.05, 0.075, np.nan, np.nan, np.nan, 0.09]
     assert np.allclose(t, expected, equal_nan=True)
+
+
+def test_real_time_scheduling_only_on_the_wall_clock_and_put_back() -> None:
+    import os
+
+    from tagbot.arm.driver import FIFO_PRIORITY, _RealTime
+
+    before = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
+    simulated = _RealTime(FakeClock())
+    assert simulated.fifo is False and os.sched_getscheduler(0) == before[0]
+    simulated.end()
+    wall = _RealTime(MonotonicClock())
+    try:
+        if wall.fifo:  # permitted here (root, CAP_SYS_NICE or an rtprio limit)
+            assert os.sched_getscheduler(0) == os.SCHED_FIFO
+            assert os.sched_getparam(0).sched_priority == FIFO_PRIORITY
+        else:
+            assert os.sched_getscheduler(0) == before[0]
+    finally:
+        wall.end()
+    assert (os.sched_getscheduler(0), os.sched_getparam(0).sched_priority) == before
