@@ -9,6 +9,7 @@ import json
 import logging
 import math
 import os
+import signal
 import time
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from tagbot.errors import (
     PlacementError,
     PortError,
     ProfileError,
+    SignalInterrupt,
 )
 
 from .conftest import FAST, GOAL_POSITION, Recorded, small_tag, two_plan_tag
@@ -168,7 +170,16 @@ def test_the_run_folder_keeps_the_executed_trace_up_to_a_fault(
     _stopped_safely(sim, profile)
 
 
-def test_ctrl_c_is_interrupted_naming_the_last_tick(sim_default, record, tmp_path) -> None:
+@pytest.mark.parametrize(
+    ("stop_signal", "named"),
+    [
+        (KeyboardInterrupt, "Ctrl-C"),
+        (lambda: SignalInterrupt(signal.SIGTERM, "SIGTERM"), "SIGTERM"),
+    ],
+)
+def test_ctrl_c_is_interrupted_naming_the_last_tick(
+    sim_default, record, tmp_path, stop_signal, named
+) -> None:
     profile, sim = sim_default
     job = prepare(two_plan_tag(), port=sim.url)
     pen_down = np.flatnonzero(job.program.goals[:, 2] == profile["pen.down"])
@@ -176,12 +187,12 @@ def test_ctrl_c_is_interrupted_naming_the_last_tick(sim_default, record, tmp_pat
 
     def progress(done: int, total: int) -> None:
         if done > stop:
-            raise KeyboardInterrupt
+            raise stop_signal()
 
     run = job.run(tmp_path, progress=progress)
     where = f"tick {stop + 1} (the last tick executed; resume with --resume-from {stop + 2})"
     assert isinstance(run.error, Interrupted) and run.error.where == where
-    assert str(run.error).startswith(f"{where}: interrupted (")
+    assert str(run.error).startswith(f"{where}: interrupted ({named})")
     assert run.executed_steps == stop + 1 and run.resume_from == stop + 2
     assert _goals_received(sim, 1) == job.program.goals[: stop + 1, 0].tolist()
     _stopped_safely(sim, profile)
