@@ -163,6 +163,7 @@ def fit_one(job: FileJob, row: dict[str, Any]) -> Tag:
             shape_error_mean=report.shape.mean,
             shape_error_max=report.shape.max,
             velocity_snr_clock_db=report.velocity_snr_clock_db,
+            velocity_snr_trace_db=report.velocity_snr_trace_db,
             velocity_snr_db=report.velocity_snr_db,
             summary=report.summary(),
         )
@@ -383,6 +384,7 @@ SUMMARY_FIELDS = (
     "shape_error_mean",
     "shape_error_max",
     "velocity_snr_clock_db",
+    "velocity_snr_trace_db",
     "velocity_snr_db",
     "timing",
     "timing_notes",

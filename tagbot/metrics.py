@@ -289,7 +289,8 @@ class FitReport:
     """Strokes per 180° of the input's turning (the paper adds one per 180°)."""
     velocity_snr_db: float | None
     """Velocity SNR against the recorded timing trace by trace, each after its own best time
-    scale and offset (None when the input has none)."""
+    scale and offset, as the Sigma-Lognormal literature scores fits (None when the input has
+    none)."""
     clock: str | None = None
     """How the input's clock unit was read (``Trace.clock``), None when no reader decided it."""
     velocity_snr_clock_db: float | None = None
@@ -298,15 +299,20 @@ class FitReport:
     ±:data:`CLOCK_REACH`) and no scaling (None when the input has no timing)."""
     timing: str | None = None
     """How the traces were timed (``"3 matched, 1 scaled"``), when the fit said."""
+    velocity_snr_trace_db: float | None = None
+    """Velocity SNR trace by trace, each with its own time offset but no scaling
+    (:func:`tag_clock_snr`; None when the input has no timing)."""
 
     def summary(self) -> str:
         """One line for people."""
         snr = ""
-        if self.velocity_snr_clock_db is not None:
-            snr = f", velocity SNR {self.velocity_snr_clock_db:.1f} dB on the tag's clock"
-        if self.velocity_snr_db is not None:
-            snr += (", " if snr else ", velocity SNR ") + f"{self.velocity_snr_db:.1f} dB"
-            snr += " trace by trace" if self.velocity_snr_clock_db is not None else ""
+        if self.velocity_snr_clock_db is not None and self.velocity_snr_trace_db is not None:
+            snr = (
+                f", velocity SNR {self.velocity_snr_clock_db:.1f} dB on the tag's clock,"
+                f" {self.velocity_snr_trace_db:.1f} dB trace by trace"
+            )
+        elif self.velocity_snr_db is not None:
+            snr = f", velocity SNR {self.velocity_snr_db:.1f} dB"
         timing = f"; timing: {self.timing}" if self.timing else ""
         return (
             f"{_count(self.traces, 'trace')} ({_count(self.points, 'point')}) ->"
@@ -347,7 +353,7 @@ def fit_report(
         compared = status == kernels.OK  # the others too short to compare
         signal, noise = energy[compared].sum(), (energy / 10 ** (db / 10))[compared].sum()
         snr = float(10 * np.log10(signal / noise)) if noise > 0 else None
-        clock_snr = tag_clock_snr(traces, tag)
+        clock_snr = tag_clock_snr(traces, tag)  # (own clock, trace by trace), no scaling
     return FitReport(
         traces=len(polylines),
         points=sum(len(p) for p in polylines),
@@ -356,7 +362,8 @@ def fit_report(
         strokes_per_half_turn=tag.n_strokes / turning if turning > 0 else float("nan"),
         velocity_snr_db=snr,
         clock=next((c for c in (getattr(tr, "clock", None) for tr in traces) if c), None),
-        velocity_snr_clock_db=clock_snr,
+        velocity_snr_clock_db=None if clock_snr is None else clock_snr[0],
+        velocity_snr_trace_db=None if clock_snr is None else clock_snr[1],
         timing=timing_summary(timings),
     )
 
@@ -406,45 +413,51 @@ CLOCK_REACH = 0.25
 
 def tag_clock_snr(
     traces: Sequence[Any], tag: Tag, cutoff: float | None = VELOCITY_CUTOFF
-) -> float | None:
-    """Velocity SNR in dB of ``tag`` (one plan per trace) against the timed ``traces`` on the
-    tag's own clock: each trace's velocity (:func:`recorded_velocity`, low-passed at
-    ``cutoff``) against its plan's at the same instants, with the one offset (within
-    ±:data:`CLOCK_REACH`, every 5 ms, then parabolic) that suits the whole capture best, and no
-    time scaling: what a machine drawing the tag on its clock reproduces. None when no trace is
-    long enough to compare."""
+) -> tuple[float, float] | None:
+    """Velocity SNR in dB of ``tag`` (one plan per trace) against the timed ``traces``, with no
+    time scaling: ``(on the tag's own clock, trace by trace)``. Each trace's velocity
+    (:func:`recorded_velocity`, low-passed at ``cutoff``) is compared with its plan's at the
+    same instants shifted by an offset within ±:data:`CLOCK_REACH` (every 5 ms, then
+    parabolic): on the tag's own clock one offset suits the whole capture (what a machine
+    drawing the tag on its clock reproduces), trace by trace each trace has its own. None when
+    no trace is long enough to compare."""
     from tagbot.model.motion import evaluate_plan
 
     step, fine = 0.005, 0.001
     offsets = np.arange(-CLOCK_REACH, CLOCK_REACH + step / 2, step)
-    signal, errors = 0.0, np.zeros(len(offsets))
+    signal, errors, each = 0.0, np.zeros(len(offsets)), 0.0
     for plan, trace in zip(tag.plans, traces, strict=True):
         try:
             grid, v = recorded_velocity(trace.t, trace.xy, cutoff=cutoff)
         except ValueError:
             continue  # too short to compare
-        t = (
-            grid[0]
-            - CLOCK_REACH
-            + fine * np.arange(int(np.ceil((grid[-1] - grid[0] + 2 * CLOCK_REACH) / fine)) + 2)
-        )
+        span = grid[-1] - grid[0] + 2 * CLOCK_REACH
+        t = grid[0] - CLOCK_REACH + fine * np.arange(int(np.ceil(span / fine)) + 2)
         _, model_v = evaluate_plan(plan, t, tag.size)
         at = (grid[None, :] + offsets[:, None] - t[0]) / fine  # (offsets, grid) in fine steps
         i = np.clip(np.floor(at).astype(np.intp), 0, len(t) - 2)
         w = (at - i)[..., None]
         shifted = model_v[i] * (1 - w) + model_v[i + 1] * w
         signal += float(np.sum(v * v))
-        errors += np.sum((shifted - v[None]) ** 2, axis=(1, 2))
+        trace_errors = np.sum((shifted - v[None]) ** 2, axis=(1, 2))
+        errors += trace_errors
+        each += _lowest(trace_errors)
     if signal <= 0:
         return None
+    return _db(signal, _lowest(errors)), _db(signal, each)
+
+
+def _lowest(errors: Array) -> float:
+    """The least of ``errors`` (at evenly spaced offsets), refined by the parabola through it
+    and its neighbours."""
     b = int(np.argmin(errors))
     best = float(errors[b])
-    if 0 < b < len(errors) - 1:  # the parabola's vertex through the best and its neighbours
+    if 0 < b < len(errors) - 1:
         lo, hi = errors[b - 1], errors[b + 1]
         curvature = lo - 2 * best + hi
         if curvature > 0:
             best = max(best - (hi - lo) ** 2 / (8 * curvature), 0.0)
-    return _db(signal, best)
+    return best
 
 
 def recorded_velocity(

@@ -317,3 +317,32 @@ def test_the_ink_is_measured_without_cutting_corners():
     np.testing.assert_allclose(xy[[0, -1]], ends, atol=1e-9)
     slow = Plan([[0, 0], [100, 0]], [0.0], [np.log(2.0)], [0.3], [0.0], [0.0])
     assert len(ink_polyline(slow, 100.0)) == math.ceil(slow.end(100.0) / 0.005 - 1e-9) + 1
+
+
+def test_velocity_snr_on_the_tags_clock_and_trace_by_trace():
+    """Two traces recorded from known plans: on their own clock both figures are high; with the
+    second trace's stamps 0.1 s late, trace by trace its offset is found (no scaling), while on
+    the tag's clock one offset cannot suit both traces."""
+    from tagbot.gesture.timing import simulated_capture
+    from tagbot.inputs import Trace
+    from tagbot.metrics import tag_clock_snr
+    from tagbot.model.plan import Plan, Tag, random_timed_plan
+
+    rng = np.random.default_rng(2)
+    first = random_timed_plan(rng)
+    second = random_timed_plan(rng)
+    size = 200.0
+    gap = first.end(size) + 0.3
+    second = Plan(second.targets + 100, second.dt, second.mu, second.sigma, second.phi1,
+                  second.phi2, gap)  # fmt: skip
+    tag = Tag((first, second))
+    a = simulated_capture(first, rng, noise=0.0)
+    b = simulated_capture(second, rng, noise=0.0)
+    clock, each = tag_clock_snr([a, b], tag)
+    assert clock > 25 and each > 25 and clock <= each + 1e-9
+    late = Trace(b.xy, b.t + 0.1)
+    clock_late, each_late = tag_clock_snr([a, late], tag)
+    assert each_late == pytest.approx(each, abs=1.0)  # its own offset found
+    assert clock_late < each_late - 6  # one offset for both: the lateness costs
+    far = Trace(b.xy, b.t + 1.0)  # beyond the offsets searched: no scaling, no rescue
+    assert tag_clock_snr([a, far], tag)[1] < each - 10
