@@ -204,3 +204,14 @@ def test_python_m_tagbot_errors_are_one_line(args: list[str], fragment: str) -> 
     proc = python_m_tagbot(*args)
     assert (proc.returncode, proc.stdout) == (2, "")
     assert_one_line_error(proc.stderr, fragment)
+
+
+def test_fit_times_the_whole_command_from_process_start():
+    """The time tagbot fit prints counts the interpreter's start-up and imports, not only the
+    fit: in a process that idled 0.3 s before asking, it is at least that."""
+    import subprocess
+    import sys
+
+    code = "import time; time.sleep(0.3); from tagbot.cli import _since_start; print(_since_start(0.0))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert float(out.stdout) >= 0.3
