@@ -212,6 +212,9 @@ def test_fit_times_the_whole_command_from_process_start():
     import subprocess
     import sys
 
-    code = "import time; time.sleep(0.3); from tagbot.cli import _since_start; print(_since_start(0.0))"
+    code = (
+        "import time; time.sleep(0.3); from tagbot.cli import _since_start;"
+        " print(_since_start(0.0))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert float(out.stdout) >= 0.3
