@@ -400,7 +400,8 @@ def _late(result: StreamResult | None, program: ArmProgram) -> Array:
 @dataclass(frozen=True, eq=False)
 class Budget:
     """The arm's budgets for :attr:`tagbot.draw.MachineRun.judge`: each pen-down run's path
-    deviation within ``motion.max_deviation`` and speed SNR at least :data:`MIN_SPEED_SNR_DB`,
+    deviation within ``motion.max_deviation`` beyond the goals' own rounding to whole ticks
+    (which no timing removes) and speed SNR at least :data:`MIN_SPEED_SNR_DB`,
     or a warning naming the run, the figure and its cause: host stalls with the pen down, late
     goals, the goals' rounding to whole ticks (small slow strokes: the plan itself, rounded,
     falls short), else the servos' follow beyond the retiming's model."""
@@ -411,14 +412,20 @@ class Budget:
     late: Array
 
     def __call__(self, report: dict[str, Any]) -> list[str]:
-        budget = float(self.profile["motion.max_deviation"])
+        follow = float(self.profile["motion.max_deviation"])
         out = []
         for i, run in enumerate(report.get("runs", [])):
             deviation, snr = run["path_deviation_max_mm"], run["speed_snr_db"]
+            # The goals' own rounding to whole ticks is a floor no timing removes: the budget
+            # is the servos' follow (motion.max_deviation) beyond it.
+            rounding = self.rounded(int(run["plan"]))[0]
+            budget = follow + rounding
             over = []
             if deviation is not None and deviation > budget:
                 over.append(
-                    f"path deviation {deviation:.3f} mm over motion.max_deviation ({budget:g} mm)"
+                    f"path deviation {deviation:.3f} mm over its budget ({budget:.3f} mm:"
+                    f" motion.max_deviation {follow:g} mm beyond the goals' rounding to whole"
+                    f" ticks, {rounding:.3f} mm)"
                 )
             if snr is not None and snr < MIN_SPEED_SNR_DB:
                 over.append(f"speed SNR {snr:.1f} dB below {MIN_SPEED_SNR_DB:g} dB")
@@ -442,21 +449,16 @@ class Budget:
         late = self.late[(self.late[:, 0] >= start) & (self.late[:, 0] <= end)]
         if len(late):
             return f"{len(late)} late goals (up to {1e3 * late[:, 1].max():.1f} ms)"
-        deviation, snr = self.rounded(int(run["plan"]))
-        budget = float(self.profile["motion.max_deviation"])
-        causes = []
-        if far and deviation > budget:
-            causes.append(f"the goals as sent lie up to {deviation:.3f} mm from the path")
-        if slow and snr < MIN_SPEED_SNR_DB + 3.0:
-            causes.append(f"the plan's speed, rounded so, has {snr:.1f} dB (a small or slow run)")
+        _, snr = self.rounded(int(run["plan"]))
         follow = "the servos' follow beyond the retiming's model (motion.max_deviation)"
-        if not causes:
+        if not (slow and snr < MIN_SPEED_SNR_DB + 3.0):
             return follow
         tick = math.degrees(RAD_PER_TICK)
-        rounding = f"the goals' rounding to whole ticks ({tick:.3f}°): {'; '.join(causes)}"
-        if far and deviation < 0.9 * run["path_deviation_max_mm"]:
-            return f"{rounding}; the rest, {follow}"
-        return rounding
+        rounding = (
+            f"the goals' rounding to whole ticks ({tick:.3f}°): the plan's speed, rounded so,"
+            f" has {snr:.1f} dB (a small or slow run)"
+        )
+        return f"{rounding}; the path, {follow}" if far else rounding
 
     def rounded(self, plan: int) -> tuple[float, float]:
         """The run's goals as sent (whole ticks, through FK) against its plan: their largest
