@@ -1,28 +1,40 @@
-"""Timing-aware reconstruction benchmark: ``fit(timing="match")`` against the geometric fit.
+"""Trustworthy reconstruction (issue 29): the default fit against the geometric one, timed data.
 
 Run from the repository root, with the shared data beside it (``../shared/data``)::
 
     python benchmarks/bench_timing.py [--data ../shared/data] [--model gamma] [--jobs 2]
-                                      [--datasets gml,unipen,mocap] [--csv timing.csv]
+                                      [--datasets gml,unipen,mocap] [--limit N]
+                                      [--csv timing.csv] [--quiet]
     python benchmarks/bench_timing.py --calibrate     # the reference against synthetic truth
 
 Datasets as in ``bench_fit.py``, timed captures only: the GML files ``index.csv`` marks as
-``velocity_benchmark`` (dense real timestamps), the UNIPEN words (100 Hz) and the mocap letters
-(120 Hz). Per file, for the geometric fit (``timing="ignore"``) and the timed fit
-(``timing="match"``): strokes, mean shape error (% of the bounding-box diagonal), velocity SNR
-(dB, :func:`tagbot.metrics.fit_report`: per trace after the best uniform time scale and offset)
-and fit time (best of 2 runs, after a warm-up fit in each worker). Goals (issue 16): median
-velocity SNR ≥ 20 dB, median shape error ≤ 0.5 %, strokes ≤ 1.5× the geometric fit, fit time
-≤ 1 s median.
+``velocity_benchmark`` (dense real timestamps), the UNIPEN words (100 Hz tablet) and the mocap
+letters (120 Hz). Per file, the default fit (``timing="auto"``,
+:func:`tagbot.gesture.reconstruct`) and the geometric fit (``timing="ignore"``):
 
-The velocity SNR is measured against two references (:func:`tagbot.metrics.recorded_velocity`):
-the recording low-passed at :data:`~tagbot.metrics.VELOCITY_CUTOFF` (15 Hz, the default, "SNR")
-and its raw central differences ("raw"). Two checks of the references come with them: "ceiling"
-scores the recording's own smoothed velocity (the local-quadratic resampling the timed fit
-works on) against the raw differences (no model can do much better on noisy captures), and
-"fidelity" scores the timed fit's trajectory, sampled at the recording's own time stamps, through
-the low-pass reference against its exact velocity (how much of a writer moving like the fit the
-filter and the recording's sampling lose: it should be far above the goal).
+- shape error, mean and max (fractions of the input's bounding-box diagonal, as
+  :func:`tagbot.metrics.fit_report` gives them), and whether the default fit keeps within the
+  shape margin of the geometric one: mean ≤ geometric + :data:`SHAPE_MARGIN_MEAN`, max ≤
+  max(1.5 × geometric, geometric + 0.005) (:data:`SHAPE_MARGIN_MAX`);
+- the default fit's velocity SNR with no time scaling (:func:`tagbot.metrics.tag_clock_snr`):
+  on the tag's own clock (one offset for the capture) and trace by trace (one offset per trace),
+  against the reference (:func:`tagbot.metrics.recorded_velocity`: samples at their instants,
+  resampled every 10 ms, 4th-order zero-phase Butterworth low-pass, central differences) at
+  10 Hz and 15 Hz, and against raw central differences; and the literature's best-mapping
+  figure (each trace after its best time scale and offset, 15 Hz, ``velocity_snr_db``);
+- the reference's **ceiling** at each cut-off: each fitted plan sampled at its trace's recorded
+  stamps (a motion whose velocity is known exactly), put through the same reference, against
+  the plan's exact velocity at the reference's instants (energy-weighted over traces, as the
+  other figures);
+- strokes per second of writing (the default fit's strokes over the traces' total pen-down span,
+  :func:`tagbot.gesture.timing.pen_down_span`) and strokes default / geometric;
+- fit time of each (best of 2 runs, after a warm-up fit in each worker);
+- how each trace was timed (matched, restrained, mapped, scaled, geometric) and files whose
+  whole clock the default fit refused.
+
+Per dataset the summary gives medians (p10 for SNRs, p90 for times and errors), and the goals:
+no file over the shape margin; per-trace SNR within 2 dB of the ceiling and own-clock SNR within
+1 dB of per-trace (medians, at each cut-off); strokes ≤ 1.5× the geometric fit's.
 """
 
 from __future__ import annotations
@@ -32,11 +44,15 @@ import csv
 import math
 import multiprocessing
 import os
+import platform
 import sys
 import time
+from collections import Counter
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -44,185 +60,260 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_fit import case_traces, gml_cases, mocap_cases, unipen_cases
 
-from tagbot.gesture import fit
-from tagbot.gesture.timing import TimingOptions, resample
-from tagbot.inputs import load_traces
-from tagbot.metrics import (
-    VELOCITY_CUTOFF,
-    clock_velocity_snr,
-    fit_report,
-    recorded_velocity,
-    stroke_report,
-    velocity_snr,
-)
+from tagbot.gesture import reconstruct
+from tagbot.gesture.timing import SHAPE_MARGIN_MAX, SHAPE_MARGIN_MEAN, pen_down_span
+from tagbot.metrics import clock_velocity_snr, fit_report, recorded_velocity, tag_clock_snr
 from tagbot.model.motion import evaluate_plan, sample_plan
+from tagbot.model.plan import Tag
+
+CUTOFFS: dict[str, float | None] = {"10hz": 10.0, "15hz": 15.0, "raw": None}
+"""The references every SNR is given against: low-passed at 10 Hz, at 15 Hz (the library's
+``VELOCITY_CUTOFF``), and raw central differences."""
+KINDS = ("matched", "restrained", "mapped", "scaled", "geometric")
+"""How a trace can be timed (:class:`tagbot.gesture.timing.TraceTiming`), the most timing first."""
+CEILING_GAP = 2.0
+"""Goal: median per-trace SNR at most this far (dB) below the median ceiling..."""
+CLOCK_GAP = 1.0
+"""... and median own-clock SNR at most this far below the median per-trace SNR."""
+STROKE_RATIO = 1.5
+"""Goal: the default fit's strokes at most this many times the geometric fit's."""
 
 
 @dataclass
 class Row:
     dataset: str
     name: str
+    traces: int = 0
     points: int = 0
     strokes_geometric: int = 0
     strokes: int = 0
-    shape_geometric_pct: float = math.nan
-    shape_pct: float = math.nan
-    snr_geometric_db: float = math.nan
-    snr_db: float = math.nan
-    snr_clock_db: float = math.nan
-    """The timed fit's velocity SNR on the recording's own clock (scale 1, offset 0)."""
-    snr_raw_geometric_db: float = math.nan
-    """As ``snr_geometric_db`` and ``snr_db`` against the raw differences."""
-    snr_raw_db: float = math.nan
-    snr_clock_raw_db: float = math.nan
+    writing_s: float = math.nan
+    """Total pen-down span of the traces (:func:`pen_down_span`), seconds."""
+    strokes_per_s: float = math.nan
+    shape_mean_geometric: float = math.nan
+    shape_max_geometric: float = math.nan
+    shape_mean: float = math.nan
+    shape_max: float = math.nan
+    shape_excess: float = math.nan
+    """The default fit's largest excess over its shape margin (fraction of the size; > 0: over)."""
+    clock_10hz_db: float = math.nan
+    trace_10hz_db: float = math.nan
+    ceiling_10hz_db: float = math.nan
+    clock_15hz_db: float = math.nan
+    trace_15hz_db: float = math.nan
+    ceiling_15hz_db: float = math.nan
+    clock_raw_db: float = math.nan
+    trace_raw_db: float = math.nan
     ceiling_raw_db: float = math.nan
-    """The recording's own smoothed velocity against its raw differences (shared clock)."""
-    fidelity_db: float = math.nan
-    """The timed fit sampled at the recorded stamps, through the reference, against itself."""
-    snr_interior_db: float = math.nan
-    """The timed fit's velocity SNR (best mapping) without each trace's first and last
-    :data:`EDGE` seconds, where the writer moves at touch-down and lift-off and a plan that
-    draws only the recorded ink starts and ends at rest."""
-    snr_10hz_db: float = math.nan
-    """Sensitivity: the timed fit's velocity SNR against the recording low-passed at 10 Hz..."""
-    snr_20hz_db: float = math.nan
-    """... and at 20 Hz."""
-    stroke_snr_median_db: float = math.nan
+    best_mapping_db: float = math.nan
+    """The default fit's ``velocity_snr_db`` (best time scale and offset per trace, 15 Hz)."""
     fit_geometric_s: float = math.nan
     fit_s: float = math.nan
+    matched: int = 0
+    restrained: int = 0
+    mapped: int = 0
+    scaled: int = 0
+    geometric: int = 0
+    refused: str = ""
+    """Why the default fit refused the whole clock (fitted the shape alone), if it did."""
     error: str = ""
 
 
-def _traces(case: tuple[str, str, object]) -> list:
-    dataset, _, payload = case
-    if dataset == "gml":
-        return load_traces(payload[0])
-    return case_traces(case)
+def shape_excess(mean: float, largest: float, mean_geometric: float, max_geometric: float) -> float:
+    """How far (fraction of the size) a fit's shape error goes beyond the margin of the geometric
+    fit's: the larger of the mean's and the max's excess; > 0 is over the margin."""
+    limit_max = max(SHAPE_MARGIN_MAX[0] * max_geometric, max_geometric + SHAPE_MARGIN_MAX[1])
+    return max(mean - (mean_geometric + SHAPE_MARGIN_MEAN), largest - limit_max)
+
+
+def ceiling_db(traces: Sequence[Any], tag: Tag, cutoff: float | None) -> float:
+    """The reference's ceiling: each plan of ``tag`` sampled at its trace's recorded stamps, put
+    through :func:`recorded_velocity` at ``cutoff``, against the plan's exact velocity at the
+    reference's instants (the same clock); energy-weighted over traces (traces too short for
+    the reference left out, as :func:`tag_clock_snr` leaves them)."""
+    signal = noise = 0.0
+    for plan, trace in zip(tag.plans, traces, strict=True):
+        stamps = np.asarray(trace.t, dtype=float)
+        order = np.argsort(stamps, kind="stable")
+        xy = np.empty((len(stamps), 2))
+        xy[order], _ = evaluate_plan(plan, stamps[order], tag.size)
+        try:
+            grid, v = recorded_velocity(stamps, xy, cutoff=cutoff)
+        except ValueError:
+            continue
+        _, exact = evaluate_plan(plan, grid, tag.size)
+        signal += float(np.sum(v * v))
+        noise += float(np.sum((v - exact) ** 2))
+    if not signal > 0:
+        return math.nan
+    return 10 * math.log10(signal / noise) if noise > 0 else math.inf
 
 
 def run_case(case: tuple[str, str, object], model: str) -> Row:
+    """Both fits of one file and every figure of :class:`Row`."""
     dataset, name, _ = case
     row = Row(dataset, name)
     try:
-        traces = _traces(case)
-        row.points = sum(len(tr) for tr in traces)
-        for timing in ("ignore", "match"):
-            options = {"model": model, "timing": timing}
-            tag = fit(traces, **options)
-            seconds = min(_timed(lambda o=options: fit(traces, **o)) for _ in range(2))
-            report = fit_report(traces, tag)
-            snr = math.nan if report.velocity_snr_db is None else report.velocity_snr_db
-            raw = _weighted(traces, tag, _best_raw)
-            if timing == "ignore":
-                row.strokes_geometric, row.fit_geometric_s = report.strokes, seconds
-                row.shape_geometric_pct, row.snr_geometric_db = 100 * report.shape.mean, snr
-                row.snr_raw_geometric_db = raw
-            else:
-                row.strokes, row.fit_s = report.strokes, seconds
-                row.shape_pct, row.snr_db = 100 * report.shape.mean, snr
-                row.snr_raw_db = raw
-                row.snr_clock_db = _weighted(traces, tag, _clock)
-                row.snr_clock_raw_db = _weighted(traces, tag, _clock_raw)
-                row.ceiling_raw_db = _weighted(traces, tag, _ceiling)
-                row.fidelity_db = _weighted(traces, tag, _fidelity)
-                row.snr_interior_db = _weighted(traces, tag, _interior)
-                row.snr_10hz_db = _weighted(traces, tag, lambda *a: _best_at(10.0, *a))
-                row.snr_20hz_db = _weighted(traces, tag, lambda *a: _best_at(20.0, *a))
-                per = [s.velocity_snr_db for s in stroke_report(traces, tag)]
-                per = [v for v in per if v is not None and np.isfinite(v)]
-                row.stroke_snr_median_db = float(np.median(per)) if per else math.nan
+        traces = case_traces(case)
+        row.traces, row.points = len(traces), sum(len(tr.xy) for tr in traces)
+        geometric, row.fit_geometric_s = _best_of_2(lambda: reconstruct(traces, model, "ignore"))
+        chosen, row.fit_s = _best_of_2(lambda: reconstruct(traces, model, "auto"))
+        report_g = fit_report(traces, geometric.tag)
+        report = fit_report(traces, chosen.tag, timings=chosen.timings)
+        row.strokes_geometric, row.strokes = report_g.strokes, report.strokes
+        row.writing_s = sum(pen_down_span(tr.t) for tr in traces)
+        row.strokes_per_s = row.strokes / row.writing_s if row.writing_s > 0 else math.nan
+        row.shape_mean_geometric, row.shape_max_geometric = report_g.shape.mean, report_g.shape.max
+        row.shape_mean, row.shape_max = report.shape.mean, report.shape.max
+        row.shape_excess = shape_excess(
+            row.shape_mean, row.shape_max, row.shape_mean_geometric, row.shape_max_geometric
+        )
+        for label, cutoff in CUTOFFS.items():
+            snr = tag_clock_snr(traces, chosen.tag, cutoff)
+            if snr is not None:
+                setattr(row, f"clock_{label}_db", snr[0])
+                setattr(row, f"trace_{label}_db", snr[1])
+            setattr(row, f"ceiling_{label}_db", ceiling_db(traces, chosen.tag, cutoff))
+        if report.velocity_snr_db is not None:
+            row.best_mapping_db = report.velocity_snr_db
+        kinds = Counter(t.kind for t in chosen.timings or ())
+        for kind in KINDS:
+            setattr(row, kind, kinds[kind])
+        if chosen.timings is None:
+            row.refused = chosen.note or "timing ignored"
     except Exception as e:  # a benchmark reports every failure and goes on
         row.error = f"{type(e).__name__}: {e}"
     return row
 
 
-def _weighted(traces: list, tag, figure) -> float:
-    """``figure(trace, tag, k)`` (dB) per trace, weighted by its recorded velocity energy."""
-    signal = noise = 0.0
-    for k, trace in enumerate(traces):
-        try:
-            db = figure(trace, tag, k)
-            _, rec = recorded_velocity(trace.t, trace.xy)
-        except ValueError:
-            continue
-        energy = float(np.sum(rec * rec))
-        if np.isfinite(db):
-            signal, noise = signal + energy, noise + energy / 10 ** (db / 10)
-    return 10 * math.log10(signal / noise) if noise > 0 else math.nan
-
-
-def _best_raw(trace, tag, k: int) -> float:
-    """Velocity SNR against the raw differences after the best time mapping (as fit_report)."""
-    return _best_at(None, trace, tag, k)
-
-
-def _best_at(cutoff: float | None, trace, tag, k: int) -> float:
-    t, _, v = sample_plan(tag, k, 0.005)
-    return velocity_snr(trace.t, trace.xy, t, v, cutoff=cutoff)[0]
-
-
-EDGE = 0.08
-"""Seconds at either end of a trace left out of the "interior" velocity SNR."""
-
-
-def _interior(trace, tag, k: int) -> float:
-    t, _, v = sample_plan(tag, k, 0.005)
-    _, scale, offset = velocity_snr(trace.t, trace.xy, t, v)
-    grid, rec = recorded_velocity(trace.t, trace.xy, cutoff=VELOCITY_CUTOFF)
-    inside = (grid - grid[0] >= EDGE) & (grid[-1] - grid >= EDGE)
-    if np.count_nonzero(inside) < 3:
-        raise ValueError("too short for an interior")
-    tm = t[0] + (grid[inside] - offset) / scale
-    model = np.column_stack([np.interp(tm, t, v[:, i], 0.0, 0.0) for i in (0, 1)]) / scale
-    rec = rec[inside]
-    return 10 * math.log10(float(np.sum(rec * rec)) / float(np.sum((rec - model) ** 2)))
-
-
-def _clock(trace, tag, k: int) -> float:
-    t, _, v = sample_plan(tag, k, 0.005)
-    return clock_velocity_snr(trace.t, trace.xy, t, v)
-
-
-def _clock_raw(trace, tag, k: int) -> float:
-    t, _, v = sample_plan(tag, k, 0.005)
-    return clock_velocity_snr(trace.t, trace.xy, t, v, cutoff=None)
-
-
-def _ceiling(trace, tag, k: int) -> float:
-    """The recording's local-quadratic velocity (timing.resample) against its raw differences."""
-    t = np.asarray(trace.t, dtype=float)
-    rec = resample(t - t[0], np.asarray(trace.xy, dtype=float), TimingOptions())
-    return clock_velocity_snr(t, trace.xy, rec.t + t[0], rec.v, cutoff=None)
-
-
-def _fidelity(trace, tag, k: int) -> float:
-    """The timed plan sampled at the recorded stamps (through the trace's best time mapping, so
-    a plan placed late by an earlier plan's tail is sampled where it moves), then through the
-    low-pass reference, against its exact velocity: what the reference and the recording's
-    sampling lose of a writer moving exactly like the fit."""
-    t, _, v = sample_plan(tag, k, 0.005)
-    _, scale, offset = velocity_snr(trace.t, trace.xy, t, v)
-    stamps = np.asarray(trace.t, dtype=float)
-    xy, _ = evaluate_plan(tag.plans[k], np.sort(t[0] + (stamps - offset) / scale), tag.size)
-    return clock_velocity_snr(stamps, xy, offset + scale * (t - t[0]), v / scale)
-
-
-def _timed(fn) -> float:
-    started = time.perf_counter()
-    fn()
-    return time.perf_counter() - started
+def _best_of_2(fit: Callable[[], Any]) -> tuple[Any, float]:
+    """``fit()``'s result (a fit is deterministic) and the shorter of two runs' times."""
+    times = []
+    for _ in range(2):
+        started = time.perf_counter()
+        result = fit()
+        times.append(time.perf_counter() - started)
+    return result, min(times)
 
 
 def _warm_up(model: str) -> None:
+    """Load (or compile) the kernels both fits and the figures use before anything is timed."""
+    from tagbot.inputs import Trace
+
     t = np.linspace(0, 1, 101)
-    traces = [type("T", (), {"xy": np.column_stack([t * 50, np.sin(6 * t) * 20]), "t": t})()]
-    fit(traces, model=model, timing="match")
+    traces = [Trace(np.column_stack([t * 50, np.sin(6 * t) * 20]), t)]
+    for timing in ("ignore", "auto"):
+        rec = reconstruct(traces, model, timing)
+        fit_report(traces, rec.tag, timings=rec.timings)
+        for cutoff in CUTOFFS.values():
+            tag_clock_snr(traces, rec.tag, cutoff)
+            ceiling_db(traces, rec.tag, cutoff)
 
 
-def _median(rows: list[Row], field: str) -> float:
-    values = np.array([getattr(r, field) for r in rows if not r.error], dtype=float)
-    values = values[np.isfinite(values)]
+# --- summary ---------------------------------------------------------------------------------
+
+
+def _values(rows: list[Row], name: str) -> np.ndarray:
+    values = np.array([getattr(r, name) for r in rows], dtype=float)
+    return values[np.isfinite(values)]
+
+
+def _stat(
+    rows: list[Row],
+    name: str,
+    tail: float,
+    scale: float = 1.0,
+    digits: int = 1,
+    worst: bool = False,
+) -> str:
+    """``median / p{tail}`` of a field over ``rows`` (times ``scale``), ``/ max`` too if
+    ``worst``; "-" without values."""
+    values = _values(rows, name) * scale
+    if not values.size:
+        return "-"
+    text = f"{np.median(values):.{digits}f} / {np.percentile(values, tail):.{digits}f}"
+    return text + (f" / {values.max():.{digits}f}" if worst else "")
+
+
+def _median(rows: list[Row], name: str) -> float:
+    values = _values(rows, name)
     return float(np.median(values)) if values.size else math.nan
+
+
+def _goal(gap: float, limit: float) -> str:
+    if math.isnan(gap):
+        return "no figure"
+    return "met" if gap <= limit else "NOT met"
+
+
+def summarise(dataset: str, rows: list[Row]) -> list[str]:
+    """The summary lines of one dataset."""
+    done = [r for r in rows if not r.error]
+    lines = [f"[{dataset}] {len(rows)} files, {len(rows) - len(done)} failed"]
+    if not done:
+        return lines
+    pct = 100.0
+    worst = max(done, key=lambda r: r.shape_excess)
+    over = [r for r in done if r.shape_excess > 0]
+    lines += [
+        "  shape error % of the size, median / p90 / worst: default fit mean"
+        f" {_stat(done, 'shape_mean', 90, pct, 3, True)}, max"
+        f" {_stat(done, 'shape_max', 90, pct, 3, True)}; geometric mean"
+        f" {_stat(done, 'shape_mean_geometric', 90, pct, 3, True)}, max"
+        f" {_stat(done, 'shape_max_geometric', 90, pct, 3, True)}",
+        f"  shape margin: {len(over)} files over (goal: none, {_goal(len(over), 0)}); closest"
+        f" to it {worst.name}: {pct * worst.shape_excess:+.3f} % of the size (mean"
+        f" {pct * worst.shape_mean:.3f} against {pct * worst.shape_mean_geometric:.3f}, max"
+        f" {pct * worst.shape_max:.3f} against {pct * worst.shape_max_geometric:.3f})",
+        "  velocity SNR dB of the default fit, no time scaling, median / p10:",
+    ]
+    for label in CUTOFFS:
+        clock, trace, ceiling = (
+            _median(done, f"{kind}_{label}_db") for kind in ("clock", "trace", "ceiling")
+        )
+        name = "raw differences" if CUTOFFS[label] is None else f"{CUTOFFS[label]:g} Hz low-pass"
+        lines.append(
+            f"    {name:16s} own clock {_stat(done, f'clock_{label}_db', 10)}, per trace"
+            f" {_stat(done, f'trace_{label}_db', 10)}, ceiling"
+            f" {_stat(done, f'ceiling_{label}_db', 10)};"
+            f" per trace - ceiling {trace - ceiling:+.1f} ({_goal(ceiling - trace, CEILING_GAP)}),"
+            f" own clock - per trace {clock - trace:+.1f} ({_goal(trace - clock, CLOCK_GAP)})"
+        )
+    ratio = np.array([r.strokes / r.strokes_geometric for r in done if r.strokes_geometric])
+    kinds = {kind: sum(getattr(r, kind) for r in done) for kind in KINDS}
+    falling = sum(any(getattr(r, k) for k in KINDS[1:]) for r in done)
+    refused = [r for r in done if r.refused]
+    lines += [
+        "    best mapping (each trace's time scale and offset, 15 Hz)"
+        f" {_stat(done, 'best_mapping_db', 10)}",
+        f"  strokes per second of writing {_stat(done, 'strokes_per_s', 90)} (median / p90);"
+        f" strokes default / geometric median {np.median(ratio):.2f}, max {ratio.max():.2f}"
+        f" (goal <= {STROKE_RATIO:g}: {_goal(float(ratio.max()) - STROKE_RATIO, 0.0)})",
+        f"  fit time s, median / p90: default {_stat(done, 'fit_s', 90, digits=2)},"
+        f" geometric {_stat(done, 'fit_geometric_s', 90, digits=2)}",
+        f"  traces timed: {', '.join(f'{n} {k}' for k, n in kinds.items())};"
+        f" {falling} files with a trace not matched; {len(refused)} files' whole clock refused",
+    ]
+    lines += [f"    refused {r.name}: {r.refused}" for r in refused]
+    return lines
+
+
+def _row_line(r: Row) -> str:
+    label = f"{r.dataset}:{r.name}"[:40]
+    if r.error:
+        return f"{label:40s} FAILED {r.error}"
+    kinds = "".join(f"{getattr(r, k)}{k[0]}" if getattr(r, k) else "" for k in KINDS)
+    return (
+        f"{label:40s} {r.strokes_geometric:4d}>{r.strokes:<4d} {r.strokes_per_s:5.1f}"
+        f" {100 * r.shape_mean:6.3f} {100 * r.shape_max:6.3f} {100 * r.shape_excess:+7.3f}"
+        f" {r.clock_10hz_db:5.1f} {r.trace_10hz_db:5.1f} {r.ceiling_10hz_db:5.1f}"
+        f" {r.clock_15hz_db:5.1f} {r.trace_15hz_db:5.1f} {r.ceiling_15hz_db:5.1f}"
+        f" {r.clock_raw_db:5.1f} {r.trace_raw_db:5.1f} {r.ceiling_raw_db:5.1f}"
+        f" {r.best_mapping_db:5.1f} {r.fit_geometric_s:5.2f}>{r.fit_s:<5.2f} {kinds or 'refused'}"
+    )
+
+
+# --- calibration -----------------------------------------------------------------------------
 
 
 CALIBRATION_CUTOFFS = (None, 8.0, 10.0, 12.0, 15.0, 20.0)
@@ -243,7 +334,7 @@ def calibrate(plans: int = 16, seed: int = 16) -> None:
     simulated digitisers, the median SNR of :func:`recorded_velocity` at each cut-off against
     the plan's exact velocity (the shared clock: the digitiser's clock is the plan's)."""
     from tagbot.gesture.timing import simulated_capture
-    from tagbot.model.plan import Tag, random_timed_plan
+    from tagbot.model.plan import random_timed_plan
 
     print(f"median SNR (dB) of the reference against the true velocity, {plans} plans each")
     print(f"{'digitiser':32s}" + "".join(f"{'raw' if c is None else f'{c:g} Hz':>8s}"
@@ -260,7 +351,10 @@ def calibrate(plans: int = 16, seed: int = 16) -> None:
         print(f"{label:32s}" + "".join(f"{np.median(scores[c]):8.1f}" for c in scores))
 
 
-def main() -> None:
+# --- command ---------------------------------------------------------------------------------
+
+
+def _arguments() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     default_data = Path(__file__).resolve().parent.parent.parent / "shared" / "data"
     parser.add_argument("--data", type=Path, default=default_data, help="the shared data folder")
@@ -275,7 +369,11 @@ def main() -> None:
         action="store_true",
         help="only the reference's calibration on synthetic digitisers (no data needed)",
     )
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+def main() -> None:
+    args = _arguments()
     if args.calibrate:
         calibrate()
         return
@@ -283,67 +381,45 @@ def main() -> None:
     names = args.datasets.split(",")
     unknown = sorted(set(names) - set(loaders))
     if unknown:
-        sys.exit(f"bench_timing: unknown dataset {unknown[0]!r}")
+        sys.exit(f"bench_timing: unknown dataset {unknown[0]!r} (gml, unipen, mocap)")
+    if args.jobs < 1:
+        sys.exit(f"bench_timing: --jobs must be at least 1, got {args.jobs}")
+    if not args.data.is_dir():
+        sys.exit(f"bench_timing: no data folder at {args.data} (use --data)")
     cases = []
     for dataset in names:
-        found = loaders[dataset](args.data)
+        try:
+            found = loaders[dataset](args.data)
+        except (OSError, ValueError, KeyError) as e:
+            sys.exit(f"bench_timing: {dataset} data under {args.data}: {e}")
         if dataset == "gml":  # dense real timestamps only
             found = [c for c in found if c[2][1]]
         cases += found[: args.limit] if args.limit else found
     for variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(variable, "1")
+    print(
+        f"machine: {platform.machine()} python {platform.python_version()} numpy"
+        f" {np.__version__}; model {args.model}, {len(cases)} files, {args.jobs} processes"
+    )
     started = time.perf_counter()
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(
         args.jobs, mp_context=spawn, initializer=_warm_up, initargs=(args.model,)
     ) as pool:
         rows = list(pool.map(run_case, cases, [args.model] * len(cases)))
-    print(
-        f"{len(cases)} files, model {args.model}, wall time {time.perf_counter() - started:.1f} s"
-    )
+    print(f"wall time {time.perf_counter() - started:.1f} s")
     if not args.quiet:
         print(
-            f"{'file':40s} {'pts':>5s} {'strk':>9s} {'shape %':>13s} {'SNR dB':>11s}"
-            f" {'raw dB':>11s} {'clock':>11s} {'ceil':>5s} {'fidel':>5s} {'stroke':>6s}"
-            f" {'fit s':>11s}"
+            f"\n{'file':40s} {'strokes':>9s} {'str/s':>5s} {'mean%':>6s} {'max%':>6s}"
+            f" {'excess':>7s} {'clock/trace/ceiling 10 Hz':>17s} {'15 Hz':>17s} {'raw':>17s}"
+            f" {'best':>5s} {'fit s':>11s} timing"
         )
         for r in rows:
-            label = f"{r.dataset}:{r.name}"[:40]
-            if r.error:
-                print(f"{label:40s} FAILED {r.error}")
-                continue
-            print(
-                f"{label:40s} {r.points:5d} {r.strokes_geometric:4d}>{r.strokes:<4d}"
-                f" {r.shape_geometric_pct:6.2f}>{r.shape_pct:<6.2f} {r.snr_geometric_db:5.1f}>"
-                f"{r.snr_db:<5.1f} {r.snr_raw_geometric_db:5.1f}>{r.snr_raw_db:<5.1f}"
-                f" {r.snr_clock_db:5.1f}/{r.snr_clock_raw_db:<5.1f} {r.ceiling_raw_db:5.1f}"
-                f" {r.fidelity_db:5.1f} {r.stroke_snr_median_db:6.1f}"
-                f" {r.fit_geometric_s:5.2f}>{r.fit_s:<5.2f}"
-            )
-    print("\nmedians (geometric > timed); velocity SNR against the 15 Hz low-pass reference [raw]")
+            print(_row_line(r))
+    print("\nsummary: the default fit (timing='auto') against the geometric fit ('ignore')")
     for dataset in [d for d in loaders if any(r.dataset == d for r in rows)]:
-        subset = [r for r in rows if r.dataset == dataset]
-        failed = sum(bool(r.error) for r in subset)
-        ratio = [r.strokes / r.strokes_geometric for r in subset if not r.error]
-        print(
-            f"[{dataset}] {len(subset)} files, {failed} failed: velocity SNR"
-            f" {_median(subset, 'snr_geometric_db'):.1f} > {_median(subset, 'snr_db'):.1f} dB"
-            f" [raw {_median(subset, 'snr_raw_geometric_db'):.1f} >"
-            f" {_median(subset, 'snr_raw_db'):.1f};"
-            f" ceiling {_median(subset, 'ceiling_raw_db'):.1f}]"
-            f" (own clock {_median(subset, 'snr_clock_db'):.1f}"
-            f" [{_median(subset, 'snr_clock_raw_db'):.1f}], reference fidelity"
-            f" {_median(subset, 'fidelity_db'):.1f}, interior"
-            f" {_median(subset, 'snr_interior_db'):.1f}, 10 / 20 Hz"
-            f" {_median(subset, 'snr_10hz_db'):.1f} /"
-            f" {_median(subset, 'snr_20hz_db'):.1f}, per stroke"
-            f" {_median(subset, 'stroke_snr_median_db'):.1f}), shape error"
-            f" {_median(subset, 'shape_geometric_pct'):.3f} >"
-            f" {_median(subset, 'shape_pct'):.3f} %,"
-            f" strokes x {np.median(ratio) if ratio else math.nan:.2f}, fit time"
-            f" {_median(subset, 'fit_geometric_s'):.2f} > {_median(subset, 'fit_s'):.2f} s"
-        )
-    if args.csv:
+        print("\n".join(summarise(dataset, [r for r in rows if r.dataset == dataset])))
+    if args.csv and rows:
         with open(args.csv, "w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=list(asdict(rows[0])))
             writer.writeheader()
