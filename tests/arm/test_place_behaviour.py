@@ -1,0 +1,116 @@
+"""The arm's refusals at and just beyond their boundaries, and where a tag is put (issue 34)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from tagbot.arm import build_program, check_program, load_profile, place
+from tagbot.arm.place import safe
+from tagbot.errors import PlacementError
+from tagbot.model import Plan, Tag
+
+from .conftest import small_tag
+
+# The default arm: links of 150 mm from (0, 0), reach margin 5 mm, so the safe reach ends at
+# 295 mm; a tall area lets the reach (not the paper) be the limit straight up the y axis.
+TALL = ["area.y_max=400"]
+
+
+def test_reach_margin_holds_at_the_boundary() -> None:
+    profile = load_profile(None, TALL)
+    inside = np.array([[0.0, 294.9], [0.0, 200.0], [100.0, 276.0]])
+    beyond = np.array([[0.0, 295.1], [0.0, 299.0], [0.0, 301.0]])
+    assert safe(inside, profile).all()
+    assert not safe(beyond, profile).any()
+    wider = load_profile(None, [*TALL, "arm.reach_margin=2"])
+    assert safe(np.array([[0.0, 297.9]]), wider).all()
+    assert not safe(np.array([[0.0, 298.1]]), wider).any()
+
+
+def test_area_margin_holds_at_the_boundary() -> None:
+    profile = load_profile()  # area x -148.5..148.5, y 40..250, margin 10
+    assert safe(np.array([[-100.0, 50.0 + 1e-3], [138.4, 150.0], [0.0, 239.9]]), profile).all()
+    assert not safe(np.array([[-100.0, 49.9], [138.6, 150.0], [0.0, 240.1]]), profile).any()
+
+
+def _pen_down_past_reach(profile):
+    program = build_program(small_tag(), profile)
+    pen = program.setpoints.pen
+    xy = program.setpoints.xy.copy()
+    k = int(np.flatnonzero(pen)[3])
+    return program, k, xy
+
+
+def test_check_program_refuses_a_pen_just_beyond_reach() -> None:
+    profile = load_profile(None, TALL)
+    program, k, xy = _pen_down_past_reach(profile)
+    for radius, refused in ((294.9, False), (295.1, True)):
+        moved = xy.copy()
+        moved[k] = [0.0, radius]
+        changed = replace(program, setpoints=replace(program.setpoints, xy=moved))
+        if refused:
+            with pytest.raises(PlacementError) as raised:
+                check_program(changed, profile)
+            assert str(raised.value) == (
+                f"tick {k} (t = {k / 100:.3f} s, plan 0): pen at (0.00, 295.10) mm, 295.10 mm"
+                " from the shoulder, is outside the safe reach 5..295 mm or the joint limits"
+            )
+        else:
+            check_program(changed, profile)
+
+
+def test_check_program_refuses_goals_outside_the_servo_range(profile) -> None:
+    program = build_program(small_tag(), profile)
+    check_program(program, profile)
+    k = len(program) // 2
+    for column, role, value in ((3, "pen", 4096), (3, "pen", -1)):
+        joints = program.joints.copy()
+        joints[k, column] = value
+        with pytest.raises(PlacementError) as raised:
+            check_program(replace(program, joints=joints), profile)
+        message = str(raised.value)
+        assert message.startswith(f"tick {k} (t = {k / 100:.3f} s, ")
+        assert message.endswith(f"{role} goal {value} ticks is outside 0..4095")
+
+
+def test_joint_at_its_limit_is_accepted_beyond_refused(profile) -> None:
+    program = build_program(small_tag(), profile)
+    k = len(program) // 2
+    for degrees, refused in ((160.0, False), (160.01, True)):
+        angles = program.angles.copy()
+        angles[k:, 1] = math.radians(degrees)
+        changed = replace(program, angles=angles)
+        if refused:
+            with pytest.raises(PlacementError, match=r"elbow at 160.01° beyond elbow.max_deg"):
+                check_program(changed, profile)
+        else:
+            with pytest.raises(PlacementError) as raised:  # the jump is too fast: not the limit
+                check_program(changed, profile)
+            assert "max_deg" not in str(raised.value)
+
+
+def _dot_tag() -> Tag:
+    plan = Plan(
+        targets=[[0.0, 0.0], [1.0, 1.0]],
+        dt=[0.0],
+        mu=[math.log(0.2)],
+        sigma=[0.3],
+        phi1=[0.0],
+        phi2=[0.0],
+    )
+    return Tag(plans=(plan,))
+
+
+def test_an_explicit_scale_is_placed_in_the_middle_of_the_safe_workspace() -> None:
+    """The safe workspace of the default arm is symmetric about x = 0 and fills the area but a
+    disc of 52 mm round the shoulder: a small tag's centre lands near (0, the area's middle),
+    within a cell of the 61 × 61 grid of candidate centres (4.5 mm)."""
+    profile = load_profile(None, ["place.scale=10"])
+    x0, x1, y0, y1 = place(_dot_tag(), profile).box
+    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
+    assert abs(centre[0]) < 4.5
+    assert centre[1] == pytest.approx((40.0 + 250.0) / 2, abs=8.0)

@@ -1,0 +1,257 @@
+"""What a user reads off a plotter job, recomputed from the G-code alone (issue 34).
+
+Job time, travel time, drawing time, the buffered motion and the resting share are recomputed
+here from the program's lines and the profile's limits, by a reader written for the test: Grbl's
+rest-to-rest trapezoid for travel, ``60/F`` for inverse-time lines, ``ceil(20·P)·50 ms`` for
+dwells and ``$1`` after every stop that follows motion.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from tagbot.model import Plan, Tag
+from tagbot.plotter import build_program, load_profile, place
+from tagbot.plotter.place import PlacementError
+from tagbot.plotter.program import resting_share
+
+from .conftest import straight_tag
+
+# Slow axes: the x feed cap binds on mostly-x travel, and an 8 mm hop never reaches full speed.
+SLOW = (
+    "limits.x_max_feed=900",
+    "limits.y_max_feed=3000",
+    "limits.x_acceleration=20",
+    "limits.y_acceleration=80",
+    "limits.step_idle_delay=0.025",
+)
+
+
+def _gap_tag() -> Tag:
+    """Two strokes with a gap between them: along +x, then up from 1 unit further right."""
+    first = straight_tag().plans[0]
+    second = Plan(
+        targets=[[11.0, 0.0], [11.0, 5.0]],
+        dt=[0.0],
+        mu=[math.log(0.2)],
+        sigma=[0.3],
+        phi1=[0.0],
+        phi2=[0.0],
+        start=first.end(10.0) + 0.5,
+    )
+    return Tag(plans=(first, second))
+
+
+def _words(line: str) -> dict[str, float]:
+    return {k: float(v) for k, v in re.findall(r"([A-Z])(-?[0-9.]+)", line)}
+
+
+def _rest_to_rest(length: float, direction: np.ndarray, feed: float, profile) -> float:
+    """Time of a G94 move: cruise speed and acceleration capped per axis, from rest to rest."""
+    vmax = [profile["limits.x_max_feed"] / 60.0, profile["limits.y_max_feed"] / 60.0]
+    amax = [profile["limits.x_acceleration"], profile["limits.y_acceleration"]]
+    speed, accel = feed / 60.0, math.inf
+    for axis in range(2):
+        share = abs(direction[axis])
+        if share > 0:
+            speed = min(speed, vmax[axis] / share)
+            accel = min(accel, amax[axis] / share)
+    peak = min(speed, math.sqrt(accel * length))  # a triangle when it cannot reach cruise
+    ramps = peak / accel  # each of the two ramps
+    return 2.0 * ramps + (length - peak * ramps) / peak
+
+
+def _replay(lines, profile):
+    """Job, travel and per-run drawing times and per-run setpoint durations, from the text."""
+    idle = profile["limits.step_idle_delay"]
+    here = np.array([profile["motion.park_x"], profile["motion.park_y"]], dtype=float)
+    clock = travel = 0.0
+    inverse = moved = False
+    runs: list[list[float]] = []
+    for line in lines:
+        word = _words(line)
+        if line.startswith("G93"):
+            inverse = True
+            runs.append([])
+        elif line.startswith("G94"):
+            inverse = False
+        elif line.startswith("G4P"):
+            clock += math.ceil(round(word["P"] * 20, 9)) * 0.05 + (idle if moved else 0.0)
+            moved = False
+        elif line.startswith(("M3", "M5")):
+            clock += idle if moved else 0.0
+            moved = False
+        elif line.startswith("G1") and "Z" not in word:
+            target = np.array([word.get("X", here[0]), word.get("Y", here[1])])
+            if inverse:
+                runs[-1].append(60.0 / word["F"])
+                clock += runs[-1][-1]
+            else:
+                d = target - here
+                length = float(np.hypot(*d))
+                spent = _rest_to_rest(length, d / length, word["F"], profile)
+                travel += spent
+                clock += spent
+            here, moved = target, True
+    return clock, travel, runs
+
+
+@pytest.fixture
+def slow(tiny_file):
+    return load_profile(tiny_file, SLOW)
+
+
+def test_job_time_is_the_sum_of_what_grbl_does(slow):
+    """Travel trapezoids (capped per axis, short hops that never cruise), dwells with the idle
+    delay after motion, inverse-time lines: the planned job time is their sum, line by line."""
+    program = build_program(place(_gap_tag(), slow), slow)
+    clock, travel, runs = _replay(program.lines, slow)
+    assert len(runs) == 2
+    assert program.duration == pytest.approx(clock, rel=1e-9)
+    assert program.notes["travel_time"] == pytest.approx(travel, rel=1e-9)
+    assert program.drawing_time == pytest.approx(sum(map(sum, runs)), rel=1e-9)
+    assert f"{program.duration:.1f} s (drawing {program.drawing_time:.1f} s)" in program.summary()
+    # Line by line: each line ends where the replay's clock says.
+    assert program.line_end[-1] == pytest.approx(clock, rel=1e-9)
+
+
+def _spans(program, prefix: str) -> list[float]:
+    return [
+        float(program.line_end[i] - program.line_start[i])
+        for i, line in enumerate(program.lines)
+        if line.startswith(prefix)
+    ]
+
+
+def test_servo_pen_change_waits_for_the_stop(tiny_file):
+    """Servo pen: M3 waits for the stop (Grbl's $1 idle delay after motion), then the dwell."""
+    profile = load_profile(tiny_file, ["limits.step_idle_delay=0.1", "pen.dwell=0.2"])
+    program = build_program(place(straight_tag(), profile), profile)
+    assert _spans(program, "M3") == pytest.approx([0.0, 0.1, 0.1])  # nothing moved before #1
+    assert _spans(program, "G4P") == pytest.approx([0.2, 0.2, 0.2])
+    assert _spans(program, "M5") == pytest.approx([0.1])  # after the travel home
+    assert program.notes["pen_time"] == pytest.approx(0.2 * 3 + 0.1 * 2)
+    clock, _, _ = _replay(program.lines, profile)
+    assert program.duration == pytest.approx(clock, rel=1e-9)
+
+
+def test_zpen_lines_and_dwells(tiny_file):
+    """Z pen: a G1 Z move at pen.feed, then the dwell, which waits for the stop after it."""
+    profile = load_profile(
+        tiny_file,
+        ["pen.type=z", "pen.up=5", "pen.down=0", "pen.feed=600", "limits.step_idle_delay=0.1"],
+    )
+    program = build_program(place(straight_tag(), profile), profile)
+    assert program.lines[3:5] == ("G1Z5F600\n", "G4P0.2\n")
+    assert program.lines.count("G1Z0F600\n") == 1
+    assert not any(line.startswith("M3") for line in program.lines)
+    assert _spans(program, "G4P") == pytest.approx([0.3, 0.3, 0.3])
+
+
+def test_buffered_motion_windows(tiny_file):
+    """min_buffered: least motion in planner_blocks consecutive setpoint lines of a run;
+    min_buffered_rx: in planner_blocks - 1 + 4 lines (what Grbl's 128-byte buffer holds)."""
+    profile = load_profile(tiny_file, ["motion.setpoints=fixed", "motion.dt=0.01"])
+    program = build_program(place(straight_tag(), profile), profile)
+    (durations,) = _replay(program.lines, profile)[2]
+    blocks = profile["limits.planner_blocks"]
+    assert len(durations) > blocks + 3
+
+    def least(window: int) -> float:
+        return min(sum(durations[i : i + window]) for i in range(len(durations) - window + 1))
+
+    assert program.min_buffered == pytest.approx(least(blocks), rel=1e-9)
+    assert program.min_buffered_rx == pytest.approx(least(blocks - 1 + 4), rel=1e-9)
+
+
+def test_short_runs_are_held_whole(tiny_file):
+    profile = load_profile(tiny_file, ["motion.setpoints=fixed", "motion.dt=0.1"])
+    program = build_program(place(straight_tag(), profile), profile)
+    assert program.min_buffered == program.min_buffered_rx == math.inf
+
+
+def _resting_exact(program, box) -> float:
+    """Pen-down time within ``box`` of a run's first or last point, exactly: position is linear
+    in time on each line, so each line's time near an end is an interval per axis."""
+    total = 0.0
+    for t, xy in program.planned_runs:
+        for k in range(1, len(t)):
+            p0, p1, span = xy[k - 1], xy[k], t[k] - t[k - 1]
+            near = []
+            for end in (xy[0], xy[-1]):
+                lo, hi = 0.0, 1.0
+                for axis in range(2):
+                    a, b = p0[axis] - end[axis], p1[axis] - end[axis]
+                    if a == b:
+                        if abs(a) >= box[axis]:
+                            lo, hi = 1.0, 0.0
+                        continue
+                    u1, u2 = sorted(((-box[axis] - a) / (b - a), (box[axis] - a) / (b - a)))
+                    lo, hi = max(lo, u1), min(hi, u2)
+                near.append((lo, hi))
+            (a0, a1), (b0, b1) = near
+            inside = max(0.0, a1 - a0) + max(0.0, b1 - b0)
+            inside -= max(0.0, min(a1, b1) - max(a0, b0))
+            total += inside * span
+    return total
+
+
+def test_resting_share_is_the_time_near_the_ends(tiny_file):
+    """The reported resting share: time within one motor step of a run's ends over drawing."""
+    profile = load_profile(tiny_file, ["place.scale=0.2", "motion.trim=false"])
+    program = build_program(place(_gap_tag(), profile), profile)
+    box = np.array([0.01, 0.01])
+    exact = _resting_exact(program, box)
+    assert exact > 0.05 * program.drawing_time  # untrimmed slow tails: a real share
+    step = 0.0005
+    lines = sum(len(t) for t, _ in program.planned_runs)
+    share = resting_share(program, profile)
+    assert share == pytest.approx(exact / program.drawing_time, abs=2 * lines * step)
+    assert program.resting_time(box) == pytest.approx(exact, abs=2 * lines * step)
+
+
+def test_bed_edges(tiny_file):
+    """A tag touching the bed's edges (no margin) is accepted; one 1 mm wider is refused, naming
+    the axis, the overflow and the limit."""
+    edge = load_profile(tiny_file, ["bed.margin=0", "motion.trim=false"])
+    setpoints = place(straight_tag(), edge)
+    xs = np.concatenate([r.xy[:, 0] for r in setpoints.runs])
+    assert xs.min() == pytest.approx(0.0, abs=0.01) and xs.max() == pytest.approx(100.0, abs=0.01)
+    wide = load_profile(tiny_file, ["bed.margin=0", f"place.scale={setpoints.size * 102 / 100}"])
+    with pytest.raises(PlacementError) as refused:
+        place(straight_tag(), wide)
+    assert str(refused.value) == (
+        "placement: the drawing reaches x = -1.000 mm, beyond bed.x_min = 0 mm by 1.000 mm "
+        "(reduce place.scale or move it)"
+    )
+
+
+@pytest.mark.parametrize(
+    ("align", "x", "y"),
+    [
+        ("bottom-left", "low", "low"),
+        ("bottom-right", "high", "low"),
+        ("top-left", "low", "high"),
+        ("top-right", "high", "high"),
+        ("center", "mid", "mid"),
+    ],
+)
+def test_alignment_puts_the_tag_where_asked(tiny_file, align, x, y):
+    """place.align: the tag's extent touches the named margins (5 mm), or is centred (within a
+    motor step: setpoints are the ink sampled, the extent is measured on a finer grid)."""
+    profile = load_profile(
+        tiny_file, [f"place.align={align}", "place.scale=2", "motion.trim=false"]
+    )
+    xy = np.concatenate([r.xy for r in place(_gap_tag(), profile).runs])
+    low, high = xy.min(axis=0), xy.max(axis=0)
+    for axis, where, limit in ((0, x, 100.0), (1, y, 50.0)):
+        if where == "low":
+            assert low[axis] == pytest.approx(5.0, abs=0.01)
+        elif where == "high":
+            assert high[axis] == pytest.approx(limit - 5.0, abs=0.01)
+        else:
+            assert low[axis] + high[axis] == pytest.approx(limit, abs=0.01)
