@@ -111,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     rng = random.Random(args.seed)
     sample = {m: stratified(list(exit_codes(m)), args.per_module, rng) for m in modules}
     if args.list:
-        for module, names in sample.items():
+        for names in sample.values():
             print("\n".join(names))
         return 0
     names = [n for picked in sample.values() for n in picked]
