@@ -1,0 +1,91 @@
+"""Report figures as a user reads them: shape error, execution comparison keys, summaries."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tagbot.metrics import FitReport, ShapeError, compare_execution, shape_error
+
+
+def _circle(radius: float) -> np.ndarray:
+    a = np.linspace(0.0, 2.0 * np.pi, 2001)
+    return radius * np.column_stack([np.cos(a), np.sin(a)])
+
+
+@pytest.mark.parametrize("crowded_first", [True, False])
+def test_shape_error_of_a_crowded_scribble_against_a_plain_line(crowded_first: bool) -> None:
+    """A thousand circles over one another (crowded: measured through a KD-tree) against one
+    circle 1 mm wider (not crowded): every point is 1 mm from the other drawing (chords of
+    0.1 mm: 1e-5 mm of sagitta)."""
+    crowded = [_circle(50.0)] * 1000
+    plain = [_circle(51.0)]
+    reference, candidate = (crowded, plain) if crowded_first else (plain, crowded)
+    error = shape_error(reference, candidate)
+    diagonal = (100.0 if crowded_first else 102.0) * np.sqrt(2.0)
+    assert error.size == pytest.approx(diagonal, rel=1e-3)
+    assert error.mean * error.size == pytest.approx(1.0, rel=1e-3)
+    assert error.max * error.size == pytest.approx(1.0, rel=1e-3)
+
+
+def _run(t0: float, length: float = 10.0, n: int = 101):
+    t = t0 + np.linspace(0.0, 1.0, n)
+    xy = np.column_stack([np.linspace(0.0, length, n), np.zeros(n)])
+    return t, xy
+
+
+def test_execution_report_keys_and_values() -> None:
+    """A run executed exactly as planned, late by 0.5 s: no deviation, the planned time."""
+    planned = [_run(0.0)]
+    t, xy = _run(0.5)
+    executed = np.column_stack([t, xy, np.ones(len(t))])
+    report = compare_execution(planned, executed).as_dict()
+    assert set(report) == {
+        "path_deviation_mean_mm",
+        "path_deviation_max_mm",
+        "speed_snr_db",
+        "planned_drawing_s",
+        "executed_drawing_s",
+        "drawing_duration_ratio",
+        "pen_down_runs",
+        "runs",
+    }
+    assert report["path_deviation_max_mm"] == pytest.approx(0.0, abs=1e-9)
+    assert report["speed_snr_db"] > 40.0
+    # A run counts from 0.02 mm into it to 0.02 mm before its end (a sample either side).
+    assert report["planned_drawing_s"] == pytest.approx(1.0, abs=0.03)
+    assert report["executed_drawing_s"] == pytest.approx(report["planned_drawing_s"], abs=0.02)
+    assert report["pen_down_runs"] == {"planned": 1, "executed": 1}
+    (run,) = report["runs"]
+    assert set(run) == {
+        "plan",
+        "planned_start",
+        "executed_start",
+        "planned_duration",
+        "executed_duration",
+        "speed_snr_db",
+        "path_deviation_max_mm",
+    }
+    assert run["plan"] == 0 and run["speed_snr_db"] > 40.0
+    assert run["planned_start"] == pytest.approx(0.0)
+    assert run["executed_start"] == pytest.approx(0.5, abs=0.02)
+
+
+def test_an_off_path_run_costs_deviation_and_snr() -> None:
+    planned = [_run(0.0)]
+    t, xy = _run(0.0)
+    xy = xy + np.array([0.0, 0.3])
+    report = compare_execution(planned, np.column_stack([t, xy, np.ones(len(t))])).as_dict()
+    assert report["path_deviation_max_mm"] == pytest.approx(0.3, abs=1e-6)
+    assert report["path_deviation_mean_mm"] == pytest.approx(0.3, abs=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("traces", "points", "strokes", "words"),
+    [(1, 1, 1, "1 trace (1 point) -> 1 stroke;"), (2, 30, 5, "2 traces (30 points) -> 5 strokes;")],
+)
+def test_fit_summary_counts(traces: int, points: int, strokes: int, words: str) -> None:
+    report = FitReport(traces, points, strokes, ShapeError(0.01, 0.02, 50.0), 1.0, 12.345)
+    assert report.summary() == (
+        f"{words} shape error mean 1.00% max 2.00% of 50, velocity SNR 12.3 dB"
+    )
