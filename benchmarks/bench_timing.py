@@ -133,10 +133,8 @@ def ceiling_db(traces: Sequence[Any], tag: Tag, cutoff: float | None) -> float:
     the reference left out, as :func:`tag_clock_snr` leaves them)."""
     signal = noise = 0.0
     for plan, trace in zip(tag.plans, traces, strict=True):
-        stamps = np.asarray(trace.t, dtype=float)
-        order = np.argsort(stamps, kind="stable")
-        xy = np.empty((len(stamps), 2))
-        xy[order], _ = evaluate_plan(plan, stamps[order], tag.size)
+        stamps = np.asarray(trace.t, dtype=float)  # non-decreasing (Trace)
+        xy, _ = evaluate_plan(plan, stamps, tag.size)
         try:
             grid, v = recorded_velocity(stamps, xy, cutoff=cutoff)
         except ValueError:
