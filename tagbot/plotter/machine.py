@@ -17,6 +17,7 @@ instants (:func:`tagbot.metrics.compare_reports`).
 from __future__ import annotations
 
 import itertools
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +31,7 @@ from tagbot.draw import MachineRun, Progress
 from tagbot.errors import ConnectionLost, DeviceError, InputError, Interrupted
 from tagbot.io.motionfile import MotionTable
 from tagbot.model import Tag
-from tagbot.plotter.place import Setpoints, place
+from tagbot.plotter.place import RX_LINES, Setpoints, place
 from tagbot.plotter.profile import Profile, device_settings, load_profile, with_device_settings
 from tagbot.plotter.program import Program, build_program, pen_down, pen_up
 from tagbot.plotter.stream import (
@@ -271,19 +272,38 @@ def _ramp(program: Program, profile: Profile) -> float:
 
 
 def _drawn_until(program: Program, done: int, executed: np.ndarray) -> float:
-    """The planned job time the machine had drawn to when it stopped: inside line ``done``
-    (0-based, the one executing) at the last executed position's place along its move."""
+    """The planned job time the machine had drawn to when it stopped: at the last executed
+    position's place along line ``done`` (0-based, the one executing by the last report), or
+    along a later queued line of the same run where that position lies nearer (the report
+    that counted the lines may be a line behind the machine)."""
     if done >= len(program.lines):
         return program.duration
     start, end = float(program.line_start[done]), float(program.line_end[done])
     if not len(executed) or not program.line_moves[done] or end <= start:
         return start
-    a = program.line_xy[done - 1] if done else program.notes_start
-    b = program.line_xy[done]
-    d = b - a
-    length2 = float(d @ d)
-    along = float((executed[-1, 1:3] - a) @ d / length2) if length2 > 0 else 0.0
-    return start + min(1.0, max(0.0, along)) * (end - start)
+    here = executed[-1, 1:3]
+    run = program.line_run[done]
+    best: tuple[float, float] | None = None
+    for k in range(done, len(program.lines)):
+        if k > done and (program.line_run[k] != run or run < 0):
+            break
+        a = program.line_xy[k - 1] if k else program.notes_start
+        d = program.line_xy[k] - a
+        length2 = float(d @ d)
+        along = min(1.0, max(0.0, float((here - a) @ d / length2))) if length2 > 0 else 0.0
+        gap = float(np.hypot(*(a + along * d - here)))
+        if best is None or gap < best[0] - 1e-9:
+            t0, t1 = float(program.line_start[k]), float(program.line_end[k])
+            best = (gap, t0 + along * (t1 - t0))
+        if k - done >= _QUEUED_LINES:
+            break
+    assert best is not None
+    return best[1]
+
+
+_QUEUED_LINES = 15 + RX_LINES
+"""Lines the machine may hold beyond the one a status report names (Grbl's 15 planner blocks and
+the lines in its receive buffer): how far :func:`_drawn_until` looks."""
 
 
 def _executed(
@@ -346,7 +366,12 @@ def _details(
         "time_scale": program.scale,
         "dt": profile.dt,
         "baud": baud,
-        "min_buffered_s": getattr(program, "min_buffered", None),
+        # What a host pause may use mid-run (the planner's queued blocks and the lines surely
+        # in the receive buffer): the figure motion.min_buffer was planned for; None when every
+        # run fits the machine's buffers whole.
+        "min_buffered_s": (
+            program.min_buffered_rx if math.isfinite(program.min_buffered_rx) else None
+        ),
     }
     if stream is not None:
         duration = max(stream.duration, 1e-9)

@@ -114,6 +114,9 @@ SUBSTEPS = 4
 RX_LINES = 128 // 28
 """Setpoint lines (``G1X…Y…F…``, up to 28 bytes) that surely fit Grbl's 128-byte receive
 buffer: what the machine holds beyond its planner when the host stops sending."""
+CORNER_MARGIN = 0.9
+"""Adaptive setpoints: a corner is entered at no more than this share of Grbl's junction speed
+(the targets' 3-decimal rounding and motor steps turn the sent lines a little)."""
 _TOLERANCE = 1e-9
 _DECIMALS = 3
 
@@ -358,14 +361,14 @@ def _moving(xy: Array, profile: Profile) -> NDArray[np.bool_]:
 
 
 def buffered(t: Array, blocks: int) -> float:
-    """The least time of motion ``blocks`` consecutive lines of a run hold (all of them when the
-    run has fewer), s, for setpoint times ``t``."""
+    """The least time of motion ``blocks`` consecutive lines of a run hold, s, for setpoint times
+    ``t``; ``inf`` for a run of ``blocks`` lines or fewer: the machine holds all of it once sent,
+    so no host pause can starve it mid-stroke."""
     d = np.diff(t)
-    if not len(d):
+    if len(d) <= blocks:
         return math.inf
-    window = min(blocks, len(d))
     total = np.concatenate([[0.0], np.cumsum(d)])
-    return float(np.min(total[window:] - total[:-window]))
+    return float(np.min(total[blocks:] - total[:-blocks]))
 
 
 def motor_steps(xy: Array, profile: Profile) -> NDArray[np.int64]:
@@ -415,25 +418,71 @@ def _adaptive_times(
     xy = p @ matrix.T + offset
     shortest = max(1, math.ceil(dt / h - 1e-9))
     most = max(shortest, math.floor(longest / h + 1e-9))
+    corner = _CornerCheck(profile, h)
     chosen = [0]
     i = 0
     while i < count:
         lo, hi = min(shortest, count - i), min(most, count - i)
-        if interpolation_error(xy, i, i + hi) <= tolerance:
+
+        def fits(j: int, i: int = i) -> bool:
+            return interpolation_error(xy, i, i + j) <= tolerance and corner.allows(xy, i, j)
+
+        if fits(hi):
             j = hi
         else:
-            # Largest j in [lo, hi) whose line stays within the tolerance (lo at least).
+            # Largest j in [lo, hi) whose line stays within the tolerance and whose corner with
+            # the previous line Grbl takes at the planned speed (lo at least).
             good, bad = lo, hi
             while bad - good > 1:
                 mid = (good + bad) // 2
-                if interpolation_error(xy, i, i + mid) <= tolerance:
+                if fits(mid):
                     good = mid
                 else:
                     bad = mid
             j = good
+        corner.take(xy, i, j)
         i += j
         chosen.append(i)
     return grid[chosen]
+
+
+class _CornerCheck:
+    """Adaptive setpoints: a line is only as long as lets Grbl take its corner with the previous
+    line at the planned speed (:func:`junction_speed`'s limit, with :data:`CORNER_MARGIN` for the
+    targets' rounding): a longer line turns more at its ends. Where even the shortest line
+    (``motion.dt``) turns too much (a cusp of the tag, where its own speed is near zero), the
+    shortest it is."""
+
+    def __init__(self, profile: Profile, h: float) -> None:
+        self.amax = np.asarray(profile.max_acceleration)
+        self.delta = profile["limits.junction_deviation"]
+        self.h = h
+        self.unit: Array | None = None
+        self.speed = 0.0
+
+    def _line(self, xy: Array, i: int, j: int) -> tuple[Array | None, float]:
+        d = xy[i + j] - xy[i]
+        length = float(np.hypot(*d))
+        return (d / length if length > 0 else None), length / (j * self.h)
+
+    def allows(self, xy: Array, i: int, j: int) -> bool:
+        unit, speed = self._line(xy, i, j)
+        if self.unit is None or unit is None:
+            return True
+        cos_theta = -float(self.unit @ unit)
+        if cos_theta < -0.999999:
+            return True  # straight on
+        junction = unit - self.unit
+        a = float(_direction_acceleration(junction[None, :], self.amax)[0])
+        sin_half = math.sqrt(max(0.0, 0.5 * (1.0 - cos_theta)))
+        limit_sq = a * self.delta * sin_half / (1.0 - sin_half)
+        entry = min(speed, self.speed)
+        return entry * entry <= CORNER_MARGIN**2 * limit_sq
+
+    def take(self, xy: Array, i: int, j: int) -> None:
+        unit, speed = self._line(xy, i, j)
+        if unit is not None:
+            self.unit, self.speed = unit, speed
 
 
 def limit_scale(v: Array, step: float, profile: Profile) -> dict[str, float]:

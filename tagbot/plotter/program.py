@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 
 from firmware_protocols.grbl import gcode
 from tagbot.io.motionfile import MotionTable
-from tagbot.plotter.place import RX_LINES, Setpoints, slowest_durations, step_box
+from tagbot.plotter.place import RX_LINES, Setpoints, buffered, slowest_durations, step_box
 from tagbot.plotter.profile import Profile
 
 __all__ = [
@@ -122,16 +122,16 @@ class Program:
     drawing_time: float
     """Pen-down motion time, s: from each run's first setpoint line to its last."""
     min_buffered: float
-    """s: the least motion the planner holds during a run, the minimum over every run of the
-    summed durations of ``limits.planner_blocks`` consecutive setpoint lines (the whole run when
-    shorter): a host pause shorter than this cannot starve the machine mid-stroke. (Grbl's
-    128-byte receive buffer holds a few lines more.)"""
+    """s: the least motion the planner holds during a run, the minimum over every run of more than
+    ``limits.planner_blocks`` setpoint lines of the summed durations of that many consecutive
+    ones (``inf`` when no run is that long: each is held whole once sent)."""
     min_buffered_rx: float = 0.0
     """s: the same for what a host pause leaves the machine surely: the ``planner_blocks - 1``
     lines queued behind the executing one plus the :data:`~tagbot.plotter.place.RX_LINES`
-    setpoint lines that fit Grbl's 128-byte receive buffer (``motion.min_buffer`` bounds it).
-    A run's first lines are the exception no timing can remove: the pen-down ``G4`` blocks
-    Grbl's parser, so a run starts with at most its receive buffer's lines queued."""
+    setpoint lines that fit Grbl's 128-byte receive buffer (``motion.min_buffer`` bounds it; the
+    report's ``min_buffered_s``). A run's first lines are the exception no timing can remove:
+    the pen-down ``G4`` blocks Grbl's parser, so a run starts with its receive buffer's lines
+    queued and the planner fills as the host sends the next ones."""
     run_points: tuple[tuple[NDArray[np.float64], NDArray[np.float64]], ...] = ()
     notes: dict[str, float] = field(default_factory=dict)
 
@@ -501,14 +501,11 @@ class _Builder:
 
 
 def _min_buffered(run: NDArray[np.int64], durations: NDArray[np.float64], blocks: int) -> float:
-    """The least summed duration of ``blocks`` consecutive setpoint lines of one run."""
-    best = math.inf
-    for k in np.unique(run[run >= 0]):
-        d = durations[run == k]
-        window = min(blocks, len(d))
-        total = np.concatenate([[0.0], np.cumsum(d)])
-        best = min(best, float(np.min(total[window:] - total[:-window])))
-    return best if math.isfinite(best) else 0.0
+    """The least summed duration of ``blocks`` consecutive setpoint lines of one run (``inf``
+    when every run has ``blocks`` lines or fewer: see :func:`~tagbot.plotter.place.buffered`)."""
+    runs = np.unique(run[run >= 0])
+    times = (np.concatenate([[0.0], np.cumsum(durations[run == k])]) for k in runs)
+    return min((buffered(t, blocks) for t in times), default=math.inf)
 
 
 def resting_share(program: Program, profile: Profile) -> float:

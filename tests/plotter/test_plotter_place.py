@@ -3,6 +3,7 @@ the machine's limits, adaptive setpoints within their tolerance."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -291,20 +292,36 @@ def test_adaptive_setpoints_within_the_tolerance(tiny_file):
 
 
 def test_buffered_motion_bound(tiny_file):
+    """With a fine tolerance the lines are short and the buffer rule slows the runs: any 18
+    consecutive lines of a longer run then hold motion.min_buffer."""
     tag = tagbot.load_plan(EXAMPLES / "cae.json")
     blocks = 15 - 1 + RX_LINES
-    profile = load_profile()
+    profile = load_profile(None, ["motion.tolerance=0.01"])
     placed = place(tag, profile)
     for run in placed.runs:
         d = np.diff(run.t)
-        window = min(blocks, len(d))
-        sums = np.convolve(d, np.ones(window), mode="valid")
+        assert len(d) > blocks
+        sums = np.convolve(d, np.ones(blocks), mode="valid")
         assert sums.min() >= profile["motion.min_buffer"] * (1 - 1e-6)
         assert buffered(run.t, blocks) == pytest.approx(sums.min())
     assert placed.limits["buffer"] == pytest.approx(placed.scale)
-    free = place(tag, load_profile(None, ["motion.min_buffer=0"]))
+    free = place(tag, load_profile(None, ["motion.tolerance=0.01", "motion.min_buffer=0"]))
     assert free.duration < placed.duration
     assert min(buffered(r.t, blocks) for r in free.runs) < profile["motion.min_buffer"]
+
+
+def test_a_short_run_is_not_slowed_for_the_buffer(tiny_file):
+    """A run of 18 lines or fewer is held whole by the machine once sent: no host pause can
+    starve it mid-stroke, so the buffer rule leaves its timing alone."""
+    blocks = 15 - 1 + RX_LINES
+    assert buffered(np.arange(blocks + 1) * 0.01, blocks) == math.inf
+    assert buffered(np.arange(blocks + 2) * 0.01, blocks) == pytest.approx(blocks * 0.01)
+    profile = load_profile(tiny_file)
+    placed = place(straight_tag(), profile)
+    free = place(straight_tag(), load_profile(tiny_file, ["motion.min_buffer=0"]))
+    assert all(len(r.t) - 1 <= blocks for r in placed.runs)
+    assert placed.duration == pytest.approx(free.duration)
+    assert placed.limits["buffer"] == 1.0
 
 
 def test_lines_never_slower_than_grbl_steps(tiny_file):

@@ -20,7 +20,7 @@ def test_packaged_defaults():
     assert profile["motion.setpoints"] == "adaptive"
     assert profile["motion.trim"] is True
     assert profile["motion.slow_lines"] == "clamp"
-    assert profile["motion.tolerance"] == 0.01
+    assert profile["motion.tolerance"] == 0.02
     assert profile["motion.max_dt"] == 0.25
     assert profile["motion.min_buffer"] == 0.6
     assert profile.sources["bed.x_max"] == "default.toml"
