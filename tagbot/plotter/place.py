@@ -41,7 +41,8 @@ pen change between), so a per-run scale changes no run's shape, only the job's l
 - host pauses (adaptive setpoints only): when the host stops sending, the machine still has the
   ``B − 1`` blocks queued behind the executing one and the :data:`RX_LINES` setpoint lines that
   surely fit Grbl's 128-byte receive buffer. ``s`` grows until any that many consecutive lines
-  of the run (all of them in a shorter run) last at least ``motion.min_buffer`` seconds (0.6 by
+  of a longer run (a shorter one is held whole once sent) last at least ``motion.min_buffer``
+  seconds (0.6 by
   default: more than the 0.39–0.52 s pauses measured on a loaded host). Longer lines come from
   the tolerance: at a fixed tolerance a line's duration grows in proportion to ``s``. Where
   Grbl's slowest step bounds the lines instead, slowing cannot help and is not done.
