@@ -255,3 +255,12 @@ def test_alignment_puts_the_tag_where_asked(tiny_file, align, x, y):
             assert high[axis] == pytest.approx(limit - 5.0, abs=0.01)
         else:
             assert low[axis] + high[axis] == pytest.approx(limit, abs=0.01)
+
+
+def test_a_dot_has_no_resting_share(tiny_file):
+    """A stroke shorter than a motor step draws nothing that moves: no drawing time, and a
+    resting share of 0 (not a division by zero)."""
+    profile = load_profile(tiny_file, ["place.scale=0.0005"])
+    program = build_program(place(straight_tag(), profile), profile)
+    assert program.drawing_time == 0.0
+    assert resting_share(program, profile) == 0.0
