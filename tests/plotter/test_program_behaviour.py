@@ -169,8 +169,11 @@ def test_buffered_motion_windows(tiny_file):
 
 
 def test_short_runs_are_held_whole(tiny_file):
-    profile = load_profile(tiny_file, ["motion.setpoints=fixed", "motion.dt=0.1"])
+    """A run of no more lines than a window is held whole once sent: nothing to starve."""
+    profile = load_profile(tiny_file, ["motion.setpoints=fixed", "motion.dt=0.25"])
     program = build_program(place(straight_tag(), profile), profile)
+    (durations,) = _replay(program.lines, profile)[2]
+    assert len(durations) <= profile["limits.planner_blocks"]
     assert program.min_buffered == program.min_buffered_rx == math.inf
 
 
