@@ -259,8 +259,8 @@ def summarise(dataset: str, rows: list[Row]) -> list[str]:
         f" {_stat(done, 'shape_max', 90, pct, 3, True)}; geometric mean"
         f" {_stat(done, 'shape_mean_geometric', 90, pct, 3, True)}, max"
         f" {_stat(done, 'shape_max_geometric', 90, pct, 3, True)}",
-        f"  shape margin: {len(over)} files over (goal: none, {_goal(len(over), 0)}); closest"
-        f" to it {worst.name}: {pct * worst.shape_excess:+.3f} % of the size (mean"
+        f"  shape margin: {len(over)} files over (goal: none, {_goal(len(over), 0)}); worst"
+        f" {worst.name}: {pct * worst.shape_excess:+.4f} % of the size beyond its margin (mean"
         f" {pct * worst.shape_mean:.3f} against {pct * worst.shape_mean_geometric:.3f}, max"
         f" {pct * worst.shape_max:.3f} against {pct * worst.shape_max_geometric:.3f})",
         "  velocity SNR dB of the default fit, no time scaling, median / p10:",

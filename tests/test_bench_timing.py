@@ -137,7 +137,7 @@ def test_summary_names_the_worst_file_and_marks_the_goals() -> None:
     ]
     text = "\n".join(summarise("gml", rows))
     assert "[gml] 4 files, 1 failed" in text
-    assert "1 files over (goal: none, NOT met); closest to it a.gml: +0.020 %" in text
+    assert "1 files over (goal: none, NOT met); worst a.gml: +0.0200 % of the size beyond" in text
     # Medians: per trace 18.0, ceiling 19.5 (10 Hz, raw) and 19.5 (15 Hz: 19.5, 23, 19.5).
     assert "per trace - ceiling -1.5 (met), own clock - per trace -1.0 (met)" in text
     assert "raw differences  own clock 17.0 / 17.0" in text
