@@ -3,7 +3,7 @@ ends a command (issue 29: bounded, interruptible work).
 
 Run from the repository root (no data folder needed)::
 
-    python benchmarks/bench_scaling.py [--sizes 1000,10000,100000] [--timings ignore,match]
+    python benchmarks/bench_scaling.py [--sizes 1000,10000,100000] [--timings ignore,auto]
                                        [--limit 300] [--no-signals]
 
 Inputs, made here and reproducible (seed 0):
@@ -15,8 +15,11 @@ Inputs, made here and reproducible (seed 0):
 
 Each case runs in a fresh process (its own peak RSS, from ``resource.getrusage``) after fitting
 one small tag, so compiling or loading the kernels is not counted; a case over ``--limit``
-seconds is stopped and reported as such. Printed per case: strokes, fit seconds, peak RSS (MB),
-shape error (mean and max, % of the input's diagonal; ``tagbot.metrics.fit_report``).
+seconds is stopped and reported as such. Printed per case: strokes, fit seconds (wall and the
+process's CPU), peak RSS (MB) after the fit and after the report, contour samples, shape error
+(mean and max, % of the input's diagonal; ``tagbot.metrics.fit_report``). A fit the library
+refuses (a tag lasting more than a tag may) prints the refusal with the seconds and memory it
+took to get there.
 
 Signal latency: a ``tagbot`` command spending minutes in one compiled loop gets SIGINT, SIGTERM
 or SIGHUP; printed: seconds from the signal to the process's end, its status and last line.
@@ -38,9 +41,14 @@ CASE = textwrap.dedent(
     """
     import json, resource, sys, time
     import numpy as np
+    from tagbot.errors import PlanError
     from tagbot.gesture import reconstruct
+    from tagbot.gesture import contour
     from tagbot.inputs import Trace
     from tagbot.metrics import fit_report
+
+    def peak():
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
     kind, n, timing = sys.argv[1], int(sys.argv[2]), sys.argv[3]
     rng = np.random.default_rng(0)
@@ -52,14 +60,25 @@ CASE = textwrap.dedent(
         xy = np.column_stack([radius * np.cos(theta), radius * np.sin(theta)])
     trace = Trace(xy=xy, t=np.arange(n) * 0.01)
     reconstruct([np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 0.0]])], timing="ignore")
-    started = time.perf_counter()
-    result = reconstruct([trace], timing=timing)
-    seconds = time.perf_counter() - started
+    size = float(np.hypot(*np.ptp(xy, axis=0)))
+    samples = int(np.ceil(contour.arc_length(xy)[-1] / (size / 600))) + 1
+    started, cpu = time.perf_counter(), time.process_time()
+    try:
+        result = reconstruct([trace], timing=timing)
+    except PlanError as e:
+        print(json.dumps({"refused": str(e), "seconds": time.perf_counter() - started,
+                          "cpu": time.process_time() - cpu, "rss_mb": peak()}))
+        sys.exit(0)
+    seconds, cpu = time.perf_counter() - started, time.process_time() - cpu
+    fitted = peak()
     report = fit_report([trace], result.tag, timings=result.timings)
     print(json.dumps({
         "strokes": result.tag.n_strokes,
         "seconds": seconds,
-        "rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "cpu": cpu,
+        "rss_mb": fitted,
+        "report_rss_mb": peak(),
+        "samples": samples,
         "mean": 100 * report.shape.mean,
         "max": 100 * report.shape.max,
         "timing": report.timing or "geometric",
@@ -101,9 +120,16 @@ def run_case(kind: str, n: int, timing: str, limit: float) -> str:
         last = (done.stderr.strip().splitlines() or ["no output"])[-1]
         return f"failed (status {done.returncode}): {last}"
     r = json.loads(done.stdout.strip().splitlines()[-1])
+    if "refused" in r:
+        return (
+            f"refused after {r['seconds']:.1f} s (cpu {r['cpu']:.1f} s), peak {r['rss_mb']:.0f} MB:"
+            f" {r['refused']}"
+        )
     return (
-        f"{r['strokes']:6d} strokes  fit {r['seconds']:8.2f} s  peak {r['rss_mb']:7.0f} MB  "
-        f"shape mean {r['mean']:.3f} % max {r['max']:.2f} %  ({r['timing']})"
+        f"{r['strokes']:6d} strokes  fit {r['seconds']:7.2f} s (cpu {r['cpu']:7.2f} s)  "
+        f"peak {r['rss_mb']:6.0f} MB ({r['report_rss_mb']:6.0f} with the report)  "
+        f"~{r['samples']:9d} samples  shape mean {r['mean']:.3f} % max {r['max']:.2f} %  "
+        f"({r['timing']})"
     )
 
 
@@ -131,7 +157,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", default="1000,10000,100000")
     parser.add_argument("--kinds", default="random,spiral")
-    parser.add_argument("--timings", default="ignore,match")
+    parser.add_argument("--timings", default="ignore,auto")
     parser.add_argument("--limit", type=float, default=300.0, help="Seconds per case at most.")
     parser.add_argument("--no-signals", action="store_true")
     args = parser.parse_args()

@@ -439,30 +439,92 @@ def salient_points(
             m += 1
     points[m] = n - 1
     m += 1
-    turns = np.empty(max(m - 2, 0))
-    for k in range(m - 2):
-        turns[k] = _salient_turn(xy, points[k], points[k + 1], points[k + 2], span)
-    count = m - 2
-    while count > 0:
-        weakest = 0  # np.argmin: the first of the smallest, or the first nan
-        for k in range(count):
-            if turns[k] != turns[k]:
-                weakest = k
-                break
-            if turns[k] < turns[weakest]:
-                weakest = k
-        if turns[weakest] >= threshold:
+    return _drop_weak(xy, points[:m], threshold, span)
+
+
+@compiled
+def _drop_weak(xy, points, threshold, span):  # type: ignore[no-untyped-def]
+    """``points`` without, repeatedly, the interior one turning least between its neighbours
+    (``np.argmin``'s: the first nan, else the first of the smallest) while that is less than
+    ``threshold``. A heap of the turns with stale entries skipped: O(m log m) for m points."""
+    m = points.size
+    before, after = np.arange(-1, m - 1), np.arange(1, m + 1)
+    alive = np.ones(m, np.bool_)
+    version = np.zeros(m, np.intp)
+    # Heap entries: (turn, node, the node's version when pushed); at most one per point at first
+    # and two per dropped point after.
+    turn_of = np.empty(3 * m)
+    node_of, version_of = np.empty(3 * m, np.intp), np.empty(3 * m, np.intp)
+    size = 0
+    for k in range(1, m - 1):
+        turn = _salient_turn(xy, points[k - 1], points[k], points[k + 1], span)
+        size = _push(turn_of, node_of, version_of, size, turn, k, 0)
+    while size:
+        turn, k, stamp = turn_of[0], node_of[0], version_of[0]
+        size = _pop(turn_of, node_of, version_of, size)
+        if not alive[k] or stamp != version[k]:
+            continue  # dropped, or its turn changed since
+        if turn >= threshold:
             break
-        for k in range(weakest, count - 1):
-            turns[k] = turns[k + 1]
-        for k in range(weakest + 1, m - 1):
-            points[k] = points[k + 1]
-        count -= 1
-        m -= 1
+        alive[k] = False
+        p, q = before[k], after[k]
+        after[p], before[q] = q, p
         # Only the dropped point's neighbours turn differently now.
-        for k in range(max(weakest - 1, 0), min(weakest + 1, count)):
-            turns[k] = _salient_turn(xy, points[k], points[k + 1], points[k + 2], span)
-    return points[:m].copy()
+        for j in (p, q):
+            if 0 < j < m - 1:
+                version[j] += 1
+                turn = _salient_turn(xy, points[before[j]], points[j], points[after[j]], span)
+                size = _push(turn_of, node_of, version_of, size, turn, j, version[j])
+    return points[alive].copy()
+
+
+@compiled
+def _first(turn_a, node_a, turn_b, node_b):  # type: ignore[no-untyped-def]
+    """Whether entry a comes before b: nan first, then the smaller turn, then the earlier."""
+    if turn_a != turn_a or turn_b != turn_b:
+        if turn_a == turn_a:
+            return False
+        if turn_b == turn_b:
+            return True
+        return node_a < node_b
+    return turn_a < turn_b or (turn_a == turn_b and node_a < node_b)
+
+
+@compiled
+def _push(turn_of, node_of, version_of, size, turn, node, stamp):  # type: ignore[no-untyped-def]
+    """Add an entry to the binary heap of the first ``size`` entries; returns the new size."""
+    i = size
+    while i > 0:
+        parent = (i - 1) // 2
+        if not _first(turn, node, turn_of[parent], node_of[parent]):
+            break
+        turn_of[i], node_of[i], version_of[i] = turn_of[parent], node_of[parent], version_of[parent]
+        i = parent
+    turn_of[i], node_of[i], version_of[i] = turn, node, stamp
+    return size + 1
+
+
+@compiled
+def _pop(turn_of, node_of, version_of, size):  # type: ignore[no-untyped-def]
+    """Remove the heap's first entry; returns the new size."""
+    size -= 1
+    turn, node, stamp = turn_of[size], node_of[size], version_of[size]
+    i = 0
+    while True:
+        child = 2 * i + 1
+        if child >= size:
+            break
+        if child + 1 < size and _first(
+            turn_of[child + 1], node_of[child + 1], turn_of[child], node_of[child]
+        ):
+            child += 1
+        if not _first(turn_of[child], node_of[child], turn, node):
+            break
+        turn_of[i], node_of[i], version_of[i] = turn_of[child], node_of[child], version_of[child]
+        i = child
+    if size:
+        turn_of[i], node_of[i], version_of[i] = turn, node, stamp
+    return size
 
 
 @compiled
@@ -519,7 +581,7 @@ def add_turning_points(
             inner = np.searchsorted(s, offset + origin)
             out[m] = min(max(inner, a + 1), b - 1)
             m += 1
-    return _sorted_unique(out)
+    return np.unique(out)
 
 
 @compiled
@@ -529,24 +591,6 @@ def _slice(i, n):  # type: ignore[no-untyped-def]
         i += n
         return i if i > 0 else 0
     return i if i < n else n
-
-
-@compiled
-def _sorted_unique(values):  # type: ignore[no-untyped-def]
-    """``np.unique`` of a few integers, mostly in order already (insertion sort, in place)."""
-    for i in range(1, values.size):
-        v = values[i]
-        j = i - 1
-        while j >= 0 and values[j] > v:
-            values[j + 1] = values[j]
-            j -= 1
-        values[j + 1] = v
-    m = 0
-    for i in range(values.size):
-        if i == 0 or values[i] != values[m - 1]:
-            values[m] = values[i]
-            m += 1
-    return values[:m].copy()
 
 
 # --- inflections --------------------------------------------------------------------------------

@@ -127,6 +127,9 @@ def evaluate_trace(
 
 # --- eq. 22 -------------------------------------------------------------------------------------
 
+CROSSING_STEPS = 8
+"""Safeguarded Newton steps for the speed-profile crossings (quadratic once close)."""
+
 
 @compiled
 def crossing(a: int, b: int, onsets, mu, sigma, lengths, steps: int) -> float:  # type: ignore[no-untyped-def]

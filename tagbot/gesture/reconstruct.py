@@ -300,16 +300,7 @@ def _fit_sections(
 ) -> tuple[list[Plan], list[Array]]:
     """The plans of ``parts`` (eq. 22, then refinement if on), and per part how far each contour
     sample is from the trajectory where the refinement looked (zeros without refinement)."""
-    count = sum(len(p.dt) for p in parts)
-    strokes = Strokes(
-        targets=np.concatenate([p.curve[p.dominant] for p in parts]),
-        onsets=np.concatenate([np.cumsum(p.dt) for p in parts]),
-        mu=np.full(count, opts.mu),
-        sigma=np.full(count, opts.sigma),
-        phi1=np.concatenate([p.phi1 for p in parts]),
-        phi2=np.concatenate([p.phi2 for p in parts]),
-        counts=np.array([len(p.dt) for p in parts], dtype=np.intp),
-    )
+    strokes = _strokes_of(parts, opts)
     tolerance = np.array([p.ds for p in parts]) * opts.tolerance
     strokes = correct_targets(strokes, size, tolerance, opts.iterations)
     curves = [p.curve for p in parts]
@@ -318,9 +309,23 @@ def _fit_sections(
     refine_options = RefineOptions(
         onset_slack=max(0.5 * (opts.dt_max - opts.dt_min), 1e-3), arcs_only=model == "sigma"
     )
-    strokes, misfit = refine(strokes, curves, size, refine_options)
+    strokes, misfit = refine(strokes, curves, size, refine_options, [p.dominant for p in parts])
     bounds = np.cumsum([len(c) for c in curves])[:-1]
     return strokes.plans(), np.split(misfit, bounds)
+
+
+def _strokes_of(parts: list[_Sections], opts: FitOptions) -> Strokes:
+    """The strokes the paper's estimates give ``parts``: targets on the dominant points."""
+    count = sum(len(p.dt) for p in parts)
+    return Strokes(
+        targets=np.concatenate([p.curve[p.dominant] for p in parts]),
+        onsets=np.concatenate([np.cumsum(p.dt) for p in parts]),
+        mu=np.full(count, opts.mu),
+        sigma=np.full(count, opts.sigma),
+        phi1=np.concatenate([p.phi1 for p in parts]),
+        phi2=np.concatenate([p.phi2 for p in parts]),
+        counts=np.array([len(p.dt) for p in parts], dtype=np.intp),
+    )
 
 
 def _split(
@@ -368,7 +373,13 @@ def _analyse(xy: Array, size: float, model: Model, opts: FitOptions) -> _Section
     dominant = contour.salient_points(
         curve, support, np.radians(opts.salient_angle), np.radians(opts.prominence)
     )
-    dominant = contour.add_turning_points(curve, dominant, np.radians(opts.max_turn), support)
+    # §6.1's points, equally spaced along the contour, and again in any section that still turns
+    # more than max_turn (where the curvature is uneven: a spiral's inner turns), until none does.
+    while True:
+        more = contour.add_turning_points(curve, dominant, np.radians(opts.max_turn), support)
+        if len(more) == len(dominant):
+            break
+        dominant = more
     return _estimate(curve, dominant, ds, support, model, opts)
 
 
@@ -463,5 +474,4 @@ def crossing_times(plan: Plan) -> Array:
     return times
 
 
-_CROSSING_STEPS = 8
-"""Safeguarded Newton steps for the speed-profile crossings (quadratic once close)."""
+_CROSSING_STEPS = kernels.CROSSING_STEPS

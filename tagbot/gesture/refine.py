@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from tagbot.gesture import refine_kernels
+from tagbot.gesture import kernels, refine_kernels
 from tagbot.gesture.strokes import Strokes
 from tagbot.model.plan import END_TOLERANCE
 
@@ -68,15 +68,21 @@ class RefineOptions:
 
 
 def refine(
-    strokes: Strokes, curves: list[Array], size: float, options: RefineOptions
+    strokes: Strokes,
+    curves: list[Array],
+    size: float,
+    options: RefineOptions,
+    sections: list[Index] | None = None,
 ) -> tuple[Strokes, Array]:
     """``strokes`` (one plan per curve) adjusted to follow ``curves`` (see the module doc), and
     the misfit: per sample of the concatenated curves, the largest distance between it and the
     trajectory that a residual saw there (0 where none looked).
 
-    The first and last target of each trace stay on its contour's ends and its first onset at 0.
+    ``sections``: per curve, the samples its targets were placed on (the dominant points);
+    without them, the samples nearest to the targets. The first and last target of each trace
+    stay on its contour's ends and its first onset at 0.
     """
-    problem = _Problem.build(strokes, curves, size, options)
+    problem = _Problem.build(strokes, curves, size, options, sections)
     layout = _Layout(strokes, options.arcs_only)
     lower, upper = layout.bounds(strokes, options.onset_slack)
     goal = problem.contour[problem.goal_index]
@@ -96,6 +102,7 @@ def refine(
         problem.grid,
         problem.grid_first,
         *problem.contour_arrays,
+        problem.reach,
         float(size),
         END_TOLERANCE,
         ANGLE_STEP,
@@ -117,14 +124,24 @@ class _Problem:
     goal_index: Index
     """The contour samples the trajectory must pass near (one forward instant each)."""
     goal_first: Index
+    goal_stroke: Index
+    """The stroke whose section of the contour holds each goal."""
     grid: Array
     """Fixed trajectory instants that must lie near the contour."""
     grid_first: Index
     trace_end: Array
+    reach: int
+    """A grid instant's nearest contour sample lies between the goals of the ``reach`` forward
+    instants before it and after it."""
 
     @classmethod
     def build(
-        cls, strokes: Strokes, curves: list[Array], size: float, options: RefineOptions
+        cls,
+        strokes: Strokes,
+        curves: list[Array],
+        size: float,
+        options: RefineOptions,
+        sections: list[Index] | None = None,
     ) -> _Problem:
         counts = strokes.counts
         lengths = np.array([len(c) for c in curves])
@@ -134,6 +151,17 @@ class _Problem:
         trace = np.repeat(np.arange(len(curves)), goals)
         fraction = (np.arange(goal_first[-1]) - goal_first[trace]) / (goals[trace] - 1)
         pick = np.round(fraction * (lengths[trace] - 1)).astype(np.intp)
+        if sections is None:
+            sections = _nearest_samples(strokes, curves)
+        goal_stroke = np.concatenate(
+            [
+                strokes.first_stroke[k]
+                + np.clip(np.searchsorted(sections[k], pick[a:b], "right") - 1, 0, n - 1)
+                for k, (n, a, b) in enumerate(
+                    zip(counts, goal_first[:-1], goal_first[1:], strict=True)
+                )
+            ]
+        )
         ends = strokes.ends(size)
         grids = np.maximum(options.path_samples * counts, 16)
         grid_first = np.concatenate([[0], np.cumsum(grids)])
@@ -145,9 +173,11 @@ class _Problem:
             contour_first=contour_first,
             goal_index=contour_first[:-1][np.repeat(np.arange(len(curves)), goals)] + pick,
             goal_first=goal_first,
+            goal_stroke=goal_stroke.astype(np.intp),
             grid=fraction * ends[trace],
             grid_first=grid_first,
             trace_end=ends,
+            reach=int(options.contour_samples),
         )
 
     @property
@@ -155,18 +185,14 @@ class _Problem:
         return np.repeat(np.arange(len(self.trace_end)), np.diff(self.goal_first))
 
     @property
-    def cell(self) -> float:
-        """Width of the cells that sort contour samples for nearest-point queries."""
-        return self.size / 100.0
-
-    @property
     def goal_arrays(self) -> tuple[Array, Index, Array, Index]:
         return self.contour[self.goal_index], self.goal_first, self.grid, self.grid_first
 
     @property
-    def contour_arrays(self) -> tuple[Array, Array, Index, Index, float]:
-        header, start, order = refine_kernels.buckets(self.contour, self.contour_first, self.cell)
-        return self.contour, header, start, order, self.cell
+    def contour_arrays(self) -> tuple[Array, Array, Index, Index]:
+        """The contour samples and their grids for nearest-sample queries, trace by trace."""
+        header, start, order = refine_kernels.path_buckets(self.contour, self.contour_first)
+        return self.contour, header, start, order
 
     @staticmethod
     def plan_arrays(strokes: Strokes) -> tuple[Array, ...]:
@@ -183,29 +209,58 @@ class _Problem:
 
     def initial_instants(self, strokes: Strokes) -> Array:
         """Each goal's instant: the closest of a dense grid along its trace's trajectory."""
+        return self._initial_instants(strokes)[0]
+
+    def _initial_instants(self, strokes: Strokes) -> tuple[Array, int]:
         dense = np.diff(self.grid_first) * _DENSE
         goal, goal_first, _, _ = self.goal_arrays
-        return refine_kernels.initial_instants(
+        return refine_kernels.initial_instants(  # type: ignore[no-any-return]
             *self.plan_arrays(strokes),
             goal,
             goal_first,
+            self.goal_stroke,
             dense,
             self.trace_end,
             self.size,
             END_TOLERANCE,
-            self.cell,
+            kernels.CROSSING_STEPS,
         )
+
+    def search_work(self, strokes: Strokes) -> tuple[int, int]:
+        """The nearest-point searches' work (cells and points looked at,
+        :func:`~tagbot.gesture.refine_kernels.nearest`) of the initial instants and of one
+        evaluation of the residuals there: what bounds the refinement's cost per point."""
+        tau, initial = self._initial_instants(strokes)
+        return initial, int(self.residuals(strokes, tau)[7])
 
     def residuals(self, strokes: Strokes, tau: Array) -> tuple[Array, ...]:
         """The residuals (:func:`~tagbot.gesture.refine_kernels.residuals`) at instants ``tau``."""
+        goal, goal_first, grid, grid_first = self.goal_arrays
         return refine_kernels.residuals(
             *self.plan_arrays(strokes),
             tau,
-            *self.goal_arrays,
+            goal,
+            goal_first,
+            self.goal_index,
+            grid,
+            grid_first,
             *self.contour_arrays,
+            self.reach,
             self.size,
             END_TOLERANCE,
         )
+
+
+def _nearest_samples(strokes: Strokes, curves: list[Array]) -> list[Index]:
+    """Per curve, the samples nearest to its targets, in order along it."""
+    out = []
+    for k, curve in enumerate(curves):
+        first = np.array([0, len(curve)], dtype=np.intp)
+        grid = refine_kernels.path_buckets(np.ascontiguousarray(curve, dtype=float), first)
+        targets = strokes.targets[strokes.target_slice(k)]
+        near = [refine_kernels.nearest(curve, *grid, 0, x, y)[0] for x, y in targets]
+        out.append(np.maximum.accumulate(np.array(near, dtype=np.intp)))
+    return out
 
 
 class _Layout:

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from tagbot.gesture.kernels import collapsed, evaluate, shapes_of, windows_of
+from tagbot.gesture.kernels import collapsed, crossing, evaluate, shapes_of, windows_of
 from tagbot.model.kernels import (
     SMALL_A,
     TAYLOR_B,
@@ -319,28 +319,84 @@ def _band_solve(factor: np.ndarray, band: int, rhs: np.ndarray) -> np.ndarray:
 # --- nearest contour samples ------------------------------------------------------------------
 
 
+OCCUPANCY = 2.0
+"""Points per cell that :func:`path_buckets` aims at where the points fill their box."""
+SPACINGS = 6.0
+"""... and the widest cell it takes, in mean spacings between consecutive points."""
+FINEST = 0.125
+"""... and the finest, in points per cell where the points fill their box (cells 8x points)."""
+
+
 @compiled
 def buckets(
     points: np.ndarray, first: np.ndarray, cell: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A uniform grid of cells ``cell`` wide over each group ``first[k]:first[k + 1]`` of
-    ``points``, for :func:`nearest`: per group ``(x0, y0, nx, ny, its first cell)``, and the
-    points of cell ``c``, ``order[start[c]:start[c + 1]]``."""
+    ``points``, for :func:`nearest`: per group ``(x0, y0, nx, ny, its first cell, cell)``, and
+    the points of cell ``c``, ``order[start[c]:start[c + 1]]``."""
+    return _buckets(points, first, np.full(first.size - 1, cell))
+
+
+@compiled
+def path_buckets(
+    points: np.ndarray, first: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`buckets` with each group's own cell width, for a group of points along a path
+    (consecutive points consecutive on it): :data:`SPACINGS` mean spacings, but no wider than
+    holds :data:`OCCUPANCY` points per cell where the points fill their bounding box, nor finer
+    than :data:`FINEST`. So a sparse curve gets cells a few samples long, and a path crossing
+    its box over and over (random points: the contour's length grows with their number, its box
+    does not) keeps a bounded number of points per cell: the cells (memory) and the work of a
+    query near the points stay proportional to the points, and at most to their number.
+    """
     groups = first.size - 1
-    header = np.empty((groups, 5))
-    cells = 0
+    cells = np.empty(groups)
     for k in range(groups):
         lo, hi = first[k], first[k + 1]
+        count = hi - lo
+        width = np.max(points[lo:hi, 0]) - np.min(points[lo:hi, 0])
+        height = np.max(points[lo:hi, 1]) - np.min(points[lo:hi, 1])
+        length = 0.0
+        for i in range(lo + 1, hi):
+            length += math.hypot(points[i, 0] - points[i - 1, 0], points[i, 1] - points[i - 1, 1])
+        spacing = length / max(count - 1, 1)
+        cells[k] = max(
+            min(SPACINGS * spacing, _fill_cell(width, height, count, OCCUPANCY)),
+            _fill_cell(width, height, count, FINEST),
+        )
+        if not cells[k] > 0.0:  # all the points at one place: any width
+            cells[k] = 1.0
+    return _buckets(points, first, cells)
+
+
+@compiled
+def _fill_cell(width: float, height: float, count: int, occupancy: float) -> float:
+    """The cell width giving at most about ``count / occupancy`` cells over a ``width`` x
+    ``height`` box (three times that at most, where the box is a line)."""
+    area_cell = math.sqrt(width * height * occupancy / count)
+    return max(area_cell, max(width, height) * occupancy / count)
+
+
+@compiled
+def _buckets(
+    points: np.ndarray, first: np.ndarray, cells: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`buckets` with cells ``cells[k]`` wide for group ``k``."""
+    groups = first.size - 1
+    header = np.empty((groups, 6))
+    total = 0
+    for k in range(groups):
+        lo, hi, cell = first[k], first[k + 1], cells[k]
         x0, y0 = np.min(points[lo:hi, 0]), np.min(points[lo:hi, 1])
         nx = int((np.max(points[lo:hi, 0]) - x0) / cell) + 1
         ny = int((np.max(points[lo:hi, 1]) - y0) / cell) + 1
         header[k, 0], header[k, 1], header[k, 2], header[k, 3] = x0, y0, nx, ny
-        header[k, 4] = cells
-        cells += nx * ny
+        header[k, 4], header[k, 5] = total, cell
+        total += nx * ny
     which = np.empty(points.shape[0], np.intp)
-    start = np.zeros(cells + 1, np.intp)
+    start = np.zeros(total + 1, np.intp)
     for k in range(groups):
-        x0, y0 = header[k, 0], header[k, 1]
+        x0, y0, cell = header[k, 0], header[k, 1], header[k, 5]
         nx, ny, base = int(header[k, 2]), int(header[k, 3]), int(header[k, 4])
         for i in range(first[k], first[k + 1]):
             cx = min(int((points[i, 0] - x0) / cell), nx - 1)
@@ -358,16 +414,18 @@ def buckets(
 
 @compiled
 def nearest(
-    points: np.ndarray, header: np.ndarray, start: np.ndarray, order: np.ndarray, cell: float,
-    k: int, x: float, y: float,
-) -> int:  # fmt: skip
-    """The point of group ``k`` nearest to ``(x, y)`` (:func:`buckets`): cells ring by ring
+    points: np.ndarray, header: np.ndarray, start: np.ndarray, order: np.ndarray, k: int,
+    x: float, y: float, lo: int = 0, hi: int = -1,
+) -> tuple[int, int]:  # fmt: skip
+    """The point of group ``k`` nearest to ``(x, y)`` (:func:`buckets`) among points ``lo..hi``
+    (``hi < 0``: all), and the work it took (cells and points looked at): cells ring by ring
     outwards, skipping those farther than the best so far, until no ring left can be nearer."""
-    x0, y0 = header[k, 0], header[k, 1]
+    x0, y0, cell = header[k, 0], header[k, 1], header[k, 5]
     nx, ny, base = int(header[k, 2]), int(header[k, 3]), int(header[k, 4])
     cx = min(max(math.floor((x - x0) / cell), 0), nx - 1)
     cy = min(max(math.floor((y - y0) / cell), 0), ny - 1)
     best, best_d2 = -1, np.inf
+    work = 0
     for ring in range(max(nx, ny) + 1):
         for iy in range(max(cy - ring, 0), min(cy + ring, ny - 1) + 1):
             edge = iy == cy - ring or iy == cy + ring
@@ -377,10 +435,14 @@ def nearest(
                 if 0 <= ix < nx:
                     dx = max(x0 + ix * cell - x, 0.0, x - x0 - (ix + 1) * cell)
                     dy = max(y0 + iy * cell - y, 0.0, y - y0 - (iy + 1) * cell)
+                    work += 1
                     if dx * dx + dy * dy < best_d2:
                         c = base + iy * nx + ix
+                        work += start[c + 1] - start[c]
                         for e in range(start[c], start[c + 1]):
                             i = order[e]
+                            if hi >= 0 and not lo <= i <= hi:
+                                continue
                             px, py = points[i, 0] - x, points[i, 1] - y
                             if px * px + py * py < best_d2:
                                 best, best_d2 = i, px * px + py * py
@@ -388,6 +450,23 @@ def nearest(
         # Cells beyond this ring are at least ``ring`` cells away.
         if (ring * cell) ** 2 >= best_d2:
             break
+    return best, work
+
+
+SCAN = 4096
+"""A grid row's contour samples are scanned one by one when fewer than this (a few strokes'
+worth; a dense grid cell holds samples of other parts of the contour, which a range skips but
+still reads), else searched through the grid."""
+
+
+@compiled
+def _nearest_in(points: np.ndarray, lo: int, hi: int, x: float, y: float) -> int:
+    """The first of ``points[lo..hi]`` nearest to ``(x, y)``."""
+    best, best_d2 = lo, np.inf
+    for i in range(lo, hi + 1):
+        dx, dy = points[i, 0] - x, points[i, 1] - y
+        if dx * dx + dy * dy < best_d2:
+            best, best_d2 = i, dx * dx + dy * dy
     return best
 
 
@@ -406,13 +485,14 @@ def residuals(
     tau,
     goal,
     goal_first,
+    goal_index,
     grid,
     grid_first,
     contour,
     header,
     start,
     order,
-    cell,
+    reach,
     size,
     end_tolerance,
 ):  # type: ignore[no-untyped-def]
@@ -421,8 +501,12 @@ def residuals(
     Rows are evaluation rows: per trace its forward instants and grid instants, sorted by time.
     Returns ``(instant per row — forward index f, or F + grid index —, begin, stop, pairs,
     residual per row (complex, trajectory minus goal), velocity per row (complex), nearest
-    contour sample per row (grid rows; −1 for forward rows))``; the goal of a forward row is
-    ``goal[f]``, of a grid row the contour sample nearest to the trajectory there.
+    contour sample per row (grid rows; −1 for forward rows), the work of those searches
+    (:func:`nearest`))``; the goal of a forward row is ``goal[f]`` (contour sample
+    ``goal_index[f]``), of a grid row the contour sample nearest to the trajectory there among
+    those between the goals of the ``reach`` forward rows before it and after it (``header,
+    start, order``: :func:`path_buckets`): a trajectory that strays towards another part of
+    its contour (a spiral's next turn, a loop's other side) is pulled back to its own.
     """
     forward = tau.size
     traces = first_stroke.size - 1
@@ -453,16 +537,39 @@ def residuals(
     residual = np.empty(rows, np.complex128)
     velocity = np.empty(rows, np.complex128)
     near = np.full(rows, -1, np.intp)
+    work = 0
     for k in range(traces):
-        for i in range(sample_first[k], sample_first[k + 1]):
+        lo, hi = sample_first[k], sample_first[k + 1]
+        # The goals' contour samples in time order, and per row how many come before it.
+        along = np.empty(goal_first[k + 1] - goal_first[k], np.intp)
+        before = np.empty(hi - lo, np.intp)
+        count = 0
+        for i in range(lo, hi):
+            before[i - lo] = count
+            if instant[i] < forward:
+                along[count] = goal_index[instant[i]]
+                count += 1
+        for i in range(lo, hi):
             velocity[i] = complex(v[i, 0], v[i, 1])
             if instant[i] < forward:
                 gx, gy = goal[instant[i], 0], goal[instant[i], 1]
             else:
-                near[i] = nearest(contour, header, start, order, cell, k, xy[i, 0], xy[i, 1])
+                first_goal = max(before[i - lo] - reach, 0)
+                last_goal = min(before[i - lo] + reach, count) - 1
+                low, high = along[first_goal], along[first_goal]
+                for f in range(first_goal + 1, last_goal + 1):
+                    low, high = min(low, along[f]), max(high, along[f])
+                if high - low < SCAN:
+                    near[i] = _nearest_in(contour, low, high, xy[i, 0], xy[i, 1])
+                    work += high - low + 1
+                else:
+                    near[i], effort = nearest(
+                        contour, header, start, order, k, xy[i, 0], xy[i, 1], low, high
+                    )
+                    work += effort
                 gx, gy = contour[near[i], 0], contour[near[i], 1]
             residual[i] = complex(xy[i, 0] - gx, xy[i, 1] - gy)
-    return instant, begin, stop, pairs, residual, velocity, near
+    return instant, begin, stop, pairs, residual, velocity, near, work
 
 
 @compiled
@@ -484,14 +591,22 @@ def initial_instants(
     first_stroke,
     goal,
     goal_first,
+    goal_stroke,
     dense,
     ends,
     size,
     end_tolerance,
-    cell,
-) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """Each goal's instant: the nearest of ``dense[k]`` instants spread over its trace's
-    motion (``0..ends[k]``)."""
+    steps,
+) -> tuple[np.ndarray, int]:  # type: ignore[no-untyped-def]
+    """Each goal's instant: the nearest of ``dense[k]`` instants spread over its trace's motion
+    (``0..ends[k]``) among those from the critical instant (§6.4) of the target before the one
+    its stroke ``goal_stroke[f]`` leaves to that of the target after the one it reaches (the
+    trace's start and end beyond them); and the work of those searches (instants looked at).
+
+    Kept so near its own stroke, a goal is not matched to where the trajectory passes by it at
+    another time (a spiral's next turn): the instants keep the contour's order, and each search
+    looks at a few strokes' worth of instants whatever the length of the trace.
+    """
     traces = first_stroke.size - 1
     sample_first = np.zeros(traces + 1, np.intp)
     for k in range(traces):
@@ -507,12 +622,42 @@ def initial_instants(
         t, sample_first, first_stroke, targets, onsets, mu, sigma, constants, unit_length, t_on,
         t_off,
     )[0]  # fmt: skip
-    header, start, order = buckets(xy, sample_first, cell)
-    tau = np.empty(goal.shape[0])
+    # Per target, its critical instant: where the speed profiles of its two strokes cross.
+    lengths = np.empty(onsets.size)
     for k in range(traces):
+        for j in range(first_stroke[k], first_stroke[k + 1]):
+            chord = math.hypot(
+                targets[j + k + 1, 0] - targets[j + k, 0], targets[j + k + 1, 1] - targets[j + k, 1]
+            )
+            lengths[j] = unit_length[j] * chord
+    critical = np.empty(onsets.size + traces)
+    for k in range(traces):
+        j0, j1 = first_stroke[k], first_stroke[k + 1]
+        critical[j0 + k], critical[j1 + k] = 0.0, ends[k]
+        for j in range(j0 + 1, j1):
+            when = crossing(j - 1, j, onsets, mu, sigma, lengths, steps)
+            critical[j + k] = min(max(when, 0.0), ends[k])
+    tau = np.empty(goal.shape[0])
+    work = 0
+    for k in range(traces):
+        lo, hi = sample_first[k], sample_first[k + 1]
+        j0, j1 = first_stroke[k], first_stroke[k + 1]
         for f in range(goal_first[k], goal_first[k + 1]):
-            tau[f] = t[nearest(xy, header, start, order, cell, k, goal[f, 0], goal[f, 1])]
-    return tau
+            j = goal_stroke[f]
+            early = critical[max(j - 1, j0) + k]
+            late = critical[min(j + 2, j1) + k]
+            first = lo + np.searchsorted(t[lo:hi], min(early, late), side="left")
+            last = lo + np.searchsorted(t[lo:hi], max(early, late), side="right")
+            if last <= first:
+                first, last = lo, hi
+            best, best_d2 = first, np.inf
+            for i in range(first, last):
+                dx, dy = xy[i, 0] - goal[f, 0], xy[i, 1] - goal[f, 1]
+                if dx * dx + dy * dy < best_d2:
+                    best, best_d2 = i, dx * dx + dy * dy
+            tau[f] = t[best]
+            work += last - first
+    return tau, work
 
 
 @compiled
@@ -658,7 +803,7 @@ def refine_loop(
     header,
     start,
     order,
-    cell,
+    reach,
     size,
     end_tolerance,
     angle_step,
@@ -674,8 +819,8 @@ def refine_loop(
     x = pack(targets, onsets, phi1, phi2, first_stroke, angle_col, onset_col, target_col,
              arcs_only, params)  # fmt: skip
     current = residuals(
-        targets, onsets, mu, sigma, phi1, phi2, first_stroke, tau, goal, goal_first, grid,
-        grid_first, contour, header, start, order, cell, size, end_tolerance,
+        targets, onsets, mu, sigma, phi1, phi2, first_stroke, tau, goal, goal_first, goal_index,
+        grid, grid_first, contour, header, start, order, reach, size, end_tolerance,
     )  # fmt: skip
     cost = cost_of(current[4])
     damping, grow = 1e-3, 2.0
@@ -718,8 +863,8 @@ def refine_loop(
         if ok and predicted > 0.0 and _valid(trial_plan[0], first_stroke, 1e-6 * size):
             trial = residuals(
                 trial_plan[0], trial_plan[1], mu, sigma, trial_plan[2], trial_plan[3],
-                first_stroke, trial_tau, goal, goal_first, grid, grid_first, contour, header,
-                start, order, cell, size, end_tolerance,
+                first_stroke, trial_tau, goal, goal_first, goal_index, grid, grid_first,
+                contour, header, start, order, reach, size, end_tolerance,
             )  # fmt: skip
             trial_cost = cost_of(trial[4])
         gain = (cost - trial_cost) / max(predicted, 1e-300)

@@ -102,14 +102,14 @@ def unpack(layout, strokes, x):
 
 def by_instant(problem, strokes, tau):
     """Residuals and velocities per instant (forward instants first, then the grid)."""
-    instant, _, _, _, residual, velocity, _ = problem.residuals(strokes, tau)
+    instant, _, _, _, residual, velocity, _, _ = problem.residuals(strokes, tau)
     r, v = np.empty_like(residual), np.empty_like(velocity)
     r[instant], v[instant] = residual, velocity
     return r, v
 
 
 def normal_system(problem, layout, strokes, tau):
-    instant, begin, stop, pairs, residual, velocity, _ = problem.residuals(strokes, tau)
+    instant, begin, stop, pairs, residual, velocity, _, _ = problem.residuals(strokes, tau)
     arrays = _Problem.plan_arrays(strokes)
     return instant, kernels.system(
         instant, begin, stop, pairs, residual, velocity, arrays[0], arrays[4], arrays[5],
@@ -131,7 +131,7 @@ def dense_jacobian(problem, layout, strokes, tau, tail=0.0):
 
 
 def _jacobian_arguments(problem, layout, strokes, tau, tail):
-    instant, begin, stop, pairs, _, _, _ = problem.residuals(strokes, tau)
+    instant, begin, stop, pairs, _, _, _, _ = problem.residuals(strokes, tau)
     chords = np.column_stack([strokes.chords.real, strokes.chords.imag])
     return (
         begin, stop, pairs, chords, strokes.first_stroke, strokes.phi1, strokes.phi2,
@@ -258,10 +258,11 @@ def test_refinement_lowers_the_cost_and_keeps_the_ends():
     np.testing.assert_array_equal(done.onsets[done.first_stroke[:-1]], 0.0)
 
 
-@pytest.mark.parametrize("cell", [0.3, 2.0, 50.0])
+@pytest.mark.parametrize("cell", [0.3, 2.0, 50.0, None])
 def test_nearest_contour_sample_is_the_nearest(cell):
     """The bucket grid's nearest point of a group equals a KD-tree's, for queries inside and
-    far outside the points, with cells much smaller and larger than their spacing."""
+    far outside the points, with cells much smaller and larger than their spacing, and with
+    each group's own cells (``None``: :func:`path_buckets`)."""
     from scipy.spatial import cKDTree
 
     rng = np.random.default_rng(1)
@@ -269,12 +270,15 @@ def test_nearest_contour_sample_is_the_nearest(cell):
         [np.cumsum(rng.normal(size=(500, 2)), 0), np.cumsum(rng.normal(size=(300, 2)), 0) + 5]
     )
     first = np.array([0, 500, 800])
-    header, start, order = kernels.buckets(points, first, cell)
+    if cell is None:
+        header, start, order = kernels.path_buckets(points, first)
+    else:
+        header, start, order = kernels.buckets(points, first, cell)
     queries = rng.uniform(-60, 60, size=(400, 2))
     for k in range(2):
         group = points[first[k] : first[k + 1]]
         distance, _ = cKDTree(group).query(queries)
         for q, d in zip(queries, distance, strict=True):
-            found = kernels.nearest(points, header, start, order, cell, k, q[0], q[1])
+            found = kernels.nearest(points, header, start, order, k, q[0], q[1])[0]
             assert first[k] <= found < first[k + 1]
             assert np.hypot(*(points[found] - q)) == pytest.approx(d, abs=1e-12)
