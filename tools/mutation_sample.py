@@ -6,6 +6,8 @@ sample per module, stratified by function (functions in a seeded random order, o
 each in turn, until the module's quota is met), runs it with ``mutmut run --max-children N
 <names>`` and prints, per module, the killed share of the non-equivalent mutants. Equivalent
 mutants are those listed in tests/EQUIVALENT_MUTANTS.txt (one per line: name, then the reason).
+Where ``[tool.mutmut.sample_functions]`` names a module's functions, its sample is drawn from
+their mutants only.
 
     python tools/mutation_sample.py                       # 40 per module, seed 0
     python tools/mutation_sample.py --per-module 20 --seed 7 --module tagbot/plotter/program.py
@@ -30,12 +32,12 @@ EQUIVALENTS = Path("tests/EQUIVALENT_MUTANTS.txt")
 KILLED = {"killed", "timeout", "caught by type check", "segfault"}
 
 
-def configured_modules() -> list[str]:
-    """The files ``[tool.mutmut] only_mutate`` names, in order."""
+def configuration() -> dict:
+    """pyproject.toml's ``[tool.mutmut]`` table."""
     import tomllib
 
     with open("pyproject.toml", "rb") as f:
-        return list(tomllib.load(f)["tool"]["mutmut"]["only_mutate"])
+        return tomllib.load(f)["tool"]["mutmut"]
 
 
 def generate() -> None:
@@ -59,6 +61,18 @@ def exit_codes(module: str) -> dict[str, int | None]:
 def function_of(name: str) -> str:
     """The function a mutant belongs to: ``pkg.mod.x_f__mutmut_3`` → ``pkg.mod.x_f``."""
     return name.rsplit("__mutmut_", 1)[0]
+
+
+def short_name(name: str) -> str:
+    """A mutant's function as written in the source: ``f``, or ``Class.method`` for mutmut's
+    ``pkg.mod.xǁClassǁmethod__mutmut_3``."""
+    last = function_of(name).rsplit(".", 1)[-1]
+    return last[2:] if last.startswith("x_") else ".".join(last.split("ǁ")[1:])
+
+
+def in_scope(names: list[str], functions: list[str] | None) -> list[str]:
+    """The mutants of ``functions`` (all of them when None)."""
+    return names if functions is None else [n for n in names if short_name(n) in functions]
 
 
 def stratified(names: list[str], count: int, rng: random.Random) -> list[str]:
@@ -101,15 +115,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--list", action="store_true", help="print the sample, run nothing")
     args = parser.parse_args(argv)
 
-    modules = configured_modules()
+    config = configuration()
+    modules = list(config["only_mutate"])
+    scope = config.get("sample_functions", {})
     unknown = sorted(set(args.module or []) - set(modules))
     if unknown:
         print(f"pyproject.toml: {', '.join(unknown)} not in [tool.mutmut] only_mutate")
         return 2
     modules = args.module or modules
     generate()
-    rng = random.Random(args.seed)
-    sample = {m: stratified(list(exit_codes(m)), args.per_module, rng) for m in modules}
+    sample = {  # each module's own seeded draw: the same whichever modules are run with it
+        m: stratified(
+            in_scope(list(exit_codes(m)), scope.get(m)),
+            args.per_module,
+            random.Random(f"{args.seed}:{m}"),
+        )
+        for m in modules
+    }
     if args.list:
         for names in sample.values():
             print("\n".join(names))
