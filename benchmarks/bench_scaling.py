@@ -42,7 +42,7 @@ CASE = textwrap.dedent(
     import json, resource, sys, time
     import numpy as np
     from tagbot.errors import PlanError
-    from tagbot.gesture import reconstruct
+    from tagbot.gesture import reconstruction
     from tagbot.gesture import contour
     from tagbot.inputs import Trace
     from tagbot.metrics import fit_report
@@ -59,12 +59,12 @@ CASE = textwrap.dedent(
         radius = 20.0 + 940.0 * theta / theta[-1]
         xy = np.column_stack([radius * np.cos(theta), radius * np.sin(theta)])
     trace = Trace(xy=xy, t=np.arange(n) * 0.01)
-    reconstruct([np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 0.0]])], timing="ignore")
+    reconstruction([np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 0.0]])], timing="ignore")
     size = float(np.hypot(*np.ptp(xy, axis=0)))
     samples = int(np.ceil(contour.arc_length(xy)[-1] / (size / 600))) + 1
     started, cpu = time.perf_counter(), time.process_time()
     try:
-        result = reconstruct([trace], timing=timing)
+        result = reconstruction([trace], timing=timing)
     except PlanError as e:
         print(json.dumps({"refused": str(e), "seconds": time.perf_counter() - started,
                           "cpu": time.process_time() - cpu, "rss_mb": peak()}))

@@ -10,7 +10,7 @@ Run from the repository root, with the shared data beside it (``../shared/data``
 Datasets as in ``bench_fit.py``, timed captures only: the GML files ``index.csv`` marks as
 ``velocity_benchmark`` (dense real timestamps), the UNIPEN words (100 Hz tablet) and the mocap
 letters (120 Hz). Per file, the default fit (``timing="auto"``,
-:func:`tagbot.gesture.reconstruct`) and the geometric fit (``timing="ignore"``):
+:func:`tagbot.gesture.reconstruction`) and the geometric fit (``timing="ignore"``):
 
 - shape error, mean and max (fractions of the input's bounding-box diagonal, as
   :func:`tagbot.metrics.fit_report` gives them), and whether the default fit keeps within the
@@ -60,7 +60,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_fit import case_traces, gml_cases, mocap_cases, unipen_cases
 
-from tagbot.gesture import reconstruct
+from tagbot.gesture import reconstruction
 from tagbot.gesture.timing import SHAPE_MARGIN_MAX, SHAPE_MARGIN_MEAN, pen_down_span
 from tagbot.metrics import clock_velocity_snr, fit_report, recorded_velocity, tag_clock_snr
 from tagbot.model.motion import evaluate_plan, sample_plan
@@ -154,8 +154,8 @@ def run_case(case: tuple[str, str, object], model: str) -> Row:
     try:
         traces = case_traces(case)
         row.traces, row.points = len(traces), sum(len(tr.xy) for tr in traces)
-        geometric, row.fit_geometric_s = _best_of_2(lambda: reconstruct(traces, model, "ignore"))
-        chosen, row.fit_s = _best_of_2(lambda: reconstruct(traces, model, "auto"))
+        geometric, row.fit_geometric_s = _best_of_2(lambda: reconstruction(traces, model, "ignore"))
+        chosen, row.fit_s = _best_of_2(lambda: reconstruction(traces, model, "auto"))
         report_g = fit_report(traces, geometric.tag)
         report = fit_report(traces, chosen.tag, timings=chosen.timings)
         row.strokes_geometric, row.strokes = report_g.strokes, report.strokes
@@ -201,7 +201,7 @@ def _warm_up(model: str) -> None:
     t = np.linspace(0, 1, 101)
     traces = [Trace(np.column_stack([t * 50, np.sin(6 * t) * 20]), t)]
     for timing in ("ignore", "auto"):
-        rec = reconstruct(traces, model, timing)
+        rec = reconstruction(traces, model, timing)
         fit_report(traces, rec.tag, timings=rec.timings)
         for cutoff in CUTOFFS.values():
             tag_clock_snr(traces, rec.tag, cutoff)

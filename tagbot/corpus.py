@@ -134,12 +134,12 @@ def fit_one(job: FileJob, row: dict[str, Any]) -> Tag:
     started = time.perf_counter()
     traces = load_traces(job.source)  # first: a bad file is refused before numba/scipy load
     loaded = time.perf_counter()
-    from tagbot.gesture import reconstruct
+    from tagbot.gesture import reconstruction
     from tagbot.io.planfile import save_plan
     from tagbot.metrics import timing_summary
 
     opts = job.options
-    fitted_tag = reconstruct(traces, model=opts.get("model", "gamma"), **opts.get("fit", {}))
+    fitted_tag = reconstruction(traces, model=opts.get("model", "gamma"), **opts.get("fit", {}))
     tag = fitted_tag.tag
     fitted = time.perf_counter()
     if job.output is not None:

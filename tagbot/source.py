@@ -49,9 +49,9 @@ def read_source(data: bytes, name: str, model: str | None = None) -> tuple[Tag, 
         except PlanError as e:
             raise type(e)(f"{name}: {e}") from e
     traces = read_traces_bytes(data, name)
-    from tagbot.gesture import reconstruct  # after reading: a bad file is refused first
+    from tagbot.gesture import reconstruction  # after reading: a bad file is refused first
 
-    fitted = reconstruct(traces, model=model or "gamma")
+    fitted = reconstruction(traces, model=model or "gamma")
     for note in fitted.notes():  # e.g. a clock no hand can produce, and what the fit did
         log.warning("%s: %s", name, note)
     return fitted.tag, traces

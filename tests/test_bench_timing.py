@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 
 from bench_timing import KINDS, Row, ceiling_db, run_case, shape_excess, summarise
 
-from tagbot.gesture import reconstruct
+from tagbot.gesture import reconstruction
 from tagbot.inputs import Trace
 from tagbot.metrics import clock_velocity_snr, fit_report, recorded_velocity, tag_clock_snr
 from tagbot.model.motion import evaluate_plan, sample_plan
@@ -89,8 +89,8 @@ def test_run_case_gives_the_fits_figures() -> None:
         start = stamps[-1] + 0.3
     row = run_case(("unipen", "synthetic", traces), "gamma")
     assert not row.error
-    chosen = reconstruct(traces, "gamma", "auto")
-    geometric = reconstruct(traces, "gamma", "ignore")
+    chosen = reconstruction(traces, "gamma", "auto")
+    geometric = reconstruction(traces, "gamma", "ignore")
     report = fit_report(traces, chosen.tag, timings=chosen.timings)
     assert (row.strokes, row.strokes_geometric) == (chosen.tag.n_strokes, geometric.tag.n_strokes)
     assert (row.shape_mean, row.shape_max) == (report.shape.mean, report.shape.max)

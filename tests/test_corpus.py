@@ -110,7 +110,7 @@ def test_a_bug_in_one_file_becomes_its_row(tmp_path, monkeypatch):
     def broken_fit(*args, **kwargs):
         raise ZeroDivisionError("boom")
 
-    monkeypatch.setattr(tagbot.gesture, "reconstruct", broken_fit)
+    monkeypatch.setattr(tagbot.gesture, "reconstruction", broken_fit)
     [row] = list(map_files(fit_file, [FileJob(str(EXAMPLE), None, {})]))
     assert row["status"] == "error"
     assert "internal error ZeroDivisionError: boom" in row["error"]

@@ -6,7 +6,7 @@ from tagbot.gesture.reconstruct import (
     critical_points,
     fit,
     fit_trace,
-    reconstruct,
+    reconstruction,
 )
 from tagbot.gesture.vary import Variation, iter_vary, new_seed, vary
 
@@ -19,6 +19,6 @@ __all__ = [
     "fit_trace",
     "iter_vary",
     "new_seed",
-    "reconstruct",
+    "reconstruction",
     "vary",
 ]

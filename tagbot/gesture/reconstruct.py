@@ -5,8 +5,10 @@ Per trace:
 1. average away jitter on dense captures, resample uniformly along the length and smooth
    (§6.1);
 2. salient points: curvature extrema turning more than 25° between their neighbours, plus the
-   ends; one extra dominant point per 180° of turning between two of them (§6.1); the ΣΛ* model
-   also splits sections at their inflections, since its arcs cannot inflect;
+   ends; one extra dominant point per 180° of turning between two of them, equally spaced along
+   the contour (§6.1), and again (beyond the paper) in any section that still turns more, where
+   the curvature is uneven (a spiral's inner turns); the ΣΛ* model also splits sections at
+   their inflections, since its arcs cannot inflect;
 3. ``phi`` per section from the area between contour and chord, one circular arc, or two across
    an inflection (eq. 19, §6.2);
 4. ``dt`` per stroke from the sharpness of the contour around the target that precedes it
@@ -178,12 +180,12 @@ def fit(
     trace by trace where the clock is one a hand can produce
     (:func:`tagbot.gesture.timing.implausible_clock`), else ``"ignore"``. Whatever the option,
     a timed plan that would miss the shape by more than the margins keeps the geometric plan on
-    the recorded span. :func:`reconstruct` also says how each trace was timed.
+    the recorded span. :func:`reconstruction` also says how each trace was timed.
     """
-    return reconstruct(traces, model, timing, timing_options, **options).tag
+    return reconstruction(traces, model, timing, timing_options, **options).tag
 
 
-def reconstruct(
+def reconstruction(
     traces: Sequence[Any],
     model: Model = "gamma",
     timing: Timing = "auto",

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tagbot.gesture import reconstruct
+from tagbot.gesture import reconstruction
 from tagbot.gesture.timing import (
     MAX_STROKE_RATE,
     SHAPE_MARGIN_MAX,
@@ -40,8 +40,8 @@ def trace_errors(traces: list[Trace], tag) -> list[tuple[float, float]]:
 def assert_within_margin(traces: list[Trace], timing: str) -> object:
     """Fit ``traces`` with ``timing`` and check every trace's shape against the geometric fit's
     of the same trace; returns the reconstruction."""
-    geometric = reconstruct(traces, timing="ignore").tag
-    fitted = reconstruct(traces, timing=timing)
+    geometric = reconstruction(traces, timing="ignore").tag
+    fitted = reconstruction(traces, timing=timing)
     for k, ((mean, largest), (mean_g, max_g)) in enumerate(
         zip(trace_errors(traces, fitted.tag), trace_errors(traces, geometric), strict=True)
     ):
@@ -112,8 +112,8 @@ def test_a_clock_no_hand_can_produce_falls_back_and_says_why(how: str, why: str)
     rng = np.random.default_rng(3)
     traces = [distorted(capture(random_timed_plan(rng), rng), how, rng) for _ in range(2)]
     traces[1] = Trace(traces[1].xy + 90.0, traces[1].t + traces[0].t[-1] + 0.5)
-    fitted = reconstruct(traces)
-    geometric = reconstruct(traces, timing="ignore")
+    fitted = reconstruction(traces)
+    geometric = reconstruction(traces, timing="ignore")
     assert fitted.timings is None  # the paper's rhythm
     assert tag_to_dict(fitted.tag) == tag_to_dict(geometric.tag)
     assert len(fitted.notes()) == 1 and fitted.notes()[0].startswith(why)
@@ -130,7 +130,7 @@ def test_a_plausible_clock_keeps_its_timing() -> None:
         truth = random_timed_plan(rng)
         trace = capture(truth, rng, rate=rate, jitter=jitter)
         trace = Trace(trace.xy, trace.t * slow)
-        fitted = reconstruct([trace])
+        fitted = reconstruction([trace])
         assert fitted.timings is not None and fitted.timings[0].kind == "matched"
         report = fit_report([trace], fitted.tag, timings=fitted.timings)
         assert report.timing == "1 matched"
@@ -147,7 +147,7 @@ def test_one_implausible_trace_falls_back_alone() -> None:
     second = capture(random_timed_plan(rng), rng)
     start = float(first.t[-1]) + 0.4
     burst = Trace(second.xy + 80.0, start + np.linspace(0.0, 0.03, len(second.t)))
-    fitted = reconstruct([first, burst])
+    fitted = reconstruction([first, burst])
     assert [t.kind for t in fitted.timings] == ["matched", "geometric"]
     why = fitted.timings[1].reason
     assert why.startswith("clock implausible: ") and "strokes in" in why
@@ -209,7 +209,7 @@ def test_runs_touch_down_and_lift_off_on_the_recorded_clock() -> None:
         t = np.asarray(recorded.t) - recorded.t[0] + clock
         traces.append(Trace(np.asarray(recorded.xy) + 70.0 * k, t))
         clock = float(t[-1]) + rng.uniform(0.08, 0.3)
-    fitted = reconstruct(traces)
+    fitted = reconstruction(traces)
     assert [t.kind for t in fitted.timings] == ["matched"] * 4
     for plan, trace in zip(fitted.tag.plans, traces, strict=True):
         down, up = plan.ink_window(fitted.tag.size)
