@@ -126,7 +126,8 @@ def test_error_mid_job_stops_at_the_exact_line_and_sends_nothing_after():
     assert 499 - 15 - 8 <= executed < 499
     assert str(caught.value) == (
         f"after line {executed} (the last line the machine executed; resume with --resume-from "
-        f"{executed + 1} --position-known): error:22 (undefined feed rate) for {lines[499].strip()!r} (line 500)"
+        f"{executed + 1} --position-known): error:22 (undefined feed rate) for"
+        f" {lines[499].strip()!r} (line 500)"
     )
     # Nothing of the program after what was already in flight (<= 127 bytes) when it failed:
     after = wire.lines_sent()[report.lines_sent + 2 :]  # +2: $$ and $I of the handshake
