@@ -16,7 +16,7 @@ Inputs, made here and reproducible (seed 0):
 Each case runs in a fresh process (its own peak RSS, from ``resource.getrusage``) after fitting
 one small tag, so compiling or loading the kernels is not counted; a case over ``--limit``
 seconds is stopped and reported as such. Printed per case: strokes, fit seconds (wall and the
-process's CPU), peak RSS (MB) after the fit and after the report, contour samples, shape error
+process's CPU), peak RSS (MB) after the fit and after the report, shape error
 (mean and max, % of the input's diagonal; ``tagbot.metrics.fit_report``). A fit the library
 refuses (a tag lasting more than a tag may) prints the refusal with the seconds and memory it
 took to get there.
@@ -43,7 +43,6 @@ CASE = textwrap.dedent(
     import numpy as np
     from tagbot.errors import PlanError
     from tagbot.gesture import reconstruction
-    from tagbot.gesture import contour
     from tagbot.inputs import Trace
     from tagbot.metrics import fit_report
 
@@ -60,8 +59,6 @@ CASE = textwrap.dedent(
         xy = np.column_stack([radius * np.cos(theta), radius * np.sin(theta)])
     trace = Trace(xy=xy, t=np.arange(n) * 0.01)
     reconstruction([np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 0.0]])], timing="ignore")
-    size = float(np.hypot(*np.ptp(xy, axis=0)))
-    samples = int(np.ceil(contour.arc_length(xy)[-1] / (size / 600))) + 1
     started, cpu = time.perf_counter(), time.process_time()
     try:
         result = reconstruction([trace], timing=timing)
@@ -78,7 +75,6 @@ CASE = textwrap.dedent(
         "cpu": cpu,
         "rss_mb": fitted,
         "report_rss_mb": peak(),
-        "samples": samples,
         "mean": 100 * report.shape.mean,
         "max": 100 * report.shape.max,
         "timing": report.timing or "geometric",
@@ -128,7 +124,7 @@ def run_case(kind: str, n: int, timing: str, limit: float) -> str:
     return (
         f"{r['strokes']:6d} strokes  fit {r['seconds']:7.2f} s (cpu {r['cpu']:7.2f} s)  "
         f"peak {r['rss_mb']:6.0f} MB ({r['report_rss_mb']:6.0f} with the report)  "
-        f"~{r['samples']:9d} samples  shape mean {r['mean']:.3f} % max {r['max']:.2f} %  "
+        f"shape mean {r['mean']:.3f} % max {r['max']:.2f} %  "
         f"({r['timing']})"
     )
 

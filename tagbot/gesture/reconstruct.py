@@ -361,6 +361,14 @@ def _polyline(trace: Any, index: int) -> Array:
     return xy
 
 
+SAMPLES = 32768
+"""A trace gets the resampling step's samples up to this many (the development data's longest
+trace has about 5700), ..."""
+SAMPLES_PER_POINT = 64
+"""... and beyond that at most this many per point it kept (a sparse capture's longest
+stretches between points stay smooth: 64 samples at most per chord)."""
+
+
 def _analyse(xy: Array, size: float, model: Model, opts: FitOptions) -> _Sections | Plan:
     """§6.1–6.3 for one trace: its sections and their estimates, or a dot's plan."""
     step = opts.step * size
@@ -368,6 +376,10 @@ def _analyse(xy: Array, size: float, model: Model, opts: FitOptions) -> _Section
     length = contour.arc_length(xy)[-1]
     if length < 0.5 * opts.dot * size:
         return _dot(xy[0], size, opts)
+    # A long trace of sparse points (random points: its length grows with their number, the tag's
+    # size does not) is resampled more coarsely: at most SAMPLES_PER_POINT samples per point it
+    # kept, beyond SAMPLES. Every length below stays a fraction of the size.
+    step = max(step, length / max(SAMPLES, SAMPLES_PER_POINT * len(xy)))
     curve = contour.smooth(contour.resample(xy, step), opts.smoothing * size / step)
     # The resampled step (≤ step): every scale below is in samples of it.
     ds = length / (len(curve) - 1)

@@ -8,9 +8,17 @@ contour: a Levenberg-Marquardt fit of every trace at once (:mod:`tagbot.gesture.
 residuals are
 
 * contour samples against the trajectory at instants of their own, which are unknowns of the
-  fit too (orthogonal distance regression: the trajectory may not skip part of the contour), and
-* trajectory instants on a uniform grid against the contour point nearest to them, re-matched at
-  every evaluation (the trajectory may not wander off the contour between those instants).
+  fit too (orthogonal distance regression: the trajectory may not skip part of the contour),
+  each starting where the trajectory passes nearest while the sample's own strokes run, and
+* trajectory instants on a uniform grid against the contour point nearest to them among the
+  contour between the samples whose instants are near, re-matched at every evaluation (the
+  trajectory may not wander off the contour between those instants, nor be held to another
+  part of it that it passes by: a spiral's next turn, a loop's other side).
+
+Every search looks at a bounded stretch of instants or contour (a few strokes' worth), or
+through a grid of cells holding a bounded number of samples each
+(:func:`~tagbot.gesture.refine_kernels.path_buckets`): an evaluation costs time and memory
+linear in the contour samples and the strokes.
 
 The Jacobian is exact for the targets (the trajectory is linear in them) and the onsets and
 instants (minus or plus a velocity); for the tangents it is closed form in the spirals'

@@ -87,7 +87,8 @@ def test_path_grid_cells_are_bounded_by_the_points(xy):
 
 
 def test_nearest_keeps_to_the_index_range():
-    """A search limited to points ``lo..hi`` finds the nearest of those, not of all."""
+    """A search limited to points ``lo..hi`` (through the grid, or one by one) finds the nearest
+    of those, not of all."""
     xy = spiral(2000)
     first = np.array([0, len(xy)], dtype=np.intp)
     grid = refine_kernels.path_buckets(xy, first)
@@ -100,6 +101,8 @@ def test_nearest_keeps_to_the_index_range():
         d = np.hypot(*(xy[lo : hi + 1] - q).T)
         assert lo <= found <= hi
         assert np.hypot(*(xy[found] - q)) == d.min()
+        scanned = refine_kernels._nearest_in(xy, lo, hi, q[0], q[1])
+        assert scanned == lo + int(np.argmin(d))
 
 
 def shape_max(xy: np.ndarray) -> float:
@@ -167,3 +170,17 @@ def test_salient_dropping_matches_the_plain_loop(seed):
     threshold, span = np.radians(25.0 + 20.0 * seed), 6
     got = contour_kernels._drop_weak(xy, points, threshold, span)
     np.testing.assert_array_equal(got, reference_drop(xy, points, threshold, span))
+
+
+def test_long_sparse_traces_are_resampled_at_most_per_point():
+    """Random points (a trace hundreds of sizes long): at most SAMPLES_PER_POINT samples per
+    point (220 at the resampling step); a trace within SAMPLES steps keeps the step."""
+    xy = random_points(2000)
+    size = float(np.hypot(*np.ptp(xy, axis=0)))
+    opts = reconstruct.FitOptions()
+    part = reconstruct._analyse(xy, size, "gamma", opts)
+    assert len(part.curve) <= reconstruct.SAMPLES_PER_POINT * len(xy) + 2  # ends, rounding
+    assert len(part.curve) >= reconstruct.SAMPLES_PER_POINT * len(xy) * 0.99
+    dense = spiral(10_000)
+    size = float(np.hypot(*np.ptp(dense, axis=0)))
+    assert reconstruct._analyse(dense, size, "gamma", opts).ds <= opts.step * size
