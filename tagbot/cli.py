@@ -568,10 +568,12 @@ class _PauseKeys:
 def _draw_summary(report: dict[str, Any], out: str) -> str:
     parts = [f"wrote {out}"]
     if "speed_snr_db" in report:
+        snr = report["speed_snr_db"]
         parts.append(
             f"path deviation {report['path_deviation_mean_mm']:.3f} mm mean, "
             f"{report['path_deviation_max_mm']:.3f} mm max; speed SNR "
-            f"{report['speed_snr_db']:.1f} dB; drawing time x{report['drawing_duration_ratio']:.3f}"
+            + ("not measured (status reports)" if snr is None else f"{snr:.1f} dB")
+            + f"; drawing time x{report['drawing_duration_ratio']:.3f}"
         )
     if report.get("recorded_speed_snr_db") is not None:
         parts.append(f"speed against the recording {report['recorded_speed_snr_db']:.1f} dB")

@@ -539,7 +539,8 @@ class RunAlignment:
     """From the first to the last planned movement, s."""
     executed_duration: float
     """From the first to the last executed movement, s."""
-    snr_db: float
+    snr_db: float | None
+    """None where the executed data cannot support a speed (:data:`SPARSE_SNR_NOTE`)."""
     deviation_max: float = math.nan
     """Largest distance either way between this run's executed and planned paths, mm (NaN
     where it is not measured)."""
@@ -553,13 +554,15 @@ class ExecutionComparison:
     """Mean distance from executed pen-down positions to the planned path."""
     deviation_max: float
     """Largest distance either way between executed and planned pen-down paths."""
-    speed_snr_db: float
-    """``10·log10(Σ|v_planned|² / Σ|v_executed - v_planned|²)`` over all runs, each aligned."""
+    speed_snr_db: float | None
+    """``10·log10(Σ|v_planned|² / Σ|v_executed - v_planned|²)`` over all runs, each aligned;
+    None where the executed data cannot support a speed (then :attr:`speed_snr_note` says why)."""
     planned_duration: float
     executed_duration: float
     runs: tuple[RunAlignment, ...]
     planned_runs: int
     executed_runs: int
+    speed_snr_note: str | None = None
 
     @property
     def duration_ratio(self) -> float:
@@ -570,6 +573,7 @@ class ExecutionComparison:
             "path_deviation_mean_mm": self.deviation_mean,
             "path_deviation_max_mm": self.deviation_max,
             "speed_snr_db": self.speed_snr_db,
+            **({} if self.speed_snr_note is None else {"speed_snr_note": self.speed_snr_note}),
             "planned_drawing_s": self.planned_duration,
             "executed_drawing_s": self.executed_duration,
             "drawing_duration_ratio": self.duration_ratio,
@@ -724,8 +728,18 @@ def _db(signal: float, noise: float) -> float:
     return float(10.0 * np.log10(signal / noise)) if noise > 0 else float("inf")
 
 
+_MOVEMENT_STEP = 0.001
+"""s: the step :func:`_movement` looks for a run's start and end at."""
+
+
 def _movement(t: Array, xy: Array) -> tuple[float, float]:
-    """When a run starts moving and when it stops (see :data:`MOVED`)."""
+    """When a run starts moving and when it stops (see :data:`MOVED`), on the path taken
+    straight between samples at 1 ms (a plan's setpoints may be a quarter second apart: the
+    crossing lies inside a line, not at its end)."""
+    if len(t) > 1 and float(np.max(np.diff(t))) > _MOVEMENT_STEP:
+        fine = np.union1d(np.arange(t[0], t[-1], _MOVEMENT_STEP), t)
+        xy = np.column_stack([np.interp(fine, t, xy[:, i]) for i in (0, 1)])
+        t = fine
     away = np.hypot(*(xy - xy[0]).T) > MOVED
     near_end = np.hypot(*(xy - xy[-1]).T) > MOVED
     start = t[np.argmax(away)] if away.any() else t[0]
@@ -794,6 +808,14 @@ def _best_offset(
     return float(offset), a, b
 
 
+SPARSE_SNR_NOTE = (
+    "no speed SNR from status reports: a few a second, stamped on arrival, cannot follow the"
+    " speed (it changes many times between two reports); positions and timing at the reported"
+    " instants are compared instead (the simulator's 1 ms recorder supports a speed SNR)"
+)
+"""Why :func:`compare_reports` gives no speed SNR."""
+
+
 def compare_reports(
     planned: Sequence[tuple[ArrayLike, ArrayLike]],
     executed: ArrayLike,
@@ -808,14 +830,16 @@ def compare_reports(
     each report belongs to (-1: pen up), as the executing line said. Per run:
 
     - path deviation: each reported position's distance to the planned path;
-    - timing: each report's planned instant by position (where along the planned path it is),
-      and the run's offset (executed t − planned t, the median over its reports); the
-      executed duration is the planned one plus the drift of that offset over the run;
-    - speed SNR: the displacement between consecutive reports against the planned displacement
-      between the same instants (mapped with the offset), ``10·log10(Σ|Δp|² / Σ|Δe − Δp|²)``.
-
-    Reports too coarse for a velocity by differences are compared as displacements, never
-    densified into a path of their own (which would measure the chords of the 5 Hz polyline).
+    - timing: each report's planned instant by position (where along the planned path it is;
+      a report within :data:`MOVED` of either end, where the plan stands still while the pen
+      goes down or up, times nothing), and the run's offset (executed t − planned t, the
+      median over its reports); the executed duration is the planned one plus the drift of
+      that offset over the run;
+    - no speed SNR (None, and :data:`SPARSE_SNR_NOTE` says why): a few reports a second are
+      stamped when the host reads them, not when the machine sampled its position, and a speed
+      changes many times between two of them. The figures the reports support are the positions
+      and the timing at the reported instants (offset and drift, each within the reports'
+      spacing), never a path or a speed densified from the 5 Hz polyline.
     """
     data = np.asarray(executed, dtype=float).reshape(-1, 4)
     run_of = np.asarray(run_of, dtype=int)
@@ -823,7 +847,6 @@ def compare_reports(
         raise ValueError("compare_reports: one run index per executed row")
     plans = list(range(len(planned))) if plans is None else list(plans)
     distances: list[Array] = []
-    signal = noise = 0.0
     alignments: list[RunAlignment] = []
     for k, ((tp, xyp), plan) in enumerate(zip(planned, plans, strict=False)):
         rows = data[(run_of == k) & (data[:, 3] > 0.5)]
@@ -837,13 +860,14 @@ def compare_reports(
         d, nearest = _tree(dense).query(xye)
         distances.append(d)
         moving = np.concatenate([[True], np.diff(arc) > 0])  # interp needs rising arc length
-        t_by_position = np.interp(dense_arc[nearest], arc[moving], tp[moving])
-        lag = te - t_by_position
+        along = dense_arc[nearest]
+        # At either end of the path the plan stands still: a report there (the pen going down
+        # or up, a Z move) could be at any instant of the rest, so it times nothing.
+        timed = (along > MOVED) & (along < arc[-1] - MOVED)
+        if not timed.any():
+            timed = np.ones(len(along), dtype=bool)
+        lag = (te - np.interp(along, arc[moving], tp[moving]))[timed]
         offset = float(np.median(lag))
-        xy_at = np.column_stack([np.interp(te - offset, tp, xyp[:, i]) for i in (0, 1)])
-        de, dp = np.diff(xye, axis=0), np.diff(xy_at, axis=0)
-        a, b = float(np.sum(dp * dp)), float(np.sum((de - dp) ** 2))
-        signal, noise = signal + a, noise + b
         p_onset, p_end = _movement(tp, xyp)
         drift = float(lag[-1] - lag[0]) if len(lag) > 1 else 0.0
         alignments.append(
@@ -853,7 +877,7 @@ def compare_reports(
                 executed_start=float(tp[0] + offset),
                 planned_duration=float(p_end - p_onset),
                 executed_duration=float(p_end - p_onset + drift),
-                snr_db=_db(a, b),
+                snr_db=None,
             )
         )
     if not distances:
@@ -862,7 +886,8 @@ def compare_reports(
     return ExecutionComparison(
         deviation_mean=float(d_all.mean()),
         deviation_max=float(d_all.max()),
-        speed_snr_db=_db(signal, noise),
+        speed_snr_db=None,
+        speed_snr_note=SPARSE_SNR_NOTE,
         planned_duration=sum(r.planned_duration for r in alignments),
         executed_duration=sum(r.executed_duration for r in alignments),
         runs=tuple(alignments),

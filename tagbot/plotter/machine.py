@@ -192,7 +192,8 @@ class PlotterJob:
         finally:
             link.close()
         stream = streamer.last_report if streamer is not None else None
-        executed, runs = _executed(stream, device, program, first)
+        pen = simulated_pen(profile)
+        executed, runs = _executed(stream, device, program, first, pen.get("pen_z_below"))
         planned_runs, plans, runs = _from_line(program, first, runs)
         done = stream.lines_executed if stream is not None else first
         origin = stream.started if stream is not None else 0.0
@@ -307,7 +308,11 @@ the lines in its receive buffer): how far :func:`_drawn_until` looks."""
 
 
 def _executed(
-    stream: StreamReport | None, device: Any, program: Program, first: int
+    stream: StreamReport | None,
+    device: Any,
+    program: Program,
+    first: int,
+    pen_z_below: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """The executed trace on the job's clock, and the pen-down run of each sample (or None)."""
     if stream is None:
@@ -316,16 +321,19 @@ def _executed(
         trace = device.trace(0.001)[:, [0, 1, 2, 4]]
         trace[:, 0] -= stream.started
         return trace[trace[:, 0] >= 0], None
-    return executed_from_statuses(stream, program, first)
+    return executed_from_statuses(stream, program, first, pen_z_below)
 
 
 def executed_from_statuses(
-    stream: StreamReport, program: Program, first: int = 0
+    stream: StreamReport, program: Program, first: int = 0, pen_z_below: float | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(N, 4)`` t, x, y, pen from status reports, and each report's pen-down run (-1: none).
 
     Positions are what Grbl reported (``MPos``, or ``WPos`` plus the last ``WCO``); the pen
-    and the run are the program's at the line the machine was executing then.
+    and the run are the program's at the line the machine was executing then. With a Z pen
+    (``pen_z_below``: the height between up and down) a report whose Z is at or above it is
+    pen up whatever the line: the executing line a report names may be a block behind, and a
+    Z move is never drawing.
     """
     rows: list[tuple[float, float, float, float]] = []
     runs: list[int] = []
@@ -343,6 +351,8 @@ def executed_from_statuses(
             continue
         line = first + done  # the line executing (0-based), or the next one to run
         down = line < len(pen) and bool(pen[line])
+        if pen_z_below is not None and len(pos) > 2 and pos[2] >= pen_z_below:
+            down = False
         rows.append((t - stream.started, pos[0], pos[1], float(down)))
         runs.append(int(run_of[line]) if down else -1)
     return np.array(rows, dtype=float).reshape(-1, 4), np.array(runs, dtype=int)
