@@ -175,7 +175,8 @@ class TimingOptions:
     would cost more than this (thousands of strokes at once, e.g. random points: the trace then
     keeps the timing it has)."""
     max_stroke_ratio: float = 1.5
-    """Strokes may be added up to this many times the geometric fit's count (at least 2)."""
+    """Strokes may be added up to this many times the geometric fit's count (rounded down: a
+    trace of one stroke is never split), so a whole tag keeps within it too."""
     split_rounds: int = 3
     """Rounds of stroke splitting at most (each followed by a new fit; 0: none)."""
     split_energy: float = 0.01
@@ -619,7 +620,7 @@ def _refit(
     """The least-squares fit of ``strokes`` to ``rec``, with strokes added where the recorded
     speed shows a bump the plan misses (up to ``max_stroke_ratio`` times ``count``)."""
     strokes, cost = _solve(strokes, rec, size, arcs, options)
-    room = max(int(np.ceil((options.max_stroke_ratio - 1.0) * count)), 2)
+    room = int(np.floor((options.max_stroke_ratio - 1.0) * count + 1e-9))  # a tag stays within
     for _ in range(options.split_rounds):
         if room <= 0:
             break
@@ -840,6 +841,9 @@ SHAPE_MARGIN_MAX = (1.5, 0.005)
 """... and its maximum by ``max(1.5 times, +0.5 %)`` of it; otherwise the trace keeps the geometric
 plan, its clock scaled to the recorded span (the shape exactly the geometric fit's)."""
 
+MARGIN_HEADROOM = 0.9
+"""The fit holds each trace to this fraction of the margins (see :data:`SHAPE_MARGIN_MAX`)."""
+
 TimingKind = Literal["matched", "restrained", "mapped", "scaled", "geometric"]
 RESTRAINT = 8.0
 """Where the timed fit would miss the shape, it is tried again with the positions weighing this
@@ -977,9 +981,10 @@ def match(
             plan, kind, base, reason, window = _kept_to_shape(
                 options, geometric, trace, tag_size, limits
             )
-            plan = _with_ink(plan.at(base + plan.start), t, tag_size, (lows[k], highs[k]))
-            if window[1] == np.inf:  # the shape needs more ink than the recorded lift leaves
-                plan = _with_ink(plan, t, tag_size)
+            # Inked once, within the limits the shape check accepted (the recorded lifts, or
+            # none where the shape needs more ink than they leave).
+            bounds = (lows[k], highs[k]) if window[1] < np.inf else (-np.inf, np.inf)
+            plan = _with_ink(plan.at(base + plan.start), t, tag_size, bounds)
             if kind == "scaled" and implausible_clock(geometric.n_strokes, turning[k], spans[k]):
                 plan, kind = geometric.at(float(t[0])), "geometric"  # (under match)
                 reason += "; its recorded span is too short for the geometric plan"
@@ -1042,8 +1047,12 @@ def _kept_to_shape(
     xy = np.asarray(trace.xy, dtype=float)
     t = np.asarray(trace.t, dtype=float)
     reference = _drawn_error(geometric, xy, size)
-    limit_mean = reference[0] + SHAPE_MARGIN_MEAN
-    limit_max = max(SHAPE_MARGIN_MAX[0] * reference[1], reference[1] + SHAPE_MARGIN_MAX[1])
+    # Each trace keeps MARGIN_HEADROOM of the margins in hand, so that a whole file's mean (an
+    # average by arc length over its traces, both ways) keeps within them too.
+    limit_mean = reference[0] + MARGIN_HEADROOM * SHAPE_MARGIN_MEAN
+    limit_max = MARGIN_HEADROOM * max(
+        SHAPE_MARGIN_MAX[0] * reference[1], reference[1] + SHAPE_MARGIN_MAX[1]
+    )
     distinct = int(np.count_nonzero(np.diff(t) > 0)) + 1
     reason = f"{distinct} distinct time stamps, too few to fit a speed"
     for k, (plan, kind, t0) in enumerate(candidates):
