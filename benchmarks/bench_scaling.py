@@ -146,7 +146,8 @@ def signal_latency(signum: int) -> str:
         _, err = process.communicate()
         latency = time.monotonic() - sent
     lines = err.strip().splitlines()
-    return f"{latency:.3f} s, status {process.returncode}, {len(lines)} line: {lines[-1]!r}"
+    last = lines[-1] if lines else "(no output)"
+    return f"{latency:.3f} s, status {process.returncode}, {len(lines)} line: {last!r}"
 
 
 def main() -> None:
