@@ -1086,8 +1086,9 @@ def _shape_first(
     if timed is not None:
         yield timed, "matched", t0
         stronger = replace(options, position_weight=options.position_weight * RESTRAINT)
-        restrained, t0, _ = _match_trace(geometric, trace, size, model, stronger)
-        yield restrained, "restrained", t0
+        restrained, t0_restrained, _ = _match_trace(geometric, trace, size, model, stronger)
+        if restrained.n_strokes <= timed.n_strokes:  # within the tag's stroke budget
+            yield restrained, "restrained", t0_restrained
     xy = np.asarray(trace.xy, dtype=float)
     t, _ = sample_instants(trace.t, xy)
     rec = resample(t - t[0], xy, options)
