@@ -48,6 +48,16 @@ class _Group(click.Group):
             return super().invoke(ctx)
         except KeyboardInterrupt as e:
             raise _Interrupted from e
+        except SystemError as e:
+            # A signal's handler that ran as a compiled kernel returned (numba runs Python to box
+            # the result, and turns an exception raised there into "CPUDispatcher(...) returned
+            # a result with an exception set"): the interrupt it carries.
+            cause: BaseException | None = e
+            while cause is not None and not isinstance(cause, KeyboardInterrupt):
+                cause = cause.__cause__ or cause.__context__
+            if cause is None:
+                raise
+            raise _Interrupted from cause
 
 
 class Seconds(click.ParamType):
