@@ -52,7 +52,12 @@ How it follows the firmware (Grbl 1.1h ``serial.c``, ``protocol.c``, ``system.c`
   with N > 0; the planner holds 14 blocks (``Bf:14,128`` idle, ``[OPT:VN,14,128]``). N words are
   read in every build (negative: error 4, above 10000000: error 27, repeated: error 25).
 - **Executed lines.** :attr:`SimulatedGrbl.executed_lines` and
-  :attr:`SimulatedGrbl.line_finished_at` record when each line received had taken effect.
+  :attr:`SimulatedGrbl.line_finished_at` record when each line received had taken effect,
+  :attr:`SimulatedGrbl.line_received_at` when its last byte arrived.
+- **Reading.** The main loop takes :data:`READ_TIME` per byte it reads (``read_time``): after a
+  stop (a dwell, a pen change) the lines the host sent meanwhile are read one by one and motion
+  starts when the planner is full or the buffer runs dry, as on the reference firmware. A ``?``
+  is answered between two lines.
 
 Not modelled: soft limits, overrides changing speeds (their values are only reported), homing
 motion (``$H`` sets the machine position to 0 at once), work offsets (WCO is always zero), a feed
@@ -177,6 +182,13 @@ RX_CAPACITY = RX_BUFFER_SIZE - 1
 ALARM_REPORT_DELAY = 0.5
 """``report_alarm_message``'s ``delay_ms(500)`` after printing ``ALARM:N``."""
 
+READ_TIME = 8 / 115200
+"""s the main loop takes per received byte, as measured on the reference firmware (Grbl 1.1h's
+host build): back-to-back lines are acknowledged 69.4 µs a byte apart (sendresp.log: 57
+bytes in 4 ms; the ``g93`` logs: one ``ok`` a millisecond), the serial pacing of grbl-sim
+(``baud_ticks = F_CPU·8/BAUD_RATE``). Slightly faster than the 10-bit wire (86.8 µs a byte), so
+a receive ring filled during a stop drains slowly and the planner fills before it runs dry."""
+
 
 def avr_read_float(text: str, pos: int = 0) -> tuple[float, int] | None:
     """Grbl's ``read_float`` as the firmware computes it, in 32-bit floats: ``(value, end)``.
@@ -258,6 +270,10 @@ _OVERRIDE_SETS = {
 _OVERRIDE_LIMITS = ((10, 200), (25, 100), (10, 200))
 
 
+def _nothing() -> None:
+    pass
+
+
 class _Wait:
     """A step of a line that must wait: for motion to end, or for the executor to take an item."""
 
@@ -289,6 +305,7 @@ class SimulatedGrbl:
         pen_servo: tuple[float, float] | None = None,
         position_mm: tuple[float, float, float] = (0.0, 0.0, 0.0),
         line_numbers: bool = False,
+        read_time: float = READ_TIME,
     ) -> None:
         if clock not in ("simulated", "real"):
             raise ValueError(f"clock: expected 'simulated' or 'real', got {clock!r}")
@@ -304,6 +321,11 @@ class SimulatedGrbl:
         self.pen_z_below = float(pen_z_below)
         self.pen_servo = None if pen_servo is None else (float(pen_servo[0]), float(pen_servo[1]))
         self.line_numbers = bool(line_numbers)
+        if not (math.isfinite(read_time) and read_time >= 0):
+            raise ValueError(f"read_time: must be a finite number >= 0, got {read_time!r}")
+        self.read_time = float(read_time)
+        self._read_free_at = 0.0  # when the main loop will have read the bytes paid for
+        self._paid_bytes = 0  # bytes at the ring's front the main loop has read (or is reading)
         capacity = PLANNER_CAPACITY - 1 if self.line_numbers else PLANNER_CAPACITY
         self.executor = GrblExecutor(
             self._grbl_settings(), position_mm, auto_start=False, planner_capacity=capacity
@@ -313,6 +335,10 @@ class SimulatedGrbl:
         self.line_finished_at: list[float | None] = []
         """Per line received (index 0 is line 1): the simulated time it had fully taken effect
         and every earlier line too, None until then (forever for lines a reset threw away)."""
+        self.line_received_at: list[float] = []
+        """Per line received (index 0 is line 1): the simulated time its last byte reached the
+        receive buffer (with :attr:`line_finished_at`: what the machine held at any instant)."""
+        self._arrivals: deque[float] = deque()  # line ends in the ring, oldest first
         self._line_own: list[float | None] = []  # when each line itself took effect
         self._line_blocks: dict[int, int] = {}  # line -> its planner blocks not yet executed
         self._lines_processed: set[int] = set()
@@ -567,6 +593,8 @@ class SimulatedGrbl:
         self._reset_pending = False
         self._rx.clear()
         self._rx_head = self._rx_tail = 0
+        self._paid_bytes = 0
+        self._arrivals.clear()
 
     def _boot(self, alarm: bool) -> None:
         self._state = State.ALARM if alarm else State.IDLE
@@ -666,6 +694,8 @@ class SimulatedGrbl:
             return
         self._rx.append(byte)
         self._rx_head = (self._rx_head + 1) % RX_BUFFER_SIZE
+        if byte in (0x0A, 0x0D):
+            self._arrivals.append(self.now)
 
     def _store_all(self, data: bytes) -> None:
         """:meth:`_store` each byte of ``data`` (none of them real-time)."""
@@ -674,6 +704,9 @@ class SimulatedGrbl:
         self.lost_bytes += len(data) - len(kept)
         self._rx += kept
         self._rx_head = (self._rx_head + len(kept)) % RX_BUFFER_SIZE
+        ends = kept.count(b"\n") + kept.count(b"\r")
+        if ends:
+            self._arrivals.extend([self.now] * ends)
 
     def _rx_available(self) -> int:
         """``serial_get_rx_buffer_available()`` of Grbl 1.1h, quirk included (128 when empty)."""
@@ -847,28 +880,47 @@ class SimulatedGrbl:
         if not rx:
             return False
         ends = [i for i in (rx.find(b"\n"), rx.find(b"\r")) if i >= 0]
+        if self._reading(min(ends) + 1 if ends else len(rx)):
+            return False
         if not ends:  # no line end yet: every byte moves into the line
             self._line += rx
             self._rx_tail = (self._rx_tail + len(rx)) % RX_BUFFER_SIZE
+            self._paid_bytes -= len(rx)
             rx.clear()
             return False
         end = min(ends)
         if end:  # the characters before the line end
             self._line += rx[:end]
             del rx[:end]
+            self._paid_bytes -= end
             self._rx_tail = (self._rx_tail + end) % RX_BUFFER_SIZE
         if not self._checkpoint():
             return False  # protocol_execute_realtime at each line's end stopped the loop
         del rx[0]
+        self._paid_bytes -= 1
         self._rx_tail = (self._rx_tail + 1) % RX_BUFFER_SIZE
         text = self._line.decode("latin-1")
         self._line.clear()
         self._handle_line(text)
         return True
 
+    def _reading(self, count: int) -> bool:
+        """The main loop reads the ring's first ``count`` bytes at :attr:`read_time` each, one
+        after another: True (and a wait until then) while it is still reading them, so the ring
+        is not dry (no auto cycle start) while bytes wait to be read."""
+        extra = count - self._paid_bytes
+        if extra > 0 and self.read_time > 0:
+            self._read_free_at = max(self.now, self._read_free_at) + extra * self.read_time
+            self._paid_bytes = count
+        if self.now >= self._read_free_at:
+            return False
+        self._block(self._read_free_at - self.now, _nothing)
+        return True
+
     def _handle_line(self, text: str) -> None:
         self.lines_received += 1
         index = self.lines_received
+        self.line_received_at.append(self._arrivals.popleft() if self._arrivals else self.now)
         self.line_finished_at.append(None)
         self._line_own.append(None)
         injected = self._injected.pop(index, None)
@@ -1133,6 +1185,8 @@ class SimulatedGrbl:
         self._abort_main_loop()
         self._rx.clear()
         self._rx_head = self._rx_tail = 0
+        self._paid_bytes = 0
+        self._arrivals.clear()
         self._jogging = False
         self._state = State.ALARM
         self.parser = ParserState(**{**self._parser_fields(), "position": self.position_mm})

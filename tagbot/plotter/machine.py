@@ -359,12 +359,14 @@ def executed_from_statuses(
 
 
 def simulated_pen(profile: Profile) -> dict[str, Any]:
-    """The pen arguments of a :class:`~sim.grbl.SimulatedGrbl` matching ``profile``."""
+    """The pen arguments of a :class:`~sim.grbl.SimulatedGrbl` matching ``profile`` (and the
+    time it takes to read a byte, ``serial.read_time``)."""
     up, down = profile["pen.up"], profile["pen.down"]
     start = (profile["motion.park_x"], profile["motion.park_y"])
+    read = {"read_time": profile["serial.read_time"]}
     if profile["pen.type"] == "z":
-        return {"pen": "z", "pen_z_below": (up + down) / 2, "position_mm": (*start, up)}
-    return {"pen": "spindle", "pen_servo": (down, up), "position_mm": (*start, 0.0)}
+        return {"pen": "z", "pen_z_below": (up + down) / 2, "position_mm": (*start, up), **read}
+    return {"pen": "spindle", "pen_servo": (down, up), "position_mm": (*start, 0.0), **read}
 
 
 def _details(

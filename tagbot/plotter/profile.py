@@ -94,7 +94,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "rotation": NUMBER,
         "align": ALIGNS,
     },
-    "serial": {"baud": INT},
+    "serial": {"baud": INT, "read_time": NON_NEGATIVE},
 }
 """Every section and key a profile may hold, with the kind of value it takes."""
 

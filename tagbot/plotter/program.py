@@ -322,6 +322,7 @@ class _Builder:
         self.kind: list[int] = []
         self.accel: list[float] = []
         self.peak: list[float] = []
+        self.sync: list[bool] = []  # the line waits for the motion before it to end
         self.clock = 0.0
         self.origin = (float(profile["motion.park_x"]), float(profile["motion.park_y"]))
         self.here = self.origin
@@ -368,6 +369,7 @@ class _Builder:
         self.kind.append(kind)
         self.accel.append(accel)
         self.peak.append(peak)
+        self.sync.append(stop)
         return duration
 
     def key(self, xy: tuple[float, float]) -> tuple[int, int]:
@@ -418,7 +420,6 @@ class _Builder:
             self.add(line)
         self.pen_lines(False)
         dwell_mode = p["motion.slow_lines"] == "dwell"
-        drawing = 0.0
         run_points = []
         for index, run in enumerate(setpoints.runs):
             self.travel_to(run.xy[0])
@@ -456,7 +457,6 @@ class _Builder:
                 self.add(line, duration, xy=self.sent((x, y)), run=index, moves=True, kind=_LINEAR)
                 times.append(self.clock)
                 points.append(self.here)
-            drawing += self.clock - begin
             run_points.append((np.array(times), np.array(points, dtype=float)))
             self.add("G94\n")
             self.pen_lines(False)
@@ -468,6 +468,14 @@ class _Builder:
             gcode.make_line(line[:-1])
         run = np.array(self.run, dtype=np.int64)
         start, end = np.array(self.start), np.array(self.end)
+        waits = read_waits(self.lines, self.moves, self.sync, p)
+        # Each wait lengthens its stop line; every later line moves by the waits before it.
+        later = np.cumsum(waits)
+        run_points = [
+            (t + later[np.searchsorted(end, t, side="right") - 1], xy) for t, xy in run_points
+        ]
+        start, end = start + np.concatenate([[0.0], later[:-1]]), end + later
+        drawing = sum(float(t[-1] - t[0]) for t, _ in run_points)
         return Program(
             lines=tuple(self.lines),
             line_start=start,
@@ -498,6 +506,46 @@ class _Builder:
             notes_peak=np.array(self.peak),
             notes_start=np.array(self.origin, dtype=float),
         )
+
+
+def read_waits(
+    lines: list[str] | tuple[str, ...],
+    moves: list[bool] | NDArray[np.bool_],
+    sync: list[bool] | NDArray[np.bool_],
+    profile: Profile,
+) -> NDArray[np.float64]:
+    """s each stop line (``sync``: it waits for the motion before it to end) adds while Grbl
+    reads the lines after it before motion starts again.
+
+    During a stop the host fills Grbl's receive buffer; after it the main loop reads on at
+    ``serial.read_time`` a byte (as measured on Grbl 1.1h), faster than the wire brings more
+    (10 bits a byte), and motion starts only when the next stop line is read, when the planner is
+    full (a move beyond ``limits.planner_blocks`` is read) or when the buffer runs dry, whichever
+    comes first: ``min(bytes read × read_time, 127 / (1/read_time − 1/byte_time))``.
+    """
+    read = profile["serial.read_time"]
+    waits = np.zeros(len(lines))
+    if read <= 0:
+        return waits
+    wire = 10.0 / profile["serial.baud"]
+    dry = RX_BYTES / (1.0 / read - 1.0 / wire) if read < wire else math.inf
+    blocks = profile["limits.planner_blocks"]
+    for s in np.flatnonzero(np.asarray(sync, dtype=bool)):
+        count = queued = 0
+        for k in range(s + 1, len(lines)):
+            count += len(lines[k])
+            if sync[k]:
+                break
+            if moves[k]:
+                queued += 1
+                if queued > blocks:
+                    break
+        waits[s] = min(count * read, dry)
+    return waits
+
+
+RX_BYTES = 127
+"""Bytes Grbl's receive ring holds (128, one slot always empty)."""
 
 
 def _min_buffered(run: NDArray[np.int64], durations: NDArray[np.float64], blocks: int) -> float:

@@ -19,6 +19,7 @@ from tagbot.plotter.cli import gcode_command
 from tagbot.plotter.place import PlacementError
 
 from .conftest import straight_tag, two_plan_tag
+from .test_program_behaviour import _reading
 
 EXAMPLES = Path(tagbot.__file__).parent / "examples"
 
@@ -79,7 +80,8 @@ def test_no_dwell_shorter_than_grbl_executes(tiny_file):
     for mode in ("clamp", "dwell"):
         for dwell in ("0.2", "0.12", "0.01"):
             profile = load_profile(
-                tiny_file, [*OLD, f"motion.slow_lines={mode}", f"pen.dwell={dwell}"]
+                tiny_file,
+                [*OLD, f"motion.slow_lines={mode}", f"pen.dwell={dwell}", "serial.read_time=0"],
             )
             program = build_program(place(straight_tag(), profile), profile)
             idle = profile["limits.step_idle_delay"]
@@ -162,9 +164,9 @@ def test_line_metadata_against_an_independent_reading(tiny):
         setpoint = inside and line.startswith("G1")
         assert program.line_run[i] == (run if setpoint else -1), line
         duration = program.line_end[i] - program.line_start[i]
-        stop = 0.0
+        stop = _reading(lines, i, tiny) if line.startswith(("M3", "M5", "G4")) else 0.0
         if line.startswith(("M3", "M5", "G4")) and moved_since_stop:
-            stop, moved_since_stop = idle, False
+            stop, moved_since_stop = stop + idle, False
         if moves:
             moved_since_stop = True
         if setpoint:
@@ -223,9 +225,16 @@ def test_planned_runs_timeline_and_buffer(tiny):
 
 
 def test_pen_moves_and_travel_not_stretched_by_the_time_scale(tiny_file):
-    fast = load_profile(tiny_file, ["motion.min_buffer=0"])
+    # (No reading after stops: its length depends on the setpoint lines' text.)
+    fast = load_profile(tiny_file, ["motion.min_buffer=0", "serial.read_time=0"])
     slow = load_profile(
-        tiny_file, ["motion.min_buffer=0", "limits.x_max_feed=3000", "limits.y_max_feed=3000"]
+        tiny_file,
+        [
+            "motion.min_buffer=0",
+            "limits.x_max_feed=3000",
+            "limits.y_max_feed=3000",
+            "serial.read_time=0",
+        ],
     )
     a = build_program(place(two_plan_tag(), fast), fast)
     b = build_program(place(two_plan_tag(), slow), slow)

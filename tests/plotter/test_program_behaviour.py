@@ -3,7 +3,8 @@
 Job time, travel time, drawing time, the buffered motion and the resting share are recomputed
 here from the program's lines and the profile's limits, by a reader written for the test: Grbl's
 rest-to-rest trapezoid for travel, ``60/F`` for inverse-time lines, ``ceil(20·P)·50 ms`` for
-dwells and ``$1`` after every stop that follows motion.
+dwells, ``$1`` after every stop that follows motion and, after each stop, Grbl reading the lines
+the host sent meanwhile before motion starts again.
 """
 
 from __future__ import annotations
@@ -65,6 +66,23 @@ def _rest_to_rest(length: float, direction: np.ndarray, feed: float, profile) ->
     return 2.0 * ramps + (length - peak * ramps) / peak
 
 
+def _reading(lines, k: int, profile) -> float:
+    """After stop line ``k``: Grbl reads on at serial.read_time a byte until it reads the next
+    stop line or a move the full planner cannot take, or its 127-byte buffer, refilled at the
+    wire's 10 bits a byte, runs dry."""
+    read, wire = profile["serial.read_time"], 10.0 / profile["serial.baud"]
+    total = moves = 0
+    for line in lines[k + 1 :]:
+        total += len(line)
+        if line.startswith(("G4P", "M3", "M5")):
+            break
+        moves += line.startswith("G1")
+        if moves > profile["limits.planner_blocks"]:
+            break
+    dry = 127 / (1 / read - 1 / wire) if 0 < read < wire else math.inf
+    return min(total * read, dry)
+
+
 def _replay(lines, profile):
     """Job, travel and per-run drawing times and per-run setpoint durations, from the text."""
     idle = profile["limits.step_idle_delay"]
@@ -72,7 +90,7 @@ def _replay(lines, profile):
     clock = travel = 0.0
     inverse = moved = False
     runs: list[list[float]] = []
-    for line in lines:
+    for k, line in enumerate(lines):
         word = _words(line)
         if line.startswith("G93"):
             inverse = True
@@ -81,9 +99,10 @@ def _replay(lines, profile):
             inverse = False
         elif line.startswith("G4P"):
             clock += math.ceil(round(word["P"] * 20, 9)) * 0.05 + (idle if moved else 0.0)
+            clock += _reading(lines, k, profile)
             moved = False
         elif line.startswith(("M3", "M5")):
-            clock += idle if moved else 0.0
+            clock += (idle if moved else 0.0) + _reading(lines, k, profile)
             moved = False
         elif line.startswith("G1") and "Z" not in word:
             target = np.array([word.get("X", here[0]), word.get("Y", here[1])])
@@ -129,7 +148,9 @@ def _spans(program, prefix: str) -> list[float]:
 
 def test_servo_pen_change_waits_for_the_stop(tiny_file):
     """Servo pen: M3 waits for the stop (Grbl's $1 idle delay after motion), then the dwell."""
-    profile = load_profile(tiny_file, ["limits.step_idle_delay=0.1", "pen.dwell=0.2"])
+    profile = load_profile(
+        tiny_file, ["limits.step_idle_delay=0.1", "pen.dwell=0.2", "serial.read_time=0"]
+    )
     program = build_program(place(straight_tag(), profile), profile)
     assert _spans(program, "M3") == pytest.approx([0.0, 0.1, 0.1])  # nothing moved before #1
     assert _spans(program, "G4P") == pytest.approx([0.2, 0.2, 0.2])
@@ -143,7 +164,14 @@ def test_zpen_lines_and_dwells(tiny_file):
     """Z pen: a G1 Z move at pen.feed, then the dwell, which waits for the stop after it."""
     profile = load_profile(
         tiny_file,
-        ["pen.type=z", "pen.up=5", "pen.down=0", "pen.feed=600", "limits.step_idle_delay=0.1"],
+        [
+            "pen.type=z",
+            "pen.up=5",
+            "pen.down=0",
+            "pen.feed=600",
+            "limits.step_idle_delay=0.1",
+            "serial.read_time=0",
+        ],
     )
     program = build_program(place(straight_tag(), profile), profile)
     assert program.lines[3:5] == ("G1Z5F600\n", "G4P0.2\n")

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from sim.grbl.device import SimulatedGrbl, avr_read_float, avr_words
+from sim.grbl.device import READ_TIME, SimulatedGrbl, avr_read_float, avr_words
 from sim.grbl.planner import Dwell
 
 PLOTTER = {100: 80, 101: 80, 102: 80, 110: 6000, 111: 6000, 112: 3000, 120: 1000, 121: 1000}
@@ -24,7 +24,10 @@ OLD_SIMULATOR_MS = {0.002: 27, 0.012: 37, 0.072: 97, 0.15: 175, 0.3: 325}
 
 
 def booted(**kwargs) -> SimulatedGrbl:
-    device = SimulatedGrbl(PLOTTER, **kwargs)
+    """Reading bytes takes no time here unless asked (``read_time``): each test isolates its
+    fact; the reading itself is checked in :func:`test_the_next_line_is_read_after_a_dwell` and
+    tests/plotter/test_read_wait.py."""
+    device = SimulatedGrbl(PLOTTER, **{"read_time": 0.0, **kwargs})
     assert device.read().startswith(WELCOME)
     return device
 
@@ -36,11 +39,11 @@ def lines_of(device: SimulatedGrbl) -> list[tuple[float, bytes]]:
     return out
 
 
-def standstill(p: float) -> tuple[float, float, float]:
+def standstill(p: float, read_time: float = 0.0) -> tuple[float, float, float]:
     """``G1 X10``, ``G4 P<p>``, ``G1 X20`` streamed at once: the time the machine stands at
     X10 from the segments' ends (recorder knots) and from ``MPos`` (the step counter), and when
     the dwell's ``ok`` came after the machine arrived."""
-    device = booted()
+    device = booted(read_time=read_time)
     device.write(f"G1 X10 F3000\nG4 P{p}\nG1 X20\n".encode())
     samples = []
     ok_at = None
@@ -68,6 +71,13 @@ def test_dwell_waits_in_50_ms_steps_after_the_step_idle_delay(p):
     assert ok == pytest.approx(0.025 + 0.050 * ticks, abs=1e-9)
     # MPos counts each step when computed: the stop's last step shows one step period earlier.
     assert 0 < mpos - knots < 0.005
+
+
+def test_the_next_line_is_read_after_a_dwell():
+    """During the dwell Grbl reads nothing: after it, ``G1 X20`` (7 bytes) is read at 69.4 µs a
+    byte before the machine moves on, part of the real standstill's residual."""
+    knots, _, ok = standstill(0.15, READ_TIME)
+    assert knots == ok == pytest.approx(0.025 + 0.15 + 7 * READ_TIME, abs=1e-9)  # its ok too
 
 
 def test_standstills_match_the_real_firmware():
@@ -159,6 +169,7 @@ def test_bf_idle_and_one_block_as_in_the_transcript():
     ]
     seen = [status_of(device)]
     device.write(b"G0X0\n")
+    device.advance(5 * device.read_time)  # read at 69.4 µs a byte
     assert device.read() == b"ok\r\n"
     seen.append(status_of(device))
     device.advance(0.2)
@@ -176,8 +187,8 @@ def test_bf_while_streaming_counts_the_receive_ring():
     """Character counting keeps the planner full (``Bf:0,n``); n is what the 128-byte ring has
     free (``serial_get_rx_buffer_available``), and once the host has sent everything and the
     ring is empty the report is ``Bf:0,128`` while 15 blocks still run, then ``Bf:15,128``
-    (shortsegs-cc transcripts)."""
-    device = SimulatedGrbl(PLOTTER)
+    (shortsegs-cc transcripts). Lines read at once: each ``?`` is answered as written."""
+    device = SimulatedGrbl(PLOTTER, read_time=0.0)
     device.read()
     lines = [
         f"G1X{20 * math.cos(k / 60):.3f}Y{20 * math.sin(k / 60):.3f}F6000\n" for k in range(400)
