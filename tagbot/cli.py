@@ -470,12 +470,7 @@ def draw_command(
     unit = "tick" if device == "dynamixel" else "line"
     with progress_bar(unit, quiet) as bar, keys:
         keys.report = bar.write
-
-        def progress(done: int, total: int) -> None:
-            if bar.total != total:
-                bar.reset(total=total)
-            bar.update(done - bar.n)
-
+        progress = bar_progress(bar)
         try:
             # The machine's loop stops it safely on a signal; its log lines go above the bar.
             with machine_run(), logging_redirect_tqdm(tqdm_class=type(bar)):
@@ -573,6 +568,21 @@ class _PauseKeys:
             if key in self.KEYS:
                 paused = self.control.toggle()
                 self.report("paused: space resumes" if paused else "resumed")
+
+
+def bar_progress(bar: Any) -> Callable[[int, int], None]:
+    """A machine's ``progress(done, total)`` on a tqdm ``bar``: the first call (a resumed job's
+    first line) sets where the bar starts, not progress, so the rate counts only what runs."""
+
+    def progress(done: int, total: int) -> None:
+        if bar.total != total:
+            bar.reset(total=total)
+            bar.initial = bar.n = bar.last_print_n = done
+            bar.refresh()
+            return
+        bar.update(done - bar.n)
+
+    return progress
 
 
 def _draw_summary(report: dict[str, Any], out: str) -> str:

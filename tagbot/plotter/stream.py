@@ -474,7 +474,9 @@ class GrblStreamer:
         and where the machine is after it (``Program.line_moves`` and ``line_xy``; worked out
         with Grbl's parser when not given): they let :class:`ExecutionTracker` know which line
         the machine is executing. ``pen_up`` are the lines :meth:`safe_stop` sends after a fault
-        or Ctrl-C. ``progress`` gets ``(lines executed, lines in the program)``. ``control``
+        or Ctrl-C. ``progress`` gets ``(lines executed, lines in the program)``: first
+        ``(first, len(lines))`` before anything is sent (a resumed job's skipped lines were not
+        executed now), then as lines execute. ``control``
         pauses (feed hold) and resumes. ``drawing`` says, per line of ``lines``, whether it is a
         pen-down drawing move (``Program.line_run >= 0``): with it, a machine reported ``Idle``
         between two drawing lines is a starved planner (:attr:`StreamReport.stall_spans`, a
@@ -506,6 +508,8 @@ class GrblStreamer:
         self._report = report
         self.last_report = report
         report.started = self.clock.now()
+        if progress is not None:
+            progress(first, len(lines))
         try:
             self._stream(entries, report)
             if wait_idle:
