@@ -48,6 +48,14 @@ again with the same profile: deterministic) and from the run's ``report.json``:
   nothing sent or read meanwhile, as the 0.39-0.52 s stalls measured on a loaded host), with
   the planner's starvation events (0) and the executed job time.
 
+The machine's pace, per tag and mode: the executed job time against the lower bound that the
+speed, acceleration and junction limits alone allow (each run at the time scale those set for it
+alone, the rest of the job as planned; ≤ 1.15), each run's limiting factor and scale
+(``Run.limits``: ``buffer`` is ``motion.min_buffer``, ``segment`` Grbl's look-ahead over 15
+blocks), the least motion the simulated Grbl actually held ahead of a drawing line (planner and
+receive buffer, from its ``line_received_at`` / ``line_finished_at`` stamps; the planned
+``min_buffered_rx`` in brackets), and each run's speed SNR and path deviation.
+
 ``--set`` adds a profile override to every mode but ``old`` (e.g. to sweep
 ``motion.tolerance``); ``--no-draw`` prints the program figures only (no simulation).
 """
@@ -160,6 +168,50 @@ def plan_fidelity(tag: tagbot.Tag, setpoints: Any, program: Any) -> tuple[float,
     return worst_dev, worst_snr
 
 
+MACHINE_LIMITS = ("speed", "acceleration", "junction")
+"""The limits a job's lower bound keeps: the machine's, not the host's buffer rule."""
+
+
+def lower_bound(setpoints: Any, program: Any, own: Any) -> tuple[float, list[str]]:
+    """The job time the machine's speed, acceleration and junction limits alone allow: every
+    run drawn at the time scale those set for it alone (``own``: the placement with
+    ``motion.time_scale=run``; its drawing time in proportion), the rest of the job (travel
+    trapezoids, pen changes, dwells, Grbl's $1 and reading after stops) as planned; and each
+    run's limiting factor with its scale (``buffer x29.0``)."""
+    fixed = program.duration - program.drawing_time
+    drawing = 0.0
+    limiting = []
+    runs = zip(setpoints.runs, own.runs, program.planned_runs, strict=True)
+    for run, alone, (t, _) in runs:
+        limits = dict(run.limits) or {"speed": 1.0}
+        machine = max([alone.limits.get(k, 1.0) for k in MACHINE_LIMITS] + [1.0])
+        drawing += float(t[-1] - t[0]) * machine / float(run.scale)
+        name = max(limits, key=lambda k: limits[k])
+        limiting.append(f"{name} x{limits[name]:.1f}")
+    return fixed + drawing, limiting
+
+
+def achieved_buffer(device: Any, program: Any) -> float | None:
+    """The least planned motion, s, the simulated Grbl held (planner and receive buffer) ahead
+    of a drawing line as it began, over lines whose run was not yet all received; None when
+    every run was held whole. From the device's stamps: each line's last byte's arrival and the
+    instant each line had finished."""
+    offset = device.lines_received - len(program.lines)
+    received = np.asarray(device.line_received_at[offset:])
+    finished = device.line_finished_at[offset:]
+    least: float | None = None
+    for k in range(1, len(program.lines)):
+        run = program.line_run[k]
+        if run < 0 or program.line_run[k - 1] != run or finished[k - 1] is None:
+            continue
+        j = int(np.searchsorted(received, finished[k - 1], side="right")) - 1
+        if j + 1 >= len(program.lines) or program.line_run[j + 1] != run:
+            continue  # the rest of the run is in the machine: held whole
+        held = float(program.line_end[j] - program.line_start[k])
+        least = held if least is None else min(least, held)
+    return least
+
+
 def program_figures(tag: tagbot.Tag, overrides: tuple[str, ...]) -> dict[str, Any]:
     """What the program asks of the machine (no simulation)."""
     profile = load_profile(None, overrides)
@@ -169,7 +221,11 @@ def program_figures(tag: tagbot.Tag, overrides: tuple[str, ...]) -> dict[str, An
     build_s = time.perf_counter() - start
     dwells = [float(line[3:]) for line in program.lines if line.startswith("G4P")]
     deviation, snr = plan_fidelity(tag, setpoints, program)
+    own = place(tag, load_profile(None, (*overrides, "motion.time_scale=run")))
+    bound, limiting = lower_bound(setpoints, program, own)
     return {
+        "bound_s": bound,
+        "limiting": limiting,
         "lines": len(program.lines),
         "planned_s": program.duration,
         "drawing_s": program.drawing_time,
@@ -206,6 +262,8 @@ def draw_figures(tag: tagbot.Tag, overrides: tuple[str, ...], out: Path) -> dict
         "run_snr_min_db": min(snrs) if snrs else math.nan,
         "dev_mean_mm": r["path_deviation_mean_mm"],
         "dev_max_mm": r["path_deviation_max_mm"],
+        "run_snr_db": [run.get("speed_snr_db") for run in runs],
+        "run_dev_mm": [run.get("path_deviation_max_mm") for run in runs],
         "starvation": details.get("starvation_events"),
         "wall_s": wall,
     }
@@ -217,6 +275,28 @@ def pause_figures(
     """Stream the program into the simulated Grbl while the host stalls ``pause`` s every
     ``every`` s (the port's ``freeze_host`` hook: nothing sent or read meanwhile); the planner's
     starvation events and the executed job time."""
+    device, executed = stream_program(tag, overrides, name, pause, every)
+    return {"pause_starvation": len(device.starvation), "pause_executed_s": executed}
+
+
+def buffer_figures(tag: tagbot.Tag, overrides: tuple[str, ...], name: str) -> dict[str, Any]:
+    """Stream the program into the simulated Grbl (no host stall): the least motion it held
+    ahead of a drawing line (:func:`achieved_buffer`)."""
+    device, _ = stream_program(tag, overrides, name)
+    profile = load_profile(None, overrides)
+    program = build_program(place(tag, profile), profile)
+    return {"achieved_buffer_s": achieved_buffer(device, program)}
+
+
+def stream_program(
+    tag: tagbot.Tag,
+    overrides: tuple[str, ...],
+    name: str,
+    pause: float = 0.0,
+    every: float = math.inf,
+) -> tuple[Any, float]:
+    """The program streamed into a simulated Grbl, the host stalling ``pause`` s every
+    ``every`` s: the device and the executed job time."""
     import serial
 
     from sim.grbl import SimulatedGrbl
@@ -229,13 +309,13 @@ def pause_figures(
     profile = load_profile(None, overrides)
     program = build_program(place(tag, profile), profile)
     device = SimulatedGrbl(device_settings(profile), **simulated_pen(profile))
-    url = attach_device(device, re.sub(r"\W", "_", f"bench_pause_{name}"))
+    url = attach_device(device, re.sub(r"\W", "_", f"bench_{name}_{pause:g}"))
     link = serial.serial_for_url(url, baudrate=profile["serial.baud"], timeout=0.01)
     try:
         streamer = GrblStreamer(link, StreamOptions())
         streamer.connect()
         start = link.clock.now()
-        for k in range(1, int(program.duration / every) + 1):
+        for k in range(1, int(program.duration / every) + 1 if pause > 0 else 1):
             link.freeze_host(start + k * every, pause)
         streamer.stream(
             list(program.lines),
@@ -246,7 +326,7 @@ def pause_figures(
         executed = streamer.last_report.duration
     finally:
         link.close()
-    return {"pause_starvation": len(device.starvation), "pause_executed_s": executed}
+    return device, executed
 
 
 def measure(
@@ -266,6 +346,7 @@ def measure(
             if simulate:
                 out = (keep if keep is not None else Path(scratch)) / f"{slug}_{mode}"
                 row.update(draw_figures(tag, MODES[mode], out))
+                row.update(buffer_figures(tag, MODES[mode], f"{slug}_{mode}"))
                 if pause is not None:
                     row.update(pause_figures(tag, MODES[mode], *pause, f"{slug}_{mode}"))
             rows.append(row)
@@ -324,6 +405,31 @@ def print_draw(rows: list[dict[str, Any]]) -> None:
                 else " - |"
             )
             + f" {r['wall_s']:.1f} |"
+        )
+
+
+def print_pace(rows: list[dict[str, Any]]) -> None:
+    """Per tag: the job against the machine's lower bound, each run's limiting factor, the
+    buffered motion achieved, per-run speed SNR and deviation."""
+    print(
+        "| tag | mode | executed job s / lower bound s (≤ 1.15) | limiting factor per run |"
+        " min buffered achieved s (planned) | per-run speed SNR dB (≥ 25) |"
+        " per-run deviation max mm (≤ 0.05) |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    for r in rows:
+        ratio = r["executed_s"] / r["bound_s"]
+        achieved = r.get("achieved_buffer_s")
+        planned = r["min_buffered_rx_s"]
+        snrs = [x for x in r["run_snr_db"] if x is not None]
+        devs = [x for x in r["run_dev_mm"] if x is not None and math.isfinite(x)]
+        print(
+            f"| {r['tag']} | {r['mode']} | {r['executed_s']:.1f} / {r['bound_s']:.1f} ="
+            f" {ratio:.2f} {mark(ratio <= 1.15)} | {', '.join(r['limiting'])} |"
+            f" {'held whole' if achieved is None else f'{achieved:.3f}'}"
+            f" ({'-' if math.isinf(planned) else f'{planned:.3f}'}) |"
+            f" {' '.join(f'{x:.1f}' for x in snrs)} {mark(min(snrs, default=0) >= SNR_GOAL)} |"
+            f" {' '.join(f'{x:.3f}' for x in devs)} {mark(max(devs, default=0) <= 0.05)} |"
         )
 
 
@@ -402,6 +508,8 @@ def main() -> None:
     if simulate:
         print("\nOn the simulated Grbl 1.1h, 115200 baud")
         print_draw(rows)
+        print("\nThe machine's pace (lower bound: speed, acceleration and junction limits alone)")
+        print_pace(rows)
     print_totals(rows, simulate)
     for failure in failures:
         print(f"FAILED {failure}")
