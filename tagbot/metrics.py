@@ -832,7 +832,8 @@ def compare_reports(
     - path deviation: each reported position's distance to the planned path;
     - timing: each report's planned instant by position (where along the planned path it is;
       a report within :data:`MOVED` of either end, where the plan stands still while the pen
-      goes down or up, times nothing), and the run's offset (executed t − planned t, the
+      goes down or up, or at the same position as its neighbour, where the machine stood,
+      times nothing), and the run's offset (executed t − planned t, the
       median over its reports); the executed duration is the planned one plus the drift of
       that offset over the run;
     - no speed SNR (None, and :data:`SPARSE_SNR_NOTE` says why): a few reports a second are
@@ -864,6 +865,10 @@ def compare_reports(
         # At either end of the path the plan stands still: a report there (the pen going down
         # or up, a Z move) could be at any instant of the rest, so it times nothing.
         timed = (along > MOVED) & (along < arc[-1] - MOVED)
+        # Nor does a report where the machine stood (as at a resumed run's first point, the
+        # pen going down mid-path): the same position as the report before or after it.
+        step = np.hypot(*np.diff(xye, axis=0).T) > MOVED
+        timed &= np.concatenate([[True], step]) & np.concatenate([step, [True]])
         if not timed.any():
             timed = np.ones(len(along), dtype=bool)
         lag = (te - np.interp(along, arc[moving], tp[moving]))[timed]

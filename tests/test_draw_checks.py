@@ -64,6 +64,10 @@ def test_refusals_come_before_the_run_folder_and_the_first_byte(tmp_path, capsys
     assert f"drawing {LETTER_B}" not in err and "Traceback" not in err
 
 
+# Early in letter-b's program (under 300 lines), so the interrupt always falls mid-job.
+CTRL_C_AT = 120
+
+
 class _CtrlC(SimulatedGrbl):
     """A simulated Grbl whose host is interrupted (Ctrl-C) while sending line ``at``."""
 
@@ -80,7 +84,7 @@ class _CtrlC(SimulatedGrbl):
 
 def test_ctrl_c_names_the_last_executed_line_and_keeps_the_run_folder(tmp_path, capsys):
     profile = load_profile()
-    device = _CtrlC(300, {**device_settings(profile), 10: 3}, pen_servo=(30, 50))
+    device = _CtrlC(CTRL_C_AT, {**device_settings(profile), 10: 3}, pen_servo=(30, 50))
     url = attach_device(device, "checks_ctrl_c")
     out = tmp_path / "run"
     code = main(["draw", str(LETTER_B), "--port", url, "--out", str(out), "--no-pictures"])
@@ -101,7 +105,7 @@ def test_ctrl_c_names_the_last_executed_line_and_keeps_the_run_folder(tmp_path, 
 
 def test_a_resumed_job_reports_against_what_was_left_to_draw(tmp_path):
     profile = load_profile()
-    device = _CtrlC(300, {**device_settings(profile), 10: 3}, pen_servo=(30, 50))
+    device = _CtrlC(CTRL_C_AT, {**device_settings(profile), 10: 3}, pen_servo=(30, 50))
     url = attach_device(device, "checks_resume")
     code = main(["draw", str(LETTER_B), "--port", url, "--out", str(tmp_path / "a"), "-q"])
     assert code == 130
@@ -114,5 +118,10 @@ def test_a_resumed_job_reports_against_what_was_left_to_draw(tmp_path):
     assert report["completed"] and report["executed"] == report["total"]
     assert report["details"]["first_line"] == resume
     # Compared with the part of the run that was left, not with the whole drawing.
-    assert report["path_deviation_max_mm"] < 0.05 and report["speed_snr_db"] > 25
+    assert report["path_deviation_max_mm"] < 0.05
+    # Status reports time the drawing (no speed from 5 Hz); the pen standing at the resume
+    # point while it goes down is not drawing late, nor a starved planner.
+    assert report["speed_snr_db"] is None and "status reports" in report["speed_snr_note"]
+    assert abs(report["drawing_duration_ratio"] - 1) < 0.01
+    assert report["stalls"] == 0 and report["warnings"] == []
     assert report["pen_down_runs"] == {"planned": 1, "executed": 1}

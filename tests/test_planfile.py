@@ -315,7 +315,10 @@ ERROR_CASES = [
     (put((*S01, "sigma"), -1), r"^plans\[0\]\.strokes\[1\]\.sigma: must be > 0"),
     (put((*P1, "strokes", 0, "dt"), -0.1), r"^plans\[1\]\.strokes\[0\]\.dt: must be >= 0"),
     (put((*P0, "targets", 1), [0, 0]), r"^plans\[0\]\.targets\[1\]: coincides with targets\[0\]"),
-    (put((*P1, "start"), 0.5), r"^plans\[1\]\.start: "),
+    (
+        put((*P1, "start"), 0.5),
+        r"^plans\[1\]: the pen touches down at 0\.5 s, before plans\[0\] lifts it off \(",
+    ),
 ]
 
 

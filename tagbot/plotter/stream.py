@@ -618,12 +618,15 @@ class GrblStreamer:
         elif not outside and self._outside_since is not None:
             report.pause_spans.append((self._outside_since, now - self._outside_since))
             self._outside_since = None
-        # Idle: everything acknowledged has run; starved if the next line is inside a run.
+        # Idle: everything acknowledged has run; starved if the next line is inside a run. A
+        # resume's preamble (travel, pen down) is not a run: idle before it is all acknowledged
+        # is the machine waiting for its first program line, not a starved planner.
         drawing = self._drawing
         following = tracker.first + max(0, tracker.acked - tracker.preamble)
         starved = (
             status.state == State.IDLE
             and not self._asked_hold
+            and tracker.acked > tracker.preamble
             and 0 < following < len(drawing)
             and bool(drawing[following])
             and bool(drawing[following - 1])
