@@ -1,0 +1,79 @@
+"""Placement and the program's refusals at their bounds (issue 34): the largest scale the area's
+margins allow is exactly the boundary, and a placement that runs out of reach is named."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from tagbot.arm import build_program, load_profile
+from tagbot.arm.place import Placement, place
+from tagbot.errors import PlacementError
+from tagbot.model.motion import evaluate_plan
+
+from .conftest import small_tag
+
+AREA = ["area.x_min=-20", "area.x_max=20", "area.y_min=150", "area.y_max=190"]
+"""A 40 by 40 mm sheet (20 by 20 inside its 10 mm margin) well inside the arm's reach and joint
+limits: only the margins bound the tag (10 by 6 units, wider than tall: x binds)."""
+
+
+def test_the_largest_scale_is_where_the_margins_stop_the_tag() -> None:
+    largest = float(place(small_tag(), load_profile(None, AREA)).largest)
+    at = place(small_tag(), load_profile(None, [*AREA, f"place.scale={largest!r}"]))
+    # At it the tag spans the room between the side margins (less its 1 ms sampling pad),
+    # centred; its height is 0.6 of that.
+    x0, x1, y0, y1 = at.box
+    assert x0 == pytest.approx(-10.0, abs=1e-3) and x1 == pytest.approx(10.0, abs=1e-3)
+    assert x0 >= -10.0 and x1 <= 10.0 and x0 == pytest.approx(-x1, abs=1e-9)
+    assert (y1 - y0) == pytest.approx(0.6 * (x1 - x0), rel=1e-3)
+    assert at.mm_per_unit == largest
+    beyond = f"{largest * (1 + 1e-9)!r}"
+    with pytest.raises(PlacementError) as raised:
+        place(small_tag(), load_profile(None, [*AREA, f"place.scale={beyond}"]))
+    assert str(raised.value) == (
+        f"place.scale: {float(beyond):g} mm per unit makes the tag 20.0 x 12.0 mm, which fits"
+        " nowhere in the arm's safe reach inside the area; the largest that fits is"
+        f' {largest:.4g} mm per unit (or use "fit")'
+    )
+
+
+def test_fit_keeps_a_thousandth_clear_of_the_largest() -> None:
+    fit = place(small_tag(), load_profile(None, AREA))
+    assert fit.mm_per_unit == pytest.approx(fit.largest * (1 - 1e-3), rel=1e-12)
+    x0, x1, _, _ = fit.box
+    assert x1 - x0 == pytest.approx(20.0 * (1 - 1e-3), abs=2e-3)
+
+
+def test_a_placement_that_leaves_the_reach_is_refused_naming_the_first_sample() -> None:
+    """The tag starts 290 mm from the shoulder and its first stroke runs along +x: the first
+    sample of the 1 ms grid beyond the arm's reach (l1 + l2 = 300 mm) is named, with its time
+    from the plan's start and its position."""
+    profile = load_profile()
+    tag = small_tag()
+    size = 12.0
+    placement = Placement(
+        np.eye(2) * size, np.array([-30.0, 290.0]), size, (0.0, 0.0, 0.0, 0.0), size
+    )
+    with pytest.raises(PlacementError) as raised:
+        build_program(tag, profile, placement)
+    found = re.fullmatch(
+        r"plan 0 at t = (\d+\.\d{3}) s: \((-?\d+\.\d\d), (-?\d+\.\d\d)\) mm is out of the arm's"
+        r" reach",
+        str(raised.value),
+    )
+    assert found is not None, str(raised.value)
+    t, x, y = (float(g) for g in found.groups())
+    assert math.hypot(x, y) > 300.0 - 0.01
+    # Independently: the tag's own motion on the 1 ms grid from the plan's start (the run's
+    # ends are not both in reach, so it is not trimmed), placed; the first sample beyond 300.
+    plan = tag.plans[0]
+    grid = plan.start + np.arange(0, int(plan.end(tag.size) / 0.001) + 2) * 0.001
+    xy, _ = evaluate_plan(plan, grid, tag.size)
+    placed = xy * size + [-30.0, 290.0]
+    first = int(np.argmax(np.hypot(*placed.T) > 300.0))
+    assert first > 0 and t == pytest.approx(grid[first] - plan.start, abs=5e-4)
+    assert (x, y) == pytest.approx(tuple(placed[first]), abs=5e-3)
