@@ -134,6 +134,14 @@ def test_unwrap_into_moves_the_run_by_whole_turns_as_one() -> None:
     assert np.allclose(near, [5.0 - 2 * math.pi, 5.1 - 2 * math.pi])
     far = unwrap_into([2.0], 0.0, 1.0)  # 2.0 is nearer 0.5 than 2.0 − 2π is
     assert np.allclose(far, [2.0])
+    # Either side of the middle (1.5) of [1, 2], 2.9 away: within π of it, so no turn added.
+    for a in (4.4, -1.4):
+        assert np.array_equal(unwrap_into([a, a + 0.1], 1.0, 2.0), [a, a + 0.1])
+    # In range, the first angle goes where wrap_into puts it, also for a range wider than a turn.
+    for a in (-2.9, 3.9, 10.0):
+        out = unwrap_into([a], -3.0, 4.0)
+        assert out[0] == pytest.approx(float(wrap_into(a, -3.0, 4.0)[0]), abs=1e-12)
+    assert unwrap_into([-2.9], -3.0, 4.0)[0] == pytest.approx(-2.9, abs=1e-12)
 
 
 def test_arm_refuses_bad_geometry_and_takes_the_profile() -> None:
@@ -141,6 +149,9 @@ def test_arm_refuses_bad_geometry_and_takes_the_profile() -> None:
         Arm(0.0, 1.0)
     with pytest.raises(ValueError, match=r"l1, l2: must be > 0, got 1\.0, -1\.0"):
         Arm(1.0, -1.0)
+    for l1, l2 in ((1.0, 0.0), (0.0, 1.0)):
+        with pytest.raises(ValueError, match=r"l1, l2: must be > 0"):
+            Arm(l1, l2)
     with pytest.raises(ValueError, match=r"branch: must be 1 or -1, got 0"):
         Arm(1.0, 1.0, branch=0)
     profile = load_profile(

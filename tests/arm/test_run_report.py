@@ -5,13 +5,15 @@ figures and causes computed independently, and a stop's message naming the resum
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import pytest
 
 from tagbot.arm import load_profile, prepare
-from tagbot.arm.run import Budget, tracking_error
+from tagbot.arm.run import Budget, draw_arm, tracking_error
+from tagbot.control import RunControl
 from tagbot.draw import run_report
 from tagbot.errors import ConnectionLost, DeviceError
 
@@ -251,3 +253,96 @@ def test_outside_its_limits_at_start_is_a_warning_and_the_arm_goes_back(tmp_path
         run.warnings
     )
     assert not any(w.startswith("shoulder") for w in run.warnings)
+
+
+class _PausedFirst(RunControl):
+    """Paused for the first ``checks`` times the loop asks (a count, not a clock)."""
+
+    def __init__(self, checks: int) -> None:
+        super().__init__()
+        self.left = checks
+
+    @property
+    def paused(self) -> bool:
+        self.left -= 1
+        return self.left >= 0
+
+
+def test_draw_arm_obeys_its_control_and_reports_the_pause() -> None:
+    run = draw_arm(small_tag(), load_profile(), control=_PausedFirst(200))
+    assert run.stats["pauses"] == 1 and run.stats["paused_s"] > 0.0
+    assert run.stats["ticks_sent"] == len(run.joints)
+
+
+def test_a_run_of_three_goals_has_its_rounding_figures(clean) -> None:
+    """The rounding figures need three goals (a speed by central differences): a run of
+    exactly three has them, computed as for any run."""
+    job = clean[0]
+    sp = job.program.setpoints
+    rows = np.flatnonzero(sp.plan == 1)
+    plan = np.where(sp.plan == 1, -1, sp.plan)
+    plan[rows[10:13]] = 1
+    three = replace(job.program, setpoints=replace(sp, plan=plan))
+    got = Budget(three, job.profile, [], np.zeros((0, 2))).rounded(1)
+    (shoulder, elbow), (l1, l2) = job.profile.joints, job.profile.links
+    g = job.program.goals[rows[10:13]]
+    a1 = _angles(g[:, 0], shoulder.zero, shoulder.sign)
+    a2 = _angles(g[:, 1], elbow.zero, elbow.sign)
+    xy = np.column_stack(
+        [l1 * np.cos(a1) + l2 * np.cos(a1 + a2), l1 * np.sin(a1) + l2 * np.sin(a1 + a2)]
+    )
+    t, planned = sp.t[rows[10:13]], sp.xy[rows[10:13]]
+    v = np.gradient(planned, t, axis=0)
+    noise = np.gradient(xy, t, axis=0) - v
+    assert got[1] == pytest.approx(10 * math.log10(np.sum(v**2) / np.sum(noise**2)), rel=1e-9)
+    assert got[0] == pytest.approx(float(_polyline_distance(xy, planned).max()), abs=1e-5)
+    plan[rows[11]] = -1  # two goals: nothing to measure
+    two = replace(job.program, setpoints=replace(sp, plan=plan))
+    assert Budget(two, job.profile, [], np.zeros((0, 2))).rounded(1) == (0.0, math.inf)
+
+
+def test_a_host_stall_leaves_late_goals_on_the_executed_clock(record, tmp_path) -> None:
+    """After a 0.12 s host stall the goals due meanwhile go late: the judge holds them (when
+    each was due at the pen on the executed clock, and by how much), and names them as the
+    cause of a run's budget when no stall is counted."""
+    from tagbot.arm.run import simulated_chain
+
+    profile = load_profile()
+    sim = record(simulated_chain(profile))
+    job = prepare(small_tag(), port=sim.url)
+    down = int(np.flatnonzero(job.program.goals[:, 2] == profile["pen.down"])[0]) + 100
+    frozen: list[float] = []
+
+    def progress(done: int, total: int) -> None:
+        if done >= down and not frozen:
+            frozen.append(done)
+            sim.chain.advance(0.12)
+
+    run = job.run(tmp_path, progress=progress)
+    assert run.error is None and frozen
+    late = run.judge.late
+    assert len(late) >= 1 and late.shape[1] == 2
+    assert 0.1 <= float(late[:, 1].max()) <= 0.12 + 1e-9
+    (stall_at, _), *_ = run.stalls
+    assert np.all(np.abs(late[:, 0] - stall_at) < 0.2)
+    budget = Budget(job.program, profile, [], late)
+    at = float(late[0, 0])
+    cause = budget.cause(
+        {"plan": 0, "executed_start": at - 0.5, "planned_duration": 1.0}, True, True
+    )
+    assert cause == f"{len(late)} late goals (up to {1e3 * late[:, 1].max():.1f} ms)"
+
+
+def test_a_resumed_runs_trace_starts_where_the_arm_stood(record, tmp_path) -> None:
+    """A run resumed at tick N keeps the executed trace from tick N − 1's program time (the
+    pose it travelled back to), not a tick earlier."""
+    from tagbot.arm.run import simulated_chain
+
+    profile = load_profile()
+    sim = record(simulated_chain(profile))
+    job = prepare(small_tag(), port=sim.url, resume_from=301)
+    run = job.run(tmp_path)
+    assert run.error is None
+    begin = float(job.program.joints[299, 0])
+    assert run.executed[0, 0] >= begin - 1e-9
+    assert run.executed[0, 0] < begin + 0.002
