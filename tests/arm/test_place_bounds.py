@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tagbot.arm import build_program, load_profile
-from tagbot.arm.place import Placement, place
+from tagbot.arm.place import Placement, place, safe
 from tagbot.errors import PlacementError
 from tagbot.model.motion import evaluate_plan
 
@@ -77,3 +77,26 @@ def test_a_placement_that_leaves_the_reach_is_refused_naming_the_first_sample() 
     first = int(np.argmax(np.hypot(*placed.T) > 300.0))
     assert first > 0 and t == pytest.approx(grid[first] - plan.start, abs=5e-4)
     assert (x, y) == pytest.approx(tuple(placed[first]), abs=5e-3)
+
+
+def test_the_safe_workspace_holds_its_edges_and_not_a_hair_beyond() -> None:
+    """Each edge of the paper less its margin, and the outer reach circle less the reach
+    margin, is inside (with the checks' 1e-6 mm of slack for rounding); the next float beyond
+    is not."""
+    profile = load_profile()
+    m, r = 10.0 - 1e-6, 5.0 - 1e-6
+    x_min, x_max, y_min, y_max = profile.area
+    edges = {
+        "left": ([x_min + m, 150.0], [-1.0, 0.0]),
+        "right": ([x_max - m, 150.0], [1.0, 0.0]),
+        "top": ([0.0, y_max - m], [0.0, 1.0]),
+        "bottom": ([-100.0, y_min + m], [0.0, -1.0]),
+    }
+    for name, (point, out) in edges.items():
+        p = np.array(point)
+        beyond = np.nextafter(p, p + 1e3 * np.array(out))
+        assert bool(safe(p, profile)) and not bool(safe(beyond, profile)), name
+    wide = load_profile(None, ["area.y_max=400", "area.y_min=-100", "area.x_min=-400"])
+    outer = np.array([-(300.0 - r), 0.0])  # on the shoulder's -x axis, within its -30..210°
+    assert bool(safe(outer, wide))
+    assert not bool(safe(np.nextafter(outer, -np.inf), wide))
