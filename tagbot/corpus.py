@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from tagbot.errors import InputError, TagbotError
+from tagbot.errors import InputError, PlanError, TagbotError
 
 if TYPE_CHECKING:
     from tagbot.model.plan import Tag
@@ -139,7 +139,10 @@ def fit_one(job: FileJob, row: dict[str, Any]) -> Tag:
     from tagbot.metrics import timing_summary
 
     opts = job.options
-    fitted_tag = reconstruction(traces, model=opts.get("model", "gamma"), **opts.get("fit", {}))
+    try:
+        fitted_tag = reconstruction(traces, model=opts.get("model", "gamma"), **opts.get("fit", {}))
+    except PlanError as e:  # e.g. a tag longer than a tag may last: which file
+        raise PlanError(f"{job.source}: {e}") from e
     tag = fitted_tag.tag
     fitted = time.perf_counter()
     if job.output is not None:

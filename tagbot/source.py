@@ -51,7 +51,10 @@ def read_source(data: bytes, name: str, model: str | None = None) -> tuple[Tag, 
     traces = read_traces_bytes(data, name)
     from tagbot.gesture import reconstruction  # after reading: a bad file is refused first
 
-    fitted = reconstruction(traces, model=model or "gamma")
+    try:
+        fitted = reconstruction(traces, model=model or "gamma")
+    except PlanError as e:  # e.g. a tag longer than a tag may last: which file
+        raise type(e)(f"{name}: {e}") from e
     for note in fitted.notes():  # e.g. a clock no hand can produce, and what the fit did
         log.warning("%s: %s", name, note)
     return fitted.tag, traces
