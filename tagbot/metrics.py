@@ -767,7 +767,7 @@ def _align(
         grid, ve = recorded_velocity(te, xye, dt)
     else:
         grid, ve = te, np.zeros_like(xye)
-    vp_full = np.gradient(xyp, tp, axis=0) if len(tp) > 2 else np.zeros_like(xyp)
+    vp_full = np.gradient(xyp, tp, axis=0) if len(tp) >= 2 else np.zeros_like(xyp)
     cuts = sorted(skip)
     piece = np.searchsorted([high for _, high in cuts], grid, side="left")
     inside = np.zeros(len(grid), dtype=bool)

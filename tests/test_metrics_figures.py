@@ -14,6 +14,7 @@ from tagbot.metrics import (
     CLOCK_REACH,
     VELOCITY_CUTOFF,
     clock_velocity_snr,
+    compare_execution,
     densify,
     pen_down_paths,
     recorded_velocity,
@@ -193,3 +194,29 @@ def test_compare_reports_refuses_what_it_cannot_compare() -> None:
     pen_up[:, 3] = 0.5  # half way is not down
     with pytest.raises(ValueError, match=r"^compare_reports: no report while the pen was down$"):
         compare_reports(planned, pen_up, run_of)
+
+
+@pytest.mark.parametrize("setpoints", [2, 3, 11])
+def test_a_straight_run_has_its_speed_however_few_its_setpoints(setpoints: int) -> None:
+    """One straight line at 10 mm/s, planned as two setpoints (one line) or more, drawn exactly
+    as planned: the planned velocity is the line's, so the speed SNR is high (two setpoints
+    used to count as standing still: -inf dB)."""
+    tp = np.linspace(0.0, 1.0, setpoints)
+    xyp = np.column_stack([10 * tp, np.zeros(setpoints)])
+    te = np.linspace(0.0, 1.0, 1001)
+    executed = np.column_stack([te, 10 * te, np.zeros_like(te), np.ones_like(te)])
+    report = compare_execution([(tp, xyp)], executed)
+    assert report.speed_snr_db > 40.0 and report.runs[0].snr_db == report.speed_snr_db
+    assert report.deviation_max <= 0.0025  # to the path densified every 5 µm
+
+
+def test_a_dot_planned_as_one_setpoint_is_reported() -> None:
+    """A dot: one planned setpoint, the pen down and standing there; nothing moves either way."""
+    te = np.linspace(0.0, 0.2, 21)
+    executed = np.column_stack([te, np.full_like(te, 3.0), np.full_like(te, 4.0), np.ones_like(te)])
+    report = compare_execution([(np.array([0.0]), np.array([[3.0, 4.0]]))], executed)
+    assert report.deviation_max == 0.0 and report.deviation_mean == 0.0
+    # Nothing moves: a run's time is then from its first sample to its last.
+    assert report.planned_duration == 0.0
+    assert report.executed_duration == pytest.approx(0.2, abs=1e-12)
+    assert (report.planned_runs, report.executed_runs) == (1, 1)
