@@ -830,6 +830,23 @@ MAX_TURN_RATE = 40.0
 """... and turns at most this many half turns (180°) per second (development data: at most
 25, a UNIPEN word's trace; rapid alternating movements of the hand top out near 10 Hz, 20 half
 turns per second)."""
+MAX_TURN_ACCELERATION = 150_000.0
+"""... and takes its fast turns with at most this acceleration across the path (``v²·κ``, mm/s²:
+150 m/s², about 15 g, judged at :data:`TURN_QUANTILE` of the trace, :func:`fastest_turn`). A
+hand cannot take a tight turn at speed: drawing movements slow down where the path curves (the
+two-thirds power law, speed ∝ curvature^(-1/3): Lacquaniti, Terzuolo & Viviani 1983, Acta
+Psychologica 54:115-130), and the fastest arm movements peak near 50 m/s² (a minimum-jerk
+reach of distance D in time T peaks at 5.77·D/T²: 0.5 m in 0.25 s, the fast end of the
+unrestrained reaches of Atkeson & Hollerbach 1985, J. Neurosci. 5:2318-2330, is 46 m/s²).
+Development data (BENCHMARKS.md, issue 29): UNIPEN words at most 2.4 m/s², timed graffiti
+tags 15, motion-captured letters a metre tall drawn in 1-2 s 66; the cap leaves 2.3 times the
+fastest. A clock compressed ten times multiplies the figure by 100. Lengths are the input's
+(mm): a capture whose units are not physical (normalised GML, 100 mm per unit; pixels) is
+judged at its stated size."""
+TURN_QUANTILE = 0.95
+"""See :func:`fastest_turn`."""
+_TURN_OPTIONS = TimingOptions(step=0.0, min_bandwidth=0.0, pad=0.0)
+""":func:`fastest_turn`'s resampling: the grid and the kernel follow the sampling interval."""
 INK_TOLERANCE = 0.002
 """A timed plan's ink runs from the first recorded sample to the last, widened to where its
 path left to travel (or travelled) is below this fraction of the tag's size: the lognormal
@@ -890,10 +907,58 @@ def pen_down_span(t: ArrayLike) -> float:
     return float(t[-1] - t[0]) + (float(np.median(steps)) if steps.size else 0.0)
 
 
-def implausible_clock(n_strokes: int, turning: float, span: float) -> str:
+@dataclass(frozen=True)
+class Turn:
+    """The fastest turn of a recording (:func:`fastest_turn`): its acceleration across the path
+    (``v²·κ``, the centripetal acceleration), the speed and the radius of curvature there."""
+
+    acceleration: float
+    """Length units per s² (mm/s² for inputs in mm)."""
+    speed: float
+    radius: float
+
+
+def fastest_turn(t: ArrayLike, xy: ArrayLike) -> Turn:
+    """The recording's fastest turn, judged robustly: its velocity on a grid of a third of the
+    median sampling interval by the local-quadratic regression of :func:`resample` (the kernel
+    as wide as that interval, no wider, so the figure scales as 1/c² when the clock is scaled by
+    c), the acceleration by central differences of it, and across the path
+    ``|v × a| / |v|``; the figure is the :data:`TURN_QUANTILE` quantile over the grid instants
+    the samples surround closely (a single stray sample does not decide it). A trace of fewer
+    than :data:`MIN_SAMPLES` distinct stamps has no figure (zeros)."""
+    t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
+    if int(np.count_nonzero(np.diff(t) > 0)) + 1 < MIN_SAMPLES:
+        return Turn(0.0, 0.0, 0.0)
+    instants, _ = sample_instants(t, xy)
+    rec = resample(instants - instants[0], xy, _TURN_OPTIONS)
+    step = np.diff(rec.t)
+    # Central differences between grid neighbours one step apart on both sides (not across a
+    # stall, where the grid leaves a gap).
+    regular = np.flatnonzero(
+        (np.abs(step[1:] - step[:-1]) <= 1e-9 * np.maximum(step[1:], 1e-300))
+        & (rec.weight[1:-1] == 1.0)
+        & (rec.weight[:-2] == 1.0)
+        & (rec.weight[2:] == 1.0)
+    )
+    if regular.size == 0:
+        return Turn(0.0, 0.0, 0.0)
+    k = regular + 1
+    v = rec.v[k]
+    a = (rec.v[k + 1] - rec.v[k - 1]) / (rec.t[k + 1] - rec.t[k - 1])[:, None]
+    speed = np.hypot(v[:, 0], v[:, 1])
+    cross = np.abs(v[:, 0] * a[:, 1] - v[:, 1] * a[:, 0])
+    normal = np.divide(cross, speed, out=np.zeros_like(speed), where=speed > 0)
+    order = np.argsort(normal, kind="stable")
+    at = order[min(int(TURN_QUANTILE * len(order)), len(order) - 1)]
+    figure = float(normal[at])
+    return Turn(figure, float(speed[at]), float(speed[at] ** 2 / figure) if figure > 0 else 0.0)
+
+
+def implausible_clock(n_strokes: int, turning: float, span: float, turn: Turn | None = None) -> str:
     """Why a drawing of ``n_strokes`` geometric strokes turning ``turning`` half turns in
-    ``span`` seconds of pen-down time (:func:`pen_down_span`) cannot be a hand's, or "" if it
-    can (:data:`MAX_STROKE_RATE`, :data:`MAX_TURN_RATE`)."""
+    ``span`` seconds of pen-down time (:func:`pen_down_span`), its fastest turn ``turn`` (one
+    trace's, :func:`fastest_turn`), cannot be a hand's, or "" if it can
+    (:data:`MAX_STROKE_RATE`, :data:`MAX_TURN_RATE`, :data:`MAX_TURN_ACCELERATION`)."""
     if span <= 0:
         return "clock implausible: no time between its stamps"
     for count, limit, noun in (
@@ -905,6 +970,12 @@ def implausible_clock(n_strokes: int, turning: float, span: float) -> str:
                 f"clock implausible: {count:.3g} {noun} in {span:.3g} s, {count / span:.3g} per"
                 f" second; a hand draws at most {limit:g}"
             )
+    if turn is not None and turn.acceleration > MAX_TURN_ACCELERATION:
+        return (
+            f"clock implausible: {turn.acceleration / 1000:.3g} m/s² across the path at its"
+            f" fast turns ({turn.speed / 1000:.3g} m/s on a {turn.radius:.3g} mm radius); a"
+            f" hand reaches at most {MAX_TURN_ACCELERATION / 1000:g}"
+        )
     return ""
 
 
@@ -936,8 +1007,10 @@ def match(
         if whole:
             return None
     verdicts = [
-        implausible_clock(plan.n_strokes, turn, span) if timing == "auto" else ""
-        for plan, turn, span in zip(plans, turning, spans, strict=True)
+        implausible_clock(plan.n_strokes, turn, span, fastest_turn(tr.t, tr.xy))
+        if timing == "auto"
+        else ""
+        for plan, turn, span, tr in zip(plans, turning, spans, traces, strict=True)
     ]
     candidates = [
         None if verdict else _match_trace(plan, trace, size, model, opts)
@@ -1122,6 +1195,7 @@ __all__ = [
     "INK_TOLERANCE",
     "MAX_INTERVAL",
     "MAX_STROKE_RATE",
+    "MAX_TURN_ACCELERATION",
     "MAX_TURN_RATE",
     "MIN_SAMPLES",
     "TIMINGS",
@@ -1129,6 +1203,8 @@ __all__ = [
     "Timing",
     "TimingOptions",
     "TraceTiming",
+    "Turn",
+    "fastest_turn",
     "implausible_clock",
     "initial_timing",
     "match",

@@ -11,8 +11,11 @@ from hypothesis import strategies as st
 from tagbot.gesture import reconstruction
 from tagbot.gesture.timing import (
     MAX_STROKE_RATE,
+    MAX_TURN_ACCELERATION,
     SHAPE_MARGIN_MAX,
     SHAPE_MARGIN_MEAN,
+    Turn,
+    fastest_turn,
     implausible_clock,
     pen_down_span,
     simulated_capture,
@@ -236,3 +239,70 @@ def test_the_shape_margin_holds_over_random_plans_and_clocks(seed, scale, timing
     rng = np.random.default_rng(seed)
     recorded = capture(random_timed_plan(rng), rng, jitter=0.002)
     assert_within_margin([Trace(recorded.xy, recorded.t * scale)], timing)
+
+
+def circle(radius: float, seconds: float, rate: float = 100.0, turns: float = 1.0) -> Trace:
+    """A circle of ``radius`` mm drawn at constant speed, ``turns`` turns in ``seconds``."""
+    t = np.arange(0.0, seconds, 1.0 / rate)
+    angle = 2 * np.pi * turns * t / seconds
+    return Trace(np.column_stack([radius * np.cos(angle), radius * np.sin(angle)]), t)
+
+
+def test_fastest_turn_is_the_acceleration_across_the_path() -> None:
+    """At constant speed v on a radius r: v²/r, with that speed and radius; a clock scaled by c
+    scales it by 1/c²; a straight line has none."""
+    trace = circle(100.0, 2.0)  # 0.314 m/s on 100 mm: 0.987 m/s²
+    v = 2 * np.pi * 100.0 / 2.0
+    turn = fastest_turn(trace.t, trace.xy)
+    assert turn.acceleration == pytest.approx(v * v / 100.0, rel=0.01)
+    assert turn.speed == pytest.approx(v, rel=0.01)
+    assert turn.radius == pytest.approx(100.0, rel=0.02)
+    fast = fastest_turn(trace.t * 0.1, trace.xy)
+    assert fast.acceleration == pytest.approx(100 * turn.acceleration, rel=1e-6)
+    line = np.column_stack([np.linspace(0, 50, 40), np.zeros(40)])
+    assert fastest_turn(np.arange(40) * 0.01, line).acceleration == pytest.approx(0.0, abs=1e-6)
+    assert fastest_turn(np.arange(7) * 0.01, line[:7]) == Turn(0.0, 0.0, 0.0)  # too few stamps
+
+
+def test_fastest_turn_is_judged_at_the_quantile_not_the_peak() -> None:
+    """A slow circle with one sample thrown 5 mm off: the stray sample makes a spike of a few
+    grid instants that does not decide the figure (it would at the maximum)."""
+    trace = circle(100.0, 4.0, turns=1.0)
+    xy = np.array(trace.xy)
+    xy[200] += 5.0
+    turn = fastest_turn(trace.t, xy)
+    v = 2 * np.pi * 100.0 / 4.0
+    assert turn.acceleration == pytest.approx(v * v / 100.0, rel=0.05)
+
+
+def test_a_fast_tight_turn_is_a_clock_no_hand_produces() -> None:
+    """A 400 mm circle drawn in 1 s (1.26 m/s on a 200 mm radius: 7.9 m/s², plausible) keeps its
+    timing; the same capture on a clock ten times too fast (790 m/s², though only a few strokes
+    and two half turns in 0.1 s) is drawn at the geometric timing, the reason naming the figure,
+    the speed, the radius and the limit."""
+    plausible = circle(200.0, 1.0)
+    fitted = reconstruction([plausible])
+    assert fitted.timings is not None and fitted.timings[0].kind != "geometric"
+    fast = Trace(plausible.xy, plausible.t * 0.1)
+    fitted = reconstruction([plausible, Trace(fast.xy + 500.0, fast.t + 2.0)])
+    assert fitted.timings[0].kind != "geometric"
+    assert fitted.timings[1].kind == "geometric"
+    why = fitted.timings[1].reason
+    v = 2 * np.pi * 200.0 / 0.1
+    figure, rest = why.removeprefix("clock implausible: ").split(" m/s² across the path", 1)
+    assert float(figure) == pytest.approx(v * v / 200.0 / 1000, rel=0.01)
+    assert rest.startswith(" at its fast turns (12.")
+    assert rest.endswith(f"mm radius); a hand reaches at most {MAX_TURN_ACCELERATION / 1000:g}")
+
+
+def test_implausible_clock_turn_bound() -> None:
+    """At the limit a turn passes; beyond, it is named with its speed and radius."""
+    at = Turn(MAX_TURN_ACCELERATION, 1000.0, 1000.0**2 / MAX_TURN_ACCELERATION)
+    assert implausible_clock(2, 1.0, 1.0, at) == ""
+    beyond = Turn(2 * MAX_TURN_ACCELERATION, 3000.0, 30.0)
+    assert implausible_clock(2, 1.0, 1.0, beyond) == (
+        "clock implausible: 300 m/s² across the path at its fast turns (3 m/s on a 30 mm"
+        " radius); a hand reaches at most 150"
+    )
+    # The rates are named first (the older, coarser checks).
+    assert implausible_clock(41, 1.0, 1.0, beyond).startswith("clock implausible: 41 strokes")
