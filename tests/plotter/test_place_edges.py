@@ -1,0 +1,43 @@
+"""Placement at the bed's y edges and Grbl's step rounding (issue 34)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tagbot.model import Plan, Tag
+from tagbot.plotter import load_profile, place
+from tagbot.plotter.place import PlacementError, motor_steps
+
+
+def _vertical_tag() -> Tag:
+    plan = Plan([[0.0, 0.0], [0.0, 10.0]], [0.0], [math.log(0.2)], [0.3], [0.0], [0.0])
+    return Tag((plan,))
+
+
+def test_a_tag_touching_the_bottom_and_top_edges_is_accepted(tiny_file) -> None:
+    """With no margin a vertical line is scaled to the bed's height (50 mm): it touches y_min
+    and y_max exactly and is accepted; 1 mm taller (place.scale 5.1 mm per unit) it is refused
+    at y_max."""
+    edge = load_profile(tiny_file, ["bed.margin=0", "motion.trim=false"])
+    setpoints = place(_vertical_tag(), edge)
+    ys = np.concatenate([r.xy[:, 1] for r in setpoints.runs])
+    assert ys.min() == pytest.approx(0.0, abs=1e-9) and ys.max() == pytest.approx(50.0, abs=0.01)
+    tall = load_profile(
+        tiny_file,
+        ["bed.margin=0", "motion.trim=false", "place.align=bottom-left", "place.scale=5.1"],
+    )
+    with pytest.raises(
+        PlacementError,
+        match=r"^placement: the drawing reaches y = 51\.000 mm, beyond bed\.y_max = 50 mm by 1\.0",
+    ):
+        place(_vertical_tag(), tall)
+
+
+def test_motor_steps_round_half_away_from_zero(tiny_file) -> None:
+    """Grbl's lround of x·$100 (2 steps/mm here): ±0.5 and ±1.5 steps go away from zero."""
+    profile = load_profile(tiny_file, ["limits.x_steps_per_mm=2", "limits.y_steps_per_mm=2"])
+    xy = np.array([[0.25, -0.25], [0.75, -1.25], [0.2, -0.2], [10.0, 0.0]])
+    assert motor_steps(xy, profile).tolist() == [[1, -1], [2, -3], [0, 0], [20, 0]]
