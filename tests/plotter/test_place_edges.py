@@ -8,8 +8,11 @@ import numpy as np
 import pytest
 
 from tagbot.model import Plan, Tag
+from tagbot.model.motion import evaluate_plan
 from tagbot.plotter import load_profile, place
-from tagbot.plotter.place import PlacementError, motor_steps
+from tagbot.plotter.place import PlacementError, motor_steps, step_box
+
+from .conftest import straight_tag, two_plan_tag
 
 
 def _vertical_tag() -> Tag:
@@ -41,3 +44,20 @@ def test_motor_steps_round_half_away_from_zero(tiny_file) -> None:
     profile = load_profile(tiny_file, ["limits.x_steps_per_mm=2", "limits.y_steps_per_mm=2"])
     xy = np.array([[0.25, -0.25], [0.75, -1.25], [0.2, -0.2], [10.0, 0.0]])
     assert motor_steps(xy, profile).tolist() == [[1, -1], [2, -3], [0, 0], [20, 0]]
+
+
+def test_trimmed_runs_start_and_end_a_step_away_from_the_plans_ends(tiny_file) -> None:
+    """motion.trim: a run is drawn from the first instant its plan is a motor step away from
+    its touch-down point to the last instant it is still a step away from its lift-off point,
+    so no setpoint of the run lies within a step of either end."""
+    profile = load_profile(tiny_file, ["motion.trim=true"])
+    box = step_box(profile)
+    for tag in (straight_tag(), two_plan_tag()):
+        placed = place(tag, profile)
+        for run in placed.runs:
+            plan = tag.plans[run.plan]
+            ends, _ = evaluate_plan(plan, np.array(plan.ink_window(tag.size)), tag.size)
+            p0, p1 = ends @ placed.matrix.T + placed.offset
+            assert np.any(np.abs(run.xy[0] - p0) >= box)
+            assert np.any(np.abs(run.xy[-1] - p1) >= box)
+            assert np.all(np.abs(run.xy[-1] - p1) < 2 * box)  # but only just
