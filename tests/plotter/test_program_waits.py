@@ -49,3 +49,24 @@ def test_z_pen_moves_take_their_trapezoid_and_the_first_takes_none(tiny_file):
     durations = [float(program.line_end[i] - program.line_start[i]) for i in z]
     assert program.lines[z[0]] == "G1Z5F800\n" and durations[0] == 0.0
     assert durations[1:] == pytest.approx([2 * math.sqrt(4.5 / 10)] * (len(z) - 1), rel=1e-12)
+
+
+@pytest.mark.parametrize(("park", "travels"), [("0.003", False), ("0.006", True), ("0.02", True)])
+def test_a_travel_within_half_a_motor_step_is_not_sent(tiny_file, park: str, travels: bool):
+    """The tag's first point is (0, 0); the machine starts parked 0.3, 0.6 or 2 motor steps (of
+    0.01 mm) away on each axis: Grbl rounds a target to the nearest step (lround), so at 0.3 it
+    is already there and no travel is sent; the others need one."""
+    profile = load_profile(
+        tiny_file,
+        [
+            "bed.margin=0",
+            "motion.trim=false",
+            "place.align=bottom-left",
+            f"motion.park_x={park}",
+            f"motion.park_y={park}",
+        ],
+    )
+    program = build_program(place(straight_tag(), profile), profile)
+    first_down = program.lines.index("M3S30\n")
+    travel = [line for line in program.lines[:first_down] if line.startswith("G1X")]
+    assert travel == (["G1X0Y0F1200\n"] if travels else [])
