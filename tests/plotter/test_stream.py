@@ -207,6 +207,7 @@ def test_ctrl_c_holds_lifts_the_pen_and_re_raises():
 def test_hold_and_resume_keep_the_job_going():
     device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
     port, streamer, wire = connected(device)
+    connect_rx = b"".join(wire.rx)
     lines = square_program(600)
     events: dict[str, float] = {}
 
@@ -234,6 +235,15 @@ def test_hold_and_resume_keep_the_job_going():
     still = trace[(trace[:, 0] > events["hold"] + 0.5) & (trace[:, 0] < events["resume"])]
     assert len(still) > 500 and np.ptp(still[:, 1]) == 0 and np.ptp(still[:, 2]) == 0
     assert report.duration > 6.0 + 1.5
+    # Asked for: one pause from the "!" sent to the "~" sent, not a hold from outside.
+    assert report.pauses == 1 and report.outside_holds == 0 and report.warnings == []
+    ((start, length),) = report.pause_spans
+    assert events["hold"] <= start < events["resume"] <= start + length
+    assert report.paused_s == length < report.duration
+    # The trace hook saw every byte received: the banner at connect, an ok per line streamed.
+    assert b"Grbl 1.1" in connect_rx
+    received = b"".join(wire.rx)[len(connect_rx) :]
+    assert received.count(b"ok\r\n") == len(lines)
 
 
 def test_handshake_policies():
