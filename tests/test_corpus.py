@@ -119,10 +119,11 @@ def test_a_bug_in_one_file_becomes_its_row(tmp_path, monkeypatch):
 @pytest.fixture(scope="module")
 def dask_scheduler():
     """A local dask.distributed cluster (threads in this process) for the module's tests; its
-    process-wide helper threads outlive it, so it is not made per test."""
+    process-wide helper threads outlive it, so it is not made per test. Its web server takes any
+    free loopback port (the default 8787 is taken when another suite runs beside this one)."""
     distributed = pytest.importorskip("distributed", reason="tagbot[dask] is not installed")
     with distributed.LocalCluster(
-        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+        n_workers=1, threads_per_worker=2, processes=False, dashboard_address="127.0.0.1:0"
     ) as cluster:
         with distributed.Client(cluster.scheduler_address) as client:  # start the worker threads
             assert client.gather(client.map(abs, [-1, -2, -3, -4], pure=False)) == [1, 2, 3, 4]

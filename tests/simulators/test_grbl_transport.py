@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import select
 import time
 
 import pytest
@@ -181,6 +182,27 @@ def test_scheduled_alarm_over_url():
         port.close()
 
 
+def _opened(path: str) -> serial.Serial:
+    """The pty opened as a host opens a Grbl's port, with its banner read. pyserial's open
+    discards what is waiting, and the simulator booted before the port was opened (a real Grbl
+    reboots as the port opens): wait for the boot banner, open, then soft-reset and read the
+    banner that follows, whatever the host's speed."""
+    probe = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    try:
+        ready, _, _ = select.select([probe], [], [], 10)
+    finally:
+        os.close(probe)
+    assert ready, "the simulated Grbl printed no banner at boot"
+    port = serial.Serial(path, 115200, timeout=10)  # busy hosts: data ends waits
+    try:
+        port.write(b"\x18")
+        assert port.read(len(WELCOME)) == WELCOME
+    except BaseException:
+        port.close()
+        raise
+    return port
+
+
 def _open_fds() -> set[str]:
     return set(os.listdir("/proc/self/fd")) if os.path.isdir("/proc/self/fd") else set()
 
@@ -190,8 +212,7 @@ def test_pty_end_to_end_with_a_real_serial_port():
     device = SimulatedGrbl(clock="real")
     path, stop = serve_pty(device)
     try:
-        with serial.Serial(path, 115200, timeout=10) as port:  # busy hosts: data ends waits
-            assert port.read(len(WELCOME)) == WELCOME
+        with _opened(path) as port:
             port.write(b"$$\n")
             listing = port.read_until(b"ok\r\n").decode().split("\r\n")
             assert listing[0] == "$0=10" and "$11=0.010" in listing and listing[-2] == "ok"
@@ -215,8 +236,7 @@ def test_pty_drop_connection():
     device = SimulatedGrbl(clock="real")
     path, stop = serve_pty(device)
     try:
-        with serial.Serial(path, 115200, timeout=10) as port:  # busy hosts: data ends waits
-            assert port.read(len(WELCOME)) == WELCOME
+        with _opened(path) as port:
             device.drop_connection()
             with pytest.raises(serial.SerialException):
                 port.read(1)
@@ -311,8 +331,7 @@ def test_pty_write_latency():
     device = SimulatedGrbl(clock="real")
     path, stop = serve_pty(device, write_latency=0.2)
     try:
-        with serial.Serial(path, 115200, timeout=10) as port:  # busy hosts: data ends waits
-            assert port.read(len(WELCOME)) == WELCOME
+        with _opened(path) as port:
             port.write(b"?")
             sent = time.monotonic()
             assert port.read_until(b">\r\n").startswith(b"<Idle|")
