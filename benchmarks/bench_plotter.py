@@ -46,7 +46,9 @@ again with the same profile: deterministic) and from the run's ``report.json``:
 - host pauses (``--pause 0.5,2``, default): the program streamed again into the simulated Grbl
   while the host stalls 0.5 s every 2 s of simulated time (the port's ``freeze_host`` hook:
   nothing sent or read meanwhile, as the 0.39-0.52 s stalls measured on a loaded host), with
-  the planner's starvation events (0) and the executed job time.
+  the planner's starvation events (0), how many came in a run's first moments (within what the
+  receive buffer held behind the pen-down stop, ``Program.run_start_reserve``, whose least is
+  shown: no timing lengthens it), and the executed job time.
 
 The machine's pace, per tag and mode: the executed job time against the lower bound that the
 speed, acceleration and junction limits alone allow (each run at the time scale those set for it
@@ -276,7 +278,30 @@ def pause_figures(
     ``every`` s (the port's ``freeze_host`` hook: nothing sent or read meanwhile); the planner's
     starvation events and the executed job time."""
     device, executed = stream_program(tag, overrides, name, pause, every)
-    return {"pause_starvation": len(device.starvation), "pause_executed_s": executed}
+    profile = load_profile(None, overrides)
+    program = build_program(place(tag, profile), profile)
+    at_start = sum(starved_at_start(device, program, t, pause) for t in device.starvation)
+    return {
+        "pause_starvation": len(device.starvation),
+        "pause_starvation_start": at_start,
+        "pause_executed_s": executed,
+        "start_reserve_s": program.min_buffered_start,
+    }
+
+
+def starved_at_start(device: Any, program: Any, at: float, pause: float) -> bool:
+    """Whether the planner ran dry at ``at`` (the simulated Grbl's clock) in a run's first
+    moments: within what the run's start held (``Program.run_start_reserve``, where the pen-down
+    stop had left only the receive buffer's lines queued) and a host pause of ``pause`` s begun
+    there, of the run's start."""
+    finished = np.array([np.nan if f is None else f for f in device.line_finished_at])
+    line = min(int(np.searchsorted(finished, at)), len(program.lines) - 1)
+    run = int(program.line_run[line])
+    if run < 0:
+        return False
+    first = int(np.flatnonzero(program.line_run == run)[0])
+    into = program.line_start[line] - program.line_start[first]
+    return bool(into <= program.run_start_reserve[run] + pause)
 
 
 def buffer_figures(tag: tagbot.Tag, overrides: tuple[str, ...], name: str) -> dict[str, Any]:
@@ -399,8 +424,9 @@ def print_draw(rows: list[dict[str, Any]]) -> None:
             f" {r['dev_mean_mm']:.4f} / {r['dev_max_mm']:.4f}"
             f" {mark(r['dev_max_mm'] <= DEVIATION_GOAL)} | {r['starvation']} |"
             + (
-                f" {r['pause_starvation']} {mark(r['pause_starvation'] == 0)} /"
-                f" {r['pause_executed_s']:.1f} |"
+                f" {r['pause_starvation']} {mark(r['pause_starvation'] == 0)}"
+                f" ({r['pause_starvation_start']} at a run's start; least start reserve"
+                f" {r['start_reserve_s']:.2f} s) / {r['pause_executed_s']:.1f} |"
                 if "pause_starvation" in r
                 else " - |"
             )

@@ -129,6 +129,7 @@ def test_grbl_program_matches_the_planned_timeline(tmp_path):
     lines = (folder / "program.gcode").read_text().splitlines()
     assert len(lines) == result.report["total"]
     assert result.report["details"]["starvation_events"] == 0
+    assert result.report["details"]["realtime"] is False  # simulated time: nothing to schedule
     start = len(lines) - 1 - lines[::-1].index("G93")
     last = [line for line in lines[start : lines.index("G94", start)] if line.startswith("G1X")]
     x, y = last[-1][3:].split("F")[0].split("Y")

@@ -69,10 +69,8 @@ a sleep that finishes with short yields, typically within 0.1 ms).
 
 from __future__ import annotations
 
-import gc
 import logging
 import math
-import os
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -92,7 +90,7 @@ from firmware_protocols.dynamixel import (
 from firmware_protocols.dynamixel.control_table import MODELS, DriveMode
 from tagbot.arm.kinematics import angles_to_ticks
 from tagbot.arm.profile import ArmProfile
-from tagbot.clock import Clock, MonotonicClock, simulated_clock
+from tagbot.clock import Clock, MonotonicClock, RealTime, simulated_clock
 from tagbot.control import RunControl
 from tagbot.errors import ConnectionLost, DeviceError, DeviceFault, DeviceTimeout
 
@@ -142,10 +140,6 @@ BUS_MARGIN = 0.0002
 
 SETTLE = 0.001
 """Seconds a USB adapter with a 1 ms latency timer may hold replies (see :class:`ReadBack`)."""
-
-FIFO_PRIORITY = 10
-"""``SCHED_FIFO`` priority of the tick loop when permitted (1..99): below the kernel's threaded
-interrupt handlers (50), which the serial port itself needs."""
 
 STATUS = 0x55
 """Protocol 2.0 status packet instruction."""
@@ -585,41 +579,6 @@ class ReadBack:
         }
 
 
-class _RealTime:
-    """What the tick loop changes while it runs, and puts back (:meth:`end`):
-
-    - ``gc.freeze()``, so that everything allocated before the stream (the program's rows, the
-      profile, the caller's objects) leaves the collector's view and a full collection during
-      the stream looks at the stream's few new objects only, not for milliseconds at the whole
-      heap;
-    - on the wall clock, real-time scheduling for the loop's thread (``SCHED_FIFO``, priority
-      :data:`FIFO_PRIORITY`) where the system permits it (root or ``CAP_SYS_NICE``, an
-      ``rtprio`` limit), so that other programs on a busy host cannot hold it off the CPU;
-      quietly not where it does not (:attr:`fifo` says which).
-    """
-
-    def __init__(self, clock: Clock) -> None:
-        gc.freeze()
-        self.fifo = False
-        self._before: tuple[int, os.sched_param] | None = None
-        if isinstance(clock, MonotonicClock) and hasattr(os, "sched_setscheduler"):
-            try:
-                before = (os.sched_getscheduler(0), os.sched_getparam(0))
-                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(FIFO_PRIORITY))
-            except OSError:  # not permitted: the ordinary scheduler
-                log.debug("real-time scheduling not permitted: running without it")
-            else:
-                self._before, self.fifo = before, True
-
-    def end(self) -> None:
-        gc.unfreeze()
-        if self._before is not None:
-            try:
-                os.sched_setscheduler(0, *self._before)
-            except OSError as e:  # pragma: no cover - lowering is always permitted
-                log.debug("restoring the scheduler: %s", e)
-
-
 def _and(names: list[str]) -> str:
     return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
@@ -1034,7 +993,7 @@ class ArmDriver:
         log.info("streaming %d ticks at %g Hz, read-back every %d", total, p["motion.rate"], every)
         rows = goals.tolist()
         k = 0
-        realtime = _RealTime(self.clock)  # after the rows: frozen, out of the collector's way
+        realtime = RealTime(self.clock)  # after the rows: frozen, out of the collector's way
         out.realtime = realtime.fifo
         try:
             while k < total:

@@ -384,6 +384,9 @@ def _details(
         "min_buffered_s": (
             program.min_buffered_rx if math.isfinite(program.min_buffered_rx) else None
         ),
+        # What the machine holds at a run's start, where the pen-down stop left only the receive
+        # buffer's lines queued: a longer host pause there starves the planner.
+        "min_buffered_start_s": program.min_buffered_start,
     }
     if stream is not None:
         duration = max(stream.duration, 1e-9)
@@ -399,6 +402,7 @@ def _details(
                 "baud_limit_bytes_per_s": baud / 10,
                 "status_reports": len(stream.statuses),
                 "outside_holds": stream.outside_holds,
+                "realtime": stream.realtime,
             }
         )
     details["starvation_events"] = len(device.starvation) if device is not None else None

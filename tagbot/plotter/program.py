@@ -70,6 +70,7 @@ __all__ = [
     "pen_down",
     "pen_up",
     "resting_share",
+    "start_reserves",
     "travel_time",
 ]
 
@@ -129,11 +130,21 @@ class Program:
     """s: the same for what a host pause leaves the machine surely: the ``planner_blocks - 1``
     lines queued behind the executing one plus the :data:`~tagbot.plotter.place.RX_LINES`
     setpoint lines that fit Grbl's 128-byte receive buffer (``motion.min_buffer`` bounds it; the
-    report's ``min_buffered_s``). A run's first lines are the exception no timing can remove:
-    the pen-down ``G4`` blocks Grbl's parser, so a run starts with its receive buffer's lines
-    queued and the planner fills as the host sends the next ones."""
+    report's ``min_buffered_s``). A run's first lines are the exception:
+    :attr:`min_buffered_start`."""
+    run_start_reserve: tuple[float, ...] = ()
+    """s per run: the motion Grbl holds at the run's start, where no timing helps. A pen-down
+    stop (``M3``, ``G4``) empties the planner, and while it lasts Grbl reads no line, so when it
+    ends the machine holds only the lines that fitted the receive buffer behind it
+    (:func:`start_reserves`): a host pause longer than that there starves the planner. ``inf``
+    for a run that follows its pen-down without a stop or fits the buffer whole."""
     run_points: tuple[tuple[NDArray[np.float64], NDArray[np.float64]], ...] = ()
     notes: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def min_buffered_start(self) -> float:
+        """s: the least of :attr:`run_start_reserve` (``inf`` for none)."""
+        return min(self.run_start_reserve, default=math.inf)
 
     @property
     def duration(self) -> float:
@@ -492,6 +503,7 @@ class _Builder:
             min_buffered_rx=_min_buffered(
                 run, end - start, p["limits.planner_blocks"] - 1 + RX_LINES
             ),
+            run_start_reserve=start_reserves(self.lines, self.moves, self.sync, run, end - start),
             run_points=tuple(run_points),
             notes={
                 "travel_time": self.travel,
@@ -546,6 +558,37 @@ def read_waits(
 
 RX_BYTES = 127
 """Bytes Grbl's receive ring holds (128, one slot always empty)."""
+
+
+def start_reserves(
+    lines: list[str] | tuple[str, ...],
+    moves: list[bool] | NDArray[np.bool_],
+    sync: list[bool] | NDArray[np.bool_],
+    run: NDArray[np.int64],
+    durations: NDArray[np.float64],
+) -> tuple[float, ...]:
+    """Per run, the motion (s) Grbl holds when the stop line before its first line ends: the
+    moves among the lines after that stop that fit the receive buffer while the host still
+    counts the stop line as outstanding (:data:`RX_BYTES` in all). ``inf`` for a run with no
+    stop of its own before it, or that fits the buffer whole."""
+    stops = np.flatnonzero(np.asarray(sync, dtype=bool))
+    moving = np.asarray(moves, dtype=bool)
+    out = []
+    for k in np.unique(run[run >= 0]):
+        rows = np.flatnonzero(run == k)
+        before = stops[stops < rows[0]]
+        held = math.inf
+        if len(before) and not np.any(run[before[-1] + 1 : rows[0]] >= 0):
+            stop = int(before[-1])
+            room, total = RX_BYTES - len(lines[stop]), 0.0
+            for i in range(stop + 1, rows[-1] + 1):
+                room -= len(lines[i])
+                if room < 0:
+                    held = total
+                    break
+                total += float(durations[i]) if moving[i] else 0.0
+        out.append(held)
+    return tuple(out)
 
 
 def _min_buffered(run: NDArray[np.int64], durations: NDArray[np.float64], blocks: int) -> float:

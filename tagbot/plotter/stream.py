@@ -77,7 +77,7 @@ from firmware_protocols.grbl import (
     gcode,
     parse_line,
 )
-from tagbot.clock import port_clock
+from tagbot.clock import RealTime, port_clock
 from tagbot.control import RunControl
 from tagbot.errors import ConnectionLost, DeviceError, DeviceFault, DeviceTimeout
 
@@ -185,6 +185,9 @@ class StreamReport:
     period)."""
     outside_holds: int = 0
     """Feed holds tagbot did not ask for."""
+    realtime: bool = False
+    """Whether the stream ran with real-time scheduling (``SCHED_FIFO``,
+    :class:`~tagbot.clock.RealTime`)."""
     warnings: list[str] = field(default_factory=list)
     """What the report must say though the job went on: outside holds, a starved planner."""
     stop_requested: float | None = None
@@ -510,6 +513,8 @@ class GrblStreamer:
         report.started = self.clock.now()
         if progress is not None:
             progress(first, len(lines))
+        realtime = RealTime(self.clock)
+        report.realtime = realtime.fifo
         try:
             self._stream(entries, report)
             if wait_idle:
@@ -526,6 +531,7 @@ class GrblStreamer:
             report.errors.insert(0, str(fault))
             raise fault from e
         finally:
+            realtime.end()
             report.finished = self.clock.now()
             report.lines_executed = first + tracker.program_done
             report.tracking = tracker.source

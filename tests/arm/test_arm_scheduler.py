@@ -159,13 +159,13 @@ def test_program_time_leaves_out_resync_gaps_and_pauses() -> None:
 def test_real_time_scheduling_only_on_the_wall_clock_and_put_back() -> None:
     import os
 
-    from tagbot.arm.driver import FIFO_PRIORITY, _RealTime
+    from tagbot.clock import FIFO_PRIORITY, RealTime
 
     before = os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
-    simulated = _RealTime(FakeClock())
+    simulated = RealTime(FakeClock())
     assert simulated.fifo is False and os.sched_getscheduler(0) == before[0]
     simulated.end()
-    wall = _RealTime(MonotonicClock())
+    wall = RealTime(MonotonicClock())
     try:
         if wall.fifo:  # permitted here (root, CAP_SYS_NICE or an rtprio limit)
             assert os.sched_getscheduler(0) == os.SCHED_FIFO

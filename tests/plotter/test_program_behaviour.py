@@ -205,6 +205,52 @@ def test_short_runs_are_held_whole(tiny_file):
     assert program.min_buffered == program.min_buffered_rx == math.inf
 
 
+def _start_reserves(lines) -> list[float]:
+    """Per run, from the text: the ``60/F`` of the inverse-time lines after the run's pen-down
+    ``G4`` that fit Grbl's 127-byte receive ring while the ``G4`` is still unacknowledged."""
+    out = []
+    for k, line in enumerate(lines):
+        if not line.startswith("G93"):
+            continue
+        stop = max(i for i in range(k) if lines[i].startswith("G4P"))
+        room, held, reserve = 127 - len(lines[stop]), 0.0, math.inf
+        for following in lines[stop + 1 :]:
+            if following.startswith("G94"):
+                break  # the whole run fits: held whole
+            room -= len(following)
+            if room < 0:
+                reserve = held
+                break
+            if following.startswith("G1") and not following.startswith("G1Z"):
+                held += 60.0 / _words(following)["F"]
+        out.append(reserve)
+    return out
+
+
+def test_run_start_reserve_is_what_the_receive_buffer_holds_behind_the_pen_down(slow):
+    """A pen-down stop empties the planner: a run starts with only the lines that fitted the
+    receive buffer behind it, whatever the timing; the report names the least of them."""
+    program = build_program(place(_gap_tag(), slow), slow)
+    expected = _start_reserves(program.lines)
+    assert len(expected) == 2 and all(0 < r < math.inf for r in expected)
+    assert program.run_start_reserve == pytest.approx(expected, rel=1e-9)
+    assert program.min_buffered_start == pytest.approx(min(expected), rel=1e-9)
+
+
+def test_run_start_reserve_without_a_pen_stop_or_a_long_run(tiny_file):
+    """A Z pen without a dwell flows into each run (no stop); a run that fits the receive buffer
+    whole is held whole once sent: nothing is exposed at the start."""
+    z_pen = load_profile(tiny_file, ["pen.type=z", "pen.up=5", "pen.down=0", "pen.dwell=0"])
+    program = build_program(place(_gap_tag(), z_pen), z_pen)
+    assert not any(line.startswith("G4") for line in program.lines)
+    assert program.run_start_reserve == (math.inf, math.inf)
+    assert program.min_buffered_start == math.inf
+    coarse = load_profile(tiny_file, ["motion.setpoints=fixed", "motion.dt=0.25"])
+    program = build_program(place(straight_tag(), coarse), coarse)
+    assert _start_reserves(program.lines) == [math.inf]
+    assert program.run_start_reserve == (math.inf,)
+
+
 def _resting_exact(program, box) -> float:
     """Pen-down time within ``box`` of a run's first or last point, exactly: position is linear
     in time on each line, so each line's time near an end is an interval per axis."""

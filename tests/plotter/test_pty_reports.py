@@ -8,6 +8,7 @@ import math
 from sim.grbl import SimulatedGrbl
 from sim.grbl.transport import serve_pty
 from tagbot.cli import _draw_summary
+from tagbot.clock import MonotonicClock, RealTime
 from tagbot.draw import draw
 from tagbot.metrics import SPARSE_SNR_NOTE, compare_execution
 from tagbot.model import Plan, Tag
@@ -62,3 +63,10 @@ def test_zpen_over_a_pty_reports_no_speed_snr_and_the_recorders_drawing_time(tmp
     recorder = compare_execution(job.program.planned_runs, trace, plans=job.program.run_plans)
     assert abs(report["drawing_duration_ratio"] / recorder.duration_ratio - 1) < 0.01
     assert abs(recorder.duration_ratio - 1) < 0.01
+    # A Z pen with a dwell still stops before each run: what its start holds is named, and the
+    # stream ran real-time exactly where the system permits it.
+    start = job.program.min_buffered_start
+    assert 0 < start < math.inf and report["details"]["min_buffered_start_s"] == start
+    probe = RealTime(MonotonicClock())
+    probe.end()
+    assert report["details"]["realtime"] is probe.fifo
