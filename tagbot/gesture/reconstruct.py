@@ -239,15 +239,14 @@ def _duration_check(
     usable_clock = timed and any(usable(tr) for tr in traces)
 
     def check(analysed: list[_Sections | Plan]) -> None:
+        strokes = sum(len(a.dt) if isinstance(a, _Sections) else 1 for a in analysed)
         if timing == "match" or (timing == "auto" and usable_clock):
-            strokes = sum(len(a.dt) if isinstance(a, _Sections) else 1 for a in analysed)
             span = sum(pen_down_span(tr.t) for tr in traces)
             if timing == "match" or not implausible_clock(strokes, 0.0, span):
                 return  # drawn on the recorded clock (refused after the fit if too long)
         least = shortest_duration(analysed, opts)
         if least > MAX_DURATION:
             points = sum(len(_points(tr)) for tr in traces)
-            strokes = sum(len(a.dt) if isinstance(a, _Sections) else 1 for a in analysed)
             raise PlanError(
                 f"{points} points: the tag would last at least {least:.0f} s ({strokes} strokes"
                 f" at the paper's rhythm), more than {MAX_DURATION:g} s (a tag's longest);"
