@@ -346,3 +346,13 @@ def test_a_resumed_runs_trace_starts_where_the_arm_stood(record, tmp_path) -> No
     begin = float(job.program.joints[299, 0])
     assert run.executed[0, 0] >= begin - 1e-9
     assert run.executed[0, 0] < begin + 0.002
+
+
+def test_a_simulated_run_leaves_no_simulated_bus_behind(tmp_path) -> None:
+    """The simulated chain a run attached for itself is detached when the run ends: a studio
+    drawing again and again does not keep every past bus (and its recorded trace) alive."""
+    from sim.dynamixel import transport
+
+    before = set(transport._attached)
+    prepare(small_tag()).run(tmp_path)
+    assert set(transport._attached) == before
