@@ -334,19 +334,29 @@ def calibrate(plans: int = 16, seed: int = 16) -> None:
     from tagbot.gesture.timing import simulated_capture
     from tagbot.model.plan import random_timed_plan
 
-    print(f"median SNR (dB) of the reference against the true velocity, {plans} plans each")
-    print(f"{'digitiser':32s}" + "".join(f"{'raw' if c is None else f'{c:g} Hz':>8s}"
+    print(
+        f"median SNR (dB) of the reference against the true velocity / the ceiling (the true"
+        f" plan sampled at the stamps without noise, as bench_timing's ceiling), {plans} plans"
+    )
+    print(f"{'digitiser':32s}" + "".join(f"{'raw' if c is None else f'{c:g} Hz':>13s}"
                                            for c in CALIBRATION_CUTOFFS))  # fmt: skip
     for label, kind in DIGITISERS.items():
         rng = np.random.default_rng(seed)
         scores: dict[float | None, list[float]] = {c: [] for c in CALIBRATION_CUTOFFS}
+        ceilings: dict[float | None, list[float]] = {c: [] for c in CALIBRATION_CUTOFFS}
         for _ in range(plans):
             plan = random_timed_plan(rng)
             trace = simulated_capture(plan, rng, **kind)
             t, _, v = sample_plan(Tag((plan,)), 0, 0.001)
             for cutoff in CALIBRATION_CUTOFFS:
                 scores[cutoff].append(clock_velocity_snr(trace.t, trace.xy, t, v, cutoff))
-        print(f"{label:32s}" + "".join(f"{np.median(scores[c]):8.1f}" for c in scores))
+                ceilings[cutoff].append(ceiling_db([trace], Tag((plan,)), cutoff))
+        print(
+            f"{label:32s}"
+            + "".join(
+                f"{np.median(scores[c]):6.1f} /{np.median(ceilings[c]):5.1f}" for c in scores
+            )
+        )
 
 
 # --- command ---------------------------------------------------------------------------------
