@@ -353,9 +353,7 @@ def calibrate(plans: int = 16, seed: int = 16) -> None:
                 ceilings[cutoff].append(ceiling_db([trace], Tag((plan,)), cutoff))
         print(
             f"{label:32s}"
-            + "".join(
-                f"{np.median(scores[c]):6.1f} /{np.median(ceilings[c]):5.1f}" for c in scores
-            )
+            + "".join(f"{np.median(scores[c]):6.1f} /{np.median(ceilings[c]):5.1f}" for c in scores)
         )
 
 
