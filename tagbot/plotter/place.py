@@ -29,7 +29,8 @@ pen change between), so a per-run scale changes no run's shape, only the job's l
 
 - per-axis speed: ``|vx| / s ≤ x_max_feed / 60`` (same for y), from the analytic velocity;
 - per-axis acceleration: ``|ax| / s² ≤ x_acceleration`` (``a`` from differences of the analytic
-  velocity at a fine step);
+  velocity at a fine step); both along the profile's ``axes`` (x and y on Grbl; ``x ± y``, the
+  motors' axes, on an AxiDraw);
 - Grbl's look-ahead: the planner must be able to stop at the end of the blocks it holds
   (``B = limits.planner_blocks``), so a block of speed ``v`` needs ``v ≤ √(2·a·ΣL)`` with ``ΣL``
   the length of it and the next ``B − 1`` blocks (fewer at the run's end) and ``a`` the
@@ -281,7 +282,10 @@ def _retime(
         excess = max((segment_excess(r.xy, r.t, profile) for r in runs), default=0.0)
         # The fine grid may miss a speed peak by a hair: check the analytic setpoint velocity.
         vmax = np.asarray(profile.max_speed)
-        excess = max(excess, *(float(np.max(np.abs(r.v) / vmax, initial=0.0)) for r in runs))
+        excess = max(
+            excess,
+            *(float(np.max(np.abs(r.v @ profile.axes.T) / vmax, initial=0.0)) for r in runs),
+        )
         corner = max((_junction_excess(r.xy, r.t, profile) for r in runs), default=0.0)
         if excess > 1.0 + 1e-6:
             scale *= excess * (1.0 + 1e-3)
@@ -494,8 +498,9 @@ def limit_scale(v: Array, step: float, profile: Profile) -> dict[str, float]:
     """
     vmax = np.asarray(profile.max_speed)
     amax = np.asarray(profile.max_acceleration)
-    speed_scale = float(np.max(np.abs(v) / vmax, initial=0.0))
-    acc = np.diff(v, axis=0) / step
+    along = v @ profile.axes.T
+    speed_scale = float(np.max(np.abs(along) / vmax, initial=0.0))
+    acc = np.diff(along, axis=0) / step
     acc_scale = math.sqrt(float(np.max(np.abs(acc) / amax, initial=0.0)))
     speed = np.hypot(v[:, 0], v[:, 1])
     cap = 2.0 * _direction_acceleration(v, amax) * profile["limits.planner_blocks"] * profile.dt
@@ -532,9 +537,8 @@ def segment_excess(xy: Array, t: Array, profile: Profile) -> float:
         return 0.0
     speed, cap = segment_speed_cap(xy, t, profile)
     durations = np.diff(t)
-    worst = float(
-        np.max(np.abs(np.diff(xy, axis=0)) / durations[:, None] / np.asarray(profile.max_speed))
-    )
+    moves = np.diff(xy, axis=0) @ profile.axes.T
+    worst = float(np.max(np.abs(moves) / durations[:, None] / np.asarray(profile.max_speed)))
     moving = speed > 0
     if moving.any():
         # speed ∝ 1/s and cap ∝ 1/√s: the ratio falls as 1/√s, so s must grow by ratio².

@@ -12,6 +12,8 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from tagbot.config import (
     BOOL,
     FIT_OR_POSITIVE,
@@ -121,6 +123,12 @@ class Profile(LayeredProfile):
     @property
     def dt(self) -> float:
         return self["motion.dt"]
+
+    @property
+    def axes(self) -> np.ndarray:
+        """Machine ``(x, y)`` → the two axes the speed and acceleration limits hold along
+        (identity: x and y; an AxiDraw's motors turn with ``x ± y``)."""
+        return np.eye(2)
 
 
 def packaged_profiles() -> list[str]:

@@ -1,0 +1,1 @@
+"""The AxiDraw (EiBotBoard) as a tagbot machine: profiles, timed low-level moves, streaming."""
