@@ -38,6 +38,20 @@ class PlacementError(TagbotError, ValueError):
     the message names the overflow. Raised before anything is sent."""
 
 
+class ReachError(PlacementError):
+    """A serial arm cannot put its pen on a point of a path (:mod:`tagbot.arm.serial`).
+
+    ``index`` is the point's index in the path (the caller maps it to plan, stroke and time),
+    ``reason`` one of ``reach``, ``joint limit``, ``tilt``, ``self-collision``, ``jump``, and
+    ``detail`` the message without its ``point N:`` prefix."""
+
+    def __init__(self, detail: str, index: int, reason: str, where: str | None = None) -> None:
+        super().__init__(f"{where or f'point {index}'}: {detail}")
+        self.detail = detail
+        self.index = index
+        self.reason = reason
+
+
 class PortError(TagbotError, ValueError):
     """The port named cannot be a serial line to the machine (missing, not a device, no access,
     unknown URL scheme). A usage error, found before anything is written or sent."""
