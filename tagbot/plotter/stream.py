@@ -301,8 +301,12 @@ class GrblStreamer:
             if poll and now >= next_poll:
                 self._write(bytes([Realtime.STATUS_REPORT]))
                 next_poll = now + 1.0 / self.options.poll_rate
-            for message in self._messages():
+            messages = self._messages()
+            for k, message in enumerate(messages):
                 if accept(message):
+                    # What came in the same read after it is the next wait's (an ok read with
+                    # a status report must still be counted).
+                    self._pending.extendleft(reversed(messages[k + 1 :]))
                     return message
                 self._note(message)
 

@@ -1,0 +1,88 @@
+"""The streamer between and around jobs (issue 34): what it learns at connect, requests made
+outside a job, and stray answers that arrive when no line is in flight."""
+
+from __future__ import annotations
+
+from firmware_protocols.grbl import State
+from sim.grbl import SimulatedGrbl
+
+from .test_stream import SETTINGS, connected, square_program
+
+
+def test_a_line_numbered_firmware_gets_numbered_lines():
+    """``$I`` names a USE_LINE_NUMBERS build ("N" among its options): with the default
+    ``line_numbers="auto"`` every program line goes out with its N word, so the status
+    reports' Ln: field says which line runs."""
+    numbered = SimulatedGrbl(SETTINGS, pen_servo=(30, 50), line_numbers=True)
+    port, streamer, wire = connected(numbered)
+    try:
+        assert streamer.line_numbers is True
+        lines = square_program(40)
+        streamer.stream(lines)
+    finally:
+        port.close()
+    sent = wire.lines_sent()[-len(lines) :]
+    assert [line.split(b"G", 1)[0].split(b"M", 1)[0] for line in sent[:3]] == [b"N1", b"N2", b"N3"]
+    assert sent[-1].startswith(f"N{len(lines)}".encode())
+    plain = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, _ = connected(plain)
+    port.close()
+    assert streamer.line_numbers is False
+
+
+def test_the_machine_position_at_connect_is_where_the_job_starts():
+    """A machine left away from its origin: the streamer starts from where it stands."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50), position_mm=(30.0, 40.0, 0.0))
+    port, streamer, _ = connected(device)
+    try:
+        streamer.query_state()
+        assert streamer._machine_xy() == (30.0, 40.0)
+    finally:
+        port.close()
+
+
+def test_a_hold_asked_between_jobs_goes_straight_to_the_machine():
+    """Outside a job (no stream loop to queue it), hold and resume are written at once."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, wire = connected(device)
+    try:
+        streamer.hold()
+        streamer.resume()
+        assert wire.tx[-2:] == [b"!", b"~"]
+        assert streamer.query_state().state == State.IDLE
+    finally:
+        port.close()
+
+
+def test_a_stray_ok_between_jobs_is_kept_not_counted():
+    """An answer to a line sent by someone else, before any job and after one: kept among
+    the messages (or logged), never taken for one of the job's lines."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, _ = connected(device)
+    try:
+        streamer._write(b"G4P0\n")  # no tracker yet: nothing to count it against
+        for _ in range(3):  # its ok arrives during one of these waits
+            assert streamer.query_state().state == State.IDLE
+        lines = square_program(20)
+        report = streamer.stream(lines)
+        acked = streamer.tracker.acked
+        streamer._write(b"G4P0\n")  # after the job: every line already answered
+        assert streamer.query_state().state == State.IDLE
+    finally:
+        port.close()
+    assert streamer.tracker.acked == acked == len(lines)
+    assert report.lines_acknowledged == len(lines)
+
+
+def test_what_arrives_with_the_awaited_report_is_not_lost():
+    """A status report and an ``ok`` read in one chunk: the wait takes the report and the
+    ``ok`` is still there for whoever reads next (a safe stop counts it as a planned line)."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, wire = connected(device)
+    try:
+        streamer._write(b"G4P0\n")
+        streamer.query_state()
+        assert wire.rx[-1].endswith(b"ok\r\n") or b"ok\r\n" in b"".join(wire.rx[-2:])
+        assert [type(m).__name__ for m in streamer._messages()] == ["Ok"]
+    finally:
+        port.close()
