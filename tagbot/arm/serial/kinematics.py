@@ -88,6 +88,8 @@ class SerialArm:
     lower: Array
     upper: Array
     velocity: Array
+    arm_geoms: NDArray[np.bool_]
+    """Geoms on the arm's bodies (the first joint's body's parent and below), not a scene's."""
 
     @classmethod
     def load(
@@ -132,7 +134,10 @@ class SerialArm:
                 f"got {velocity.tolist()}"
             )
         rng = model.jnt_range.copy()
-        return cls(model, path, names, rng[:, 0].copy(), rng[:, 1].copy(), velocity)
+        root = int(model.body_parentid[model.jnt_bodyid[0]])
+        mine = np.zeros(model.ngeom, dtype=bool)
+        mine[mink.get_subtree_geom_ids(model, root) if root > 0 else slice(None)] = True
+        return cls(model, path, names, rng[:, 0].copy(), rng[:, 1].copy(), velocity, mine)
 
     @staticmethod
     def _place_tool(spec: mujoco.MjSpec, path: Path, tool_offset: float | ArrayLike) -> None:
@@ -187,20 +192,11 @@ class SerialArm:
 
     def _self_contacts(self, data: mujoco.MjData) -> list[tuple[str, str]]:
         mujoco.mj_collision(self.model, data)
-        arm = self._arm_geoms()
-        return [
-            (self.model.geom(c.geom1).name, self.model.geom(c.geom2).name)
-            for c in data.contact[: data.ncon]
-            if arm[c.geom1] and arm[c.geom2]
-        ]
-
-    def _arm_geoms(self) -> NDArray[np.bool_]:
-        """Geoms on the arm's bodies (the first joint's body's parent and below), not a scene's."""
-        root = int(self.model.body_parentid[self.model.jnt_bodyid[0]])
-        ids = mink.get_subtree_geom_ids(self.model, root) if root > 0 else range(self.model.ngeom)
-        mask = np.zeros(self.model.ngeom, dtype=bool)
-        mask[list(ids)] = True
-        return mask
+        if data.ncon == 0:
+            return []
+        pairs = data.contact.geom[: data.ncon]
+        mine = self.arm_geoms[pairs].all(axis=1)
+        return [(self.model.geom(a).name, self.model.geom(b).name) for a, b in pairs[mine]]
 
     def solve_path(
         self,
@@ -293,12 +289,13 @@ class _PathSolver:
                 settle = False
         return bool(np.linalg.norm(self.tip() - target) < self.tol)
 
-    def solve_point(self, target: Array, guess: Array, settle: bool) -> bool:
+    def solve_point(self, target: Array, guess: Array, first: bool) -> bool:
         """The tip on ``target`` from ``guess``: both tasks, then the position alone (the axis
-        task's pull can leave the tip a little off when the paper's normal is out of reach)."""
+        task's pull can leave the tip a little off when the paper's normal is out of reach).
+        The first point comes from anywhere: its tilt is checked after, not held on the way."""
         self.cfg.update(guess)
-        limits = [*self.bounds, self.tilt]
-        if self.converge(target, [self.position, self.align], limits, settle):
+        limits = list(self.bounds) if first else [*self.bounds, self.tilt]
+        if self.converge(target, [self.position, self.align], limits, first):
             return True
         return self.converge(target, [self.position], limits, False)
 
@@ -310,8 +307,8 @@ class _PathSolver:
                 guess = np.clip(2.0 * out[i - 1] - out[i - 2], self.arm.lower, self.arm.upper)
             else:
                 guess = prev
-            if not self.solve_point(target, guess, settle=i == 0):
-                self.refuse(i, target, guess)
+            if not self.solve_point(target, guess, first=i == 0):
+                self.fall_back(i, target, guess)
             q = self.cfg.q.copy()
             tilt = _tilt(_site_axis(self.cfg.data, self.site), self.normal)
             if tilt > self.max_tilt + 1e-9:
@@ -341,14 +338,17 @@ class _PathSolver:
             prev = q
         return out
 
-    def refuse(self, i: int, target: Array, guess: Array) -> None:
-        """Name why point ``i`` is out: the tilt (reachable without the tilt cone), a joint limit
-        (reachable only outside the ranges), or the reach."""
+    def fall_back(self, i: int, target: Array, guess: Array) -> None:
+        """Point ``i`` by the position alone within the ranges, if that is within the tilt;
+        otherwise name why it is out: the tilt, a joint limit (reachable only outside the
+        ranges), or the reach."""
         closest = np.linalg.norm(self.tip() - target) * 1e3
         where = f"({target[0]:.4f}, {target[1]:.4f}, {target[2]:.4f}) m"
         self.cfg.update(guess)
         if self.converge(target, [self.position], list(self.bounds), True):
             tilt = _tilt(_site_axis(self.cfg.data, self.site), self.normal)
+            if tilt <= self.max_tilt:
+                return
             raise ReachError(
                 f"the pen at {where} would tilt {math.degrees(tilt):.1f}° from the paper's "
                 f"normal (max {math.degrees(self.max_tilt):.1f}°)",
