@@ -1,0 +1,306 @@
+"""Streaming a job's moves to an EiBotBoard (firmware 3.x, legacy response mode).
+
+**Connect.** ``V`` reads the firmware version; below :data:`MIN_FIRMWARE` the run is refused
+before any motion command (``LT``/``T3``, the settable FIFO and ``QU,6`` need 3.0.1). Then
+``QU,2`` (the largest FIFO the firmware has) and ``CU,4,n`` (the depth asked, capped there),
+``EM`` (motors on, the profile's microstepping), ``SC,4``/``SC,5``/``SC,11``/``SC,12`` (pen
+positions and rates) and a pen-up ``SP,1``.
+
+**Stream.** A motion command is sent only while the board has room for it (one executing, ``n``
+in the FIFO), so the board answers it at once and its queries stay answered: every
+``serial.poll`` s (and whenever the FIFO is full) ``QM`` (executing?), ``QU,6`` (commands
+waiting) and ``QS`` (global step position) say what has executed:
+``executed = sent − waiting − executing`` (read in that order, a race can only count one move
+fewer, never one more), and ``QB`` (the PRG button) asks for a pause.
+
+**Pause** (the button or :class:`~tagbot.control.RunControl`): nothing more is sent, the FIFO
+drains, the pen lifts (``SP,1``) and waits; on resume the pen lowers and the stream goes on from
+the next move: the motors never moved, so the motion after it is the plan's, exactly.
+
+**Stop** (Ctrl-C, SIGTERM, a board error, a lost line): ``ES`` (motion stops, the FIFO is
+flushed), ``QS`` (where the motors stopped), pen up. The move in progress is found from the
+stopped position along the job's tick record (:meth:`EBBStreamer.locate`).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from firmware_protocols.ebb.motion import TICK_HZ
+from tagbot.axidraw.profile import Profile
+from tagbot.clock import port_clock
+from tagbot.control import RunControl
+from tagbot.errors import ConnectionLost, DeviceError, DeviceFault, DeviceTimeout
+
+if TYPE_CHECKING:
+    from tagbot.axidraw.moves import Job
+
+__all__ = ["MIN_FIRMWARE", "EBBStreamer", "StreamReport", "parse_version"]
+
+MIN_FIRMWARE = (3, 0, 1)
+"""The oldest EBB firmware tagbot drives: LT/T3, the FIFO set with CU,4 and QU,6 (3.0.1)."""
+
+REPLY_TIMEOUT = 2.0
+"""s a reply may take (the board answers every command at once: tagbot never fills its FIFO)."""
+
+_VERSION = re.compile(rb"Version\s+(\d+)\.(\d+)\.(\d+)")
+
+
+def parse_version(reply: bytes) -> tuple[int, int, int]:
+    """The firmware version in a ``V`` reply (``EBBv13_and_above EB Firmware Version 3.0.2``)."""
+    found = _VERSION.search(reply)
+    if found is None:
+        raise DeviceError(f"V: not an EiBotBoard's version reply: {reply!r}")
+    return int(found[1]), int(found[2]), int(found[3])
+
+
+@dataclass
+class StreamReport:
+    """What a stream sent, what executed and when (times on the port's clock)."""
+
+    firmware: tuple[int, int, int] = (0, 0, 0)
+    fifo: int = 1
+    first: int = 0
+    """The first entry streamed (0-based; > 0 when resuming)."""
+    sent: int = 0
+    """Entries sent and acknowledged, counting from :attr:`first`."""
+    executed: int = 0
+    """Entries executed in full, counting from the job's first."""
+    started: float = 0.0
+    ended: float = 0.0
+    polls: list[tuple[float, int, int, int]] = field(default_factory=list)
+    """``(t, executed, motor 1, motor 2)`` at each ``QS``."""
+    pauses: list[tuple[float, float]] = field(default_factory=list)
+    stopped_at: tuple[int, int] | None = None
+    """Global steps where ``ES`` stopped the motors (None: the job ran to its end)."""
+    button_presses: int = 0
+    errors: list[str] = field(default_factory=list)
+
+    @property
+    def duration(self) -> float:
+        return self.ended - self.started
+
+
+class EBBStreamer:
+    """One EBB on an open serial ``link`` (pyserial-like: ``write``, ``read``)."""
+
+    def __init__(self, link: Any, profile: Profile) -> None:
+        self.link = link
+        self.profile = profile
+        self.clock = port_clock(link)
+        self.report = StreamReport()
+        self._buffer = b""
+
+    # -- the wire ---------------------------------------------------------------------------
+    def _line(self, command: bytes) -> bytes:
+        """The next non-empty reply line (legacy mode ends lines with CR, LF or both)."""
+        deadline = self.clock.now() + REPLY_TIMEOUT
+        while True:
+            parts = re.split(rb"[\r\n]+", self._buffer.lstrip(b"\r\n"), maxsplit=1)
+            if len(parts) == 2:
+                self._buffer = parts[1]
+                return parts[0]
+            if self.clock.now() >= deadline:
+                name = command.split(b",")[0].strip().decode("ascii", "replace")
+                raise DeviceTimeout(f"{name}: no reply from the EBB in {REPLY_TIMEOUT:g} s")
+            try:
+                chunk = self.link.read(max(1, getattr(self.link, "in_waiting", 0) or 1))
+            except (OSError, ValueError) as e:
+                raise ConnectionLost(f"the EBB's line failed: {e}") from e
+            self._buffer += chunk
+
+    def ask(self, command: str | bytes, *, data: bool = False, ok: bool = True) -> bytes:
+        """Send ``command`` (``\\r`` added); its data line if ``data``, then ``OK`` if ``ok``.
+        An error line (``!N Err: ...``) is a :class:`DeviceFault` naming the command."""
+        line = command.encode("ascii") if isinstance(command, str) else command
+        line = line if line.endswith(b"\r") else line + b"\r"
+        try:
+            self.link.write(line)
+        except (OSError, ValueError) as e:
+            raise ConnectionLost(f"the EBB's line failed: {e}") from e
+        answer = b""
+        if data:
+            answer = self._checked(line, self._line(line))
+        if ok:
+            end = self._checked(line, self._line(line))
+            if end != b"OK":
+                raise DeviceError(f"{_name(line)}: expected OK from the EBB, got {end!r}")
+        return answer
+
+    def _checked(self, line: bytes, reply: bytes) -> bytes:
+        if reply.startswith(b"!"):
+            text = reply.decode("ascii", "replace")
+            self.report.errors.append(text)
+            raise DeviceFault(f"{line.strip().decode('ascii', 'replace')}: the EBB replied {text}")
+        return reply
+
+    # -- connect ----------------------------------------------------------------------------
+    def connect(self) -> tuple[int, int, int]:
+        """Version, FIFO depth, motors and pen set up (module docstring); the version."""
+        p = self.profile
+        version = parse_version(self.ask("V", data=True, ok=False))
+        self.report.firmware = version
+        if version < MIN_FIRMWARE:
+            have = ".".join(map(str, version))
+            need = ".".join(map(str, MIN_FIRMWARE))
+            raise DeviceError(
+                f"EBB firmware {have} is not supported: tagbot needs {need} or later (LT/T3 "
+                "moves, a deep FIFO); update it with the makers' EBB firmware updater"
+            )
+        largest = int(self.ask("QU,2", data=True).split(b",")[-1])
+        depth = max(1, min(int(p["serial.fifo"]), largest))
+        self.ask(f"CU,4,{depth}")
+        self.report.fifo = depth
+        self.ask(f"EM,{p.step_mode},{p.step_mode}")
+        self.ask(f"SC,4,{p.servo_position(p['pen.up'])}")
+        self.ask(f"SC,5,{p.servo_position(p['pen.down'])}")
+        self.ask(f"SC,11,{p.servo_rate(p['pen.rate_raise'])}")
+        self.ask(f"SC,12,{p.servo_rate(p['pen.rate_lower'])}")
+        self.ask("QB", data=True)  # forget a press from before the job
+        return version
+
+    def position(self) -> tuple[int, int]:
+        """The global step position (``QS``)."""
+        a, b = self.ask("QS", data=True).split(b",")
+        return int(a), int(b)
+
+    def pen_line(self, down: bool) -> bytes:
+        """``SP`` with the servo's travel time as the board's delay."""
+        ms = max(1, round(1000.0 * self.profile.pen_time(down)))
+        return f"SP,{0 if down else 1},{ms},{self.profile['pen.pin']}\r".encode()
+
+    # -- stream -----------------------------------------------------------------------------
+    def stream(
+        self,
+        lines: Sequence[bytes],
+        *,
+        first: int = 0,
+        preamble: Sequence[bytes] = (),
+        pen_down: Sequence[bool] = (),
+        progress: Callable[[int, int], None] | None = None,
+        control: RunControl | None = None,
+    ) -> StreamReport:
+        """Send ``preamble`` then ``lines[first:]`` (module docstring); ``pen_down[i]``: the
+        pen is down once line ``i`` has executed (for a pause's lift and lowering)."""
+        r = self.report
+        r.first, r.executed = first, first
+        r.started = self.clock.now()
+        depth = r.fifo + 1  # one executing, the rest in the FIFO
+        poll = float(self.profile["serial.poll"])
+        for line in preamble:  # a resume's travel and pen: done before the job's moves
+            self.ask(line)
+            self._drain(poll)
+        queue = list(lines[first:])
+        total = len(lines)
+        next_poll = self.clock.now()
+        k = 0
+        while k < len(queue) or self._outstanding:
+            now = self.clock.now()
+            if k < len(queue) and self._outstanding < depth and now < next_poll:
+                self.ask(queue[k])
+                k += 1
+                r.sent = k
+                self._outstanding += 1
+                continue
+            if now < next_poll:
+                self.clock.sleep_until(next_poll)
+            next_poll = self.clock.now() + poll
+            self._poll(first + k)
+            if progress is not None:
+                progress(r.executed, total)
+            button = self._button()
+            if button or (control is not None and control.paused):
+                last = first + k - 1
+                down = bool(pen_down[last]) if pen_down and last >= 0 else False
+                self._pause(down, None if button else control, first + k, poll)
+        r.ended = self.clock.now()
+        if progress is not None:
+            progress(r.executed, total)
+        return r
+
+    _outstanding = 0
+
+    def _state(self) -> int:
+        """Motion commands on the board (``QM`` executing, then ``QU,6`` waiting)."""
+        status = self.ask("QM", data=True, ok=False).split(b",")
+        executing = int(status[1]) if len(status) == 5 else 0
+        return executing + int(self.ask("QU,6", data=True).split(b",")[-1])
+
+    def _poll(self, sent_to: int) -> None:
+        """What has executed, and where the motors are (module docstring)."""
+        self.report.executed = max(self.report.executed, sent_to - self._state())
+        self._outstanding = sent_to - self.report.executed
+        steps = self.position()
+        self.report.polls.append((self.clock.now(), self.report.executed, *steps))
+
+    def _drain(self, poll: float) -> None:
+        """Wait until the board has executed every motion command it holds."""
+        while self._state():
+            self.clock.sleep_until(self.clock.now() + poll)
+
+    def _button(self) -> bool:
+        """``QB``: the PRG button pressed since the last ask."""
+        pressed = self.ask("QB", data=True).strip() == b"1"
+        self.report.button_presses += pressed
+        return pressed
+
+    def _pause(self, down: bool, control: RunControl | None, sent_to: int, poll: float) -> None:
+        """Drain, lift, wait for the resume (``control``, or without it the button pressed
+        again), lower, drain."""
+        while self._outstanding:
+            self.clock.sleep_until(self.clock.now() + poll)
+            self._poll(sent_to)
+        start = self.clock.now()
+        if down:
+            self.ask(self.pen_line(False))
+        while True:
+            self.clock.sleep_until(self.clock.now() + poll)
+            pressed = self._button()
+            if (control is None and pressed) or (control is not None and not control.paused):
+                break
+        if down:
+            self.ask(self.pen_line(True))
+            self._drain(poll)
+        self.report.pauses.append((start, self.clock.now() - start))
+
+    def stop(self) -> tuple[int, int] | None:
+        """``ES``, ``QS``, pen up; the stopped position (None if the board did not answer)."""
+        try:
+            self.ask("ES", data=True)
+            steps = self.position()
+            self.ask(self.pen_line(False))
+        except DeviceError:
+            return None
+        self.report.stopped_at = steps
+        self.report.ended = self.clock.now()
+        return steps
+
+
+def locate(job: Job, steps: tuple[int, int], after: int, before: int) -> int:
+    """Entries executed in full when the motors stood at ``steps``: the first tick at or after
+    the end of entry ``after`` (executed entries) and before the end of entry ``before`` (sent)
+    where the job's tick record is at ``steps``; ``after`` when none is."""
+    ends = entry_end_ticks(job)
+    lo = int(ends[after - 1]) if after > 0 else 0
+    hi = int(ends[min(before, len(ends)) - 1]) if before > 0 else 0
+    window = job.ticks[lo:hi]
+    hits = np.flatnonzero((window == np.asarray(steps)).all(axis=1))
+    if not len(hits):
+        return after
+    tick = lo + int(hits[0]) + 1  # ticks done
+    return max(after, int(np.searchsorted(ends, tick, side="right")))
+
+
+def entry_end_ticks(job: Job) -> np.ndarray:
+    """Per entry: the motion ticks done once it has executed."""
+    ticks = [round(e.duration * TICK_HZ) if e.move is not None else 0 for e in job.entries]
+    return np.cumsum(np.asarray(ticks, dtype=np.int64))
+
+
+def _name(line: bytes) -> str:
+    return line.split(b",")[0].strip().decode("ascii", "replace")
