@@ -1,0 +1,381 @@
+"""The placed, retimed tag as the EiBotBoard's own moves, each one's every tick known exactly.
+
+**Motors.** Motor 1 turns with ``x + y``, motor 2 with ``x − y``: a machine position ``(x, y)`` mm
+is the motor position ``m = k·(x + y, x − y)`` steps (``k`` steps per mm,
+:attr:`~tagbot.axidraw.profile.Profile.steps_per_mm`).
+
+**Drawing** (``LT``). Between consecutive setpoints of a pen-down run (the plotter's placement
+and retiming by run, :func:`tagbot.plotter.place.place`) one ``LT`` move of ``N`` ticks (40 µs;
+the setpoint times rounded to the tick grid, so no rounding accumulates). The firmware adds
+``Rate − trunc(Accel/2) + Accel·i`` to each axis's accumulator at tick ``i`` and steps whenever it
+passes a multiple of 2³¹, so an axis holds ``P = p + accumulator / 2³¹`` steps, a quadratic in
+time over the move. Per axis, ``Accel`` is the planned change of rate over the move (planned
+velocity at both setpoints) and ``Rate`` is the integer that makes ``P`` end on ``m + ½`` at the
+next setpoint: the executed step position ``floor(P)`` is then ``m`` rounded, exactly (the end
+is checked with the firmware's own arithmetic, :func:`firmware_protocols.ebb.motion.execute`,
+and ``Rate`` nudged by whole accumulator units until the move ends on its target steps). The
+accumulators carry from move to move (never cleared), so no fraction of a step is lost.
+
+**The error, stated.** Every tick's step position is computed with the firmware's arithmetic
+and compared with the plan's continuous motion at that tick: :attr:`Job.move_error` (mm, the
+largest distance over each move's ticks) and :attr:`Job.run_error` (each run's largest). By
+construction it is at most half a step per motor from the quadratic ``P`` (``√(e₁² + e₂²)/(√2·k)``
+mm with ``e ≤ ½``: 0.00625 mm at 80 steps/mm) plus how far the quadratic strays from the plan
+within a move (its ``O(h³·jerk)`` interpolation error; at ``motion.dt = 10`` ms on the examples a
+few thousandths of a mm) plus, on a run's first move only, the fraction of a step the pen-down
+position differs from the plan's first point.
+
+**Travel** (``LM``, pen up): a trapezoid along the longer motor axis at ``limits.travel_speed``
+and ``limits.travel_acceleration`` (accelerate, cruise, decelerate: three ``LM``, step-exact per
+axis, the other motor's rates in proportion so both finish together), from and to a crawl of
+1 ms of acceleration (never a zero rate, where firmware 3 would reverse).
+
+**Pen**: ``SP,0`` / ``SP,1`` with the servo's travel time as the board's own delay
+(:meth:`~tagbot.axidraw.profile.Profile.pen_time`), lifted as soon as a run's last move ends.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, Move, execute
+from tagbot.axidraw.profile import MOTOR_AXES, Profile
+from tagbot.errors import PlacementError
+from tagbot.model import Tag
+from tagbot.model.motion import evaluate_plan
+from tagbot.plotter.place import Run, Setpoints
+
+__all__ = ["Entry", "Job", "build_job", "run_reference", "steps_to_xy"]
+
+Array = NDArray[np.float64]
+Steps = tuple[int, int]
+
+CRAWL = 0.001
+"""s of travel acceleration a pen-up move starts and ends at (its slowest rate)."""
+_MAX_RATE = ACCUMULATOR_STEP - 1
+"""The largest per-tick accumulator increment: one step per tick."""
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One command of the job, in the order sent."""
+
+    kind: str
+    """``"travel"`` (LM), ``"draw"`` (LT), ``"pen"`` (SP)."""
+    line: bytes
+    start: float
+    """Planned start on the job's clock, s."""
+    duration: float
+    run: int
+    """The pen-down run (index in :attr:`Job.runs`) a draw move or a pen move belongs to; -1."""
+    steps: Steps
+    """Global motor step position once it has executed."""
+    pen: bool
+    """Pen down once it has executed."""
+    move: Move | None = None
+
+    @property
+    def end(self) -> float:
+        return self.start + self.duration
+
+
+@dataclass(eq=False)
+class Job:
+    """A whole job: commands, their exact ticks, and the stated error against the plan."""
+
+    entries: list[Entry]
+    runs: list[Run]
+    run_start: list[float]
+    """Each run's first draw move's start on the job's clock, s."""
+    ticks: NDArray[np.int64]
+    """``(T, 2)``: the global step position after every tick of motion (draw and travel)."""
+    tick_time: Array
+    """``(T,)``: when each of :attr:`ticks` happens on the job's clock, s."""
+    move_error: Array
+    """Per entry: the largest distance, mm, between its executed and planned positions at every
+    tick (draw moves; 0 for the others)."""
+    run_error: list[float]
+    steps_per_mm: float
+    pen_at: list[tuple[float, bool]] = field(default_factory=list)
+    """``(time, down)`` at each pen command's start."""
+
+    @property
+    def duration(self) -> float:
+        return self.entries[-1].end if self.entries else 0.0
+
+    def xy(self, steps: NDArray[np.int64] | Sequence[int]) -> Array:
+        """Machine mm of global motor step positions ``(…, 2)``."""
+        return steps_to_xy(steps, self.steps_per_mm)
+
+    def planned_runs(self) -> list[tuple[Array, Array]]:
+        """Per run: the setpoint times on the job's clock and their positions, mm."""
+        return [(start + r.t, r.xy) for r, start in zip(self.runs, self.run_start, strict=True)]
+
+
+def steps_to_xy(steps: NDArray[np.int64] | Sequence[int], k: float) -> Array:
+    """Machine mm of global motor step positions ``(…, 2)`` at ``k`` steps per mm."""
+    return np.asarray(steps, dtype=float) @ np.linalg.inv(MOTOR_AXES).T / k
+
+
+def run_reference(tag: Tag, run: Run, matrix: Array, offset: Array) -> Callable[[Array], Array]:
+    """The plan's continuous position, mm, at times ``t`` s of ``run``'s clock."""
+    plan = tag.plans[run.plan]
+
+    def at(t: Array) -> Array:
+        p, _ = evaluate_plan(plan, run.clock.tag_time(np.asarray(t) / run.scale), tag.size)
+        return p @ matrix.T + offset
+
+    return at
+
+
+def build_job(tag: Tag, setpoints: Setpoints, profile: Profile, start: Steps = (0, 0)) -> Job:
+    """Every command of the job from the home position ``start`` (global steps): travel, pen
+    down, the run's ``LT`` moves, pen up, ... and back to the park position."""
+    k = profile.steps_per_mm
+    builder = _Builder(profile, start)
+    for run in setpoints.runs:
+        if len(run.t) < 2:
+            continue
+        reference = run_reference(tag, run, setpoints.matrix, setpoints.offset)
+        builder.travel(_motor(run.xy[0], k))
+        builder.pen(down=True, run=len(builder.runs))
+        builder.draw(run, reference)
+        builder.pen(down=False, run=len(builder.runs) - 1)
+    if profile["motion.park"]:
+        builder.travel(_motor(np.array([profile["motion.park_x"], profile["motion.park_y"]]), k))
+    return builder.job()
+
+
+def _motor(xy: Array, k: float) -> Steps:
+    """The nearest global motor step position of machine position ``xy``."""
+    m = np.floor(MOTOR_AXES @ xy * k + 0.5).astype(np.int64)
+    return int(m[0]), int(m[1])
+
+
+class _Builder:
+    """The job so far: where the motors are (steps and accumulators) and when."""
+
+    def __init__(self, profile: Profile, start: Steps) -> None:
+        self.profile = profile
+        self.k = profile.steps_per_mm
+        self.steps = start
+        self.accumulators: Steps = (0, 0)
+        self.time = 0.0
+        self.down = False
+        self.entries: list[Entry] = []
+        self.errors: list[float] = []
+        self.runs: list[Run] = []
+        self.run_start: list[float] = []
+        self.run_error: list[float] = []
+        self.tick_parts: list[NDArray[np.int64]] = []
+        self.time_parts: list[Array] = []
+        self.pen_at: list[tuple[float, bool]] = []
+
+    def _add(self, kind: str, move: Move | None, line: bytes, duration: float, run: int) -> None:
+        self.entries.append(
+            Entry(kind, line, self.time, duration, run, self.steps, self.down, move)
+        )
+        self.errors.append(0.0)
+        self.time += duration
+
+    def _motion(self, kind: str, move: Move, run: int) -> NDArray[np.int64]:
+        """Execute ``move`` with the firmware's arithmetic; record its ticks; return them."""
+        relative, self.accumulators = execute(move, self.accumulators)
+        ticks = relative + np.asarray(self.steps, dtype=np.int64)
+        self.tick_parts.append(ticks)
+        self.time_parts.append(self.time + np.arange(1, len(ticks) + 1) / TICK_HZ)
+        if len(ticks):
+            self.steps = int(ticks[-1, 0]), int(ticks[-1, 1])
+        self._add(kind, move, move.line(), len(ticks) / TICK_HZ, run)
+        return ticks
+
+    def pen(self, *, down: bool, run: int) -> None:
+        p = self.profile
+        ms = round(1000.0 * p.pen_time(down))
+        self.pen_at.append((self.time, down))
+        self.down = down
+        line = f"SP,{0 if down else 1},{max(ms, 1)},{p['pen.pin']}\r".encode()
+        self._add("pen", None, line, max(ms, 1) / 1000.0, run)
+
+    def travel(self, target: Steps) -> None:
+        """Pen-up ``LM`` moves from here to ``target`` (none if already there)."""
+        delta = (target[0] - self.steps[0], target[1] - self.steps[1])
+        for move in _travel_moves(delta, self.profile):
+            self._motion("travel", move, -1)
+        if self.steps != target:  # pragma: no cover - LM is step-exact
+            raise RuntimeError(f"travel ended at {self.steps}, not {target}")
+
+    def draw(self, run: Run, reference: Callable[[Array], Array]) -> None:
+        """``T3`` (or ``LT``) moves through the run's setpoints (module docstring)."""
+        index = len(self.runs)
+        self.runs.append(run)
+        self.run_start.append(self.time)
+        grid = np.round(run.t * TICK_HZ).astype(np.int64)
+        keep = np.concatenate([[True], np.diff(grid) > 0])
+        grid, m, v = grid[keep], run.xy[keep] @ MOTOR_AXES.T * self.k, run.v[keep] @ MOTOR_AXES.T
+        target = np.floor(m + 0.5).astype(np.int64)
+        # Accumulator-unit positions (m + 1/2) and per-tick rates (velocity) at the setpoints.
+        aim = [[round((float(x) + 0.5) * ACCUMULATOR_STEP) for x in row] for row in m]
+        rate = (v * self.k * (ACCUMULATOR_STEP / TICK_HZ)).tolist()
+        command = "T3" if self.profile["motion.jerk"] else "LT"
+        first, parts = len(self.entries), len(self.tick_parts)
+        for i in range(len(grid) - 1):
+            n = int(grid[i + 1] - grid[i])
+            goal = (int(target[i + 1, 0]), int(target[i + 1, 1]))
+            axes = [
+                _axis(
+                    n,
+                    self.accumulators[j],
+                    aim[i + 1][j] - self.steps[j] * ACCUMULATOR_STEP,
+                    (rate[i][j], rate[i + 1][j]),
+                    goal[j] - self.steps[j],
+                    # A run's first move also takes up where the pen went down (within a step
+                    # of its first point): no end rates to hold it to.
+                    command == "T3" and i > 0,
+                )
+                for j in (0, 1)
+            ]
+            move = Move(
+                command=command,  # type: ignore[arg-type]
+                ticks=n,
+                rate=(axes[0][0], axes[1][0]),
+                accel=(axes[0][1], axes[1][1]),
+                jerk=(axes[0][2], axes[1][2]) if command == "T3" else (0, 0),
+            )
+            _check_rates(move)
+            self._motion("draw", move, index)
+            if self.steps != goal:  # pragma: no cover - _axis ends on its target by construction
+                raise RuntimeError(f"a {command} move ended at {self.steps}, not {goal}")
+        # The error at every tick of the run, and each move's largest.
+        ticks = self.tick_parts[parts:]
+        if ticks:
+            times = np.concatenate(self.time_parts[parts:]) - self.run_start[index]
+            gap = np.hypot(*(steps_to_xy(np.concatenate(ticks), self.k) - reference(times)).T)
+            bounds = np.cumsum([0] + [len(t) for t in ticks[:-1]])
+            self.errors[first:] = np.maximum.reduceat(gap, bounds).tolist()
+            self.run_error.append(float(gap.max()))
+        else:  # a dot: no move
+            here = steps_to_xy(self.steps, self.k) - reference(np.zeros(1))[0]
+            self.run_error.append(float(np.hypot(*here)))
+
+    def job(self) -> Job:
+        ticks = np.concatenate(self.tick_parts) if self.tick_parts else np.zeros((0, 2), np.int64)
+        times = np.concatenate(self.time_parts) if self.time_parts else np.zeros(0)
+        return Job(
+            self.entries,
+            self.runs,
+            self.run_start,
+            ticks,
+            times,
+            np.asarray(self.errors),
+            self.run_error,
+            self.k,
+            self.pen_at,
+        )
+
+
+def _ceil_div(a: int, b: int) -> int:
+    return -((-a) // b)
+
+
+def _axis(
+    n: int, accumulator: int, aim: int, rates: tuple[float, float], goal: int, jerk: bool
+) -> tuple[int, int, int]:
+    """``(Rate, Accel, Jerk)`` of one axis of an ``n``-tick ``T3`` (``LT``: no jerk).
+
+    From ``accumulator`` (the step position is 0 here) to ``aim`` accumulator units, the rate
+    per tick going from ``rates[0]`` to ``rates[1]`` as planned, ending on step ``goal`` in the
+    firmware's arithmetic (``R_k = r + a·k + j·k(k+1)/2`` at tick ``k``).
+    """
+    v0, v1 = rates
+    half = n * (n + 1) // 2
+    sixth = n * (n + 1) * (n + 2) // 6
+    if jerk and n > 2:
+        # The rate at the move's ends (ticks 1/2 and n + 1/2) as planned, and the distance.
+        system = np.array(
+            [
+                [1.0, 0.5, 0.375],
+                [1.0, n + 0.5, (n + 0.5) * (n + 1.5) / 2],
+                [n, half, sixth],
+            ]
+        )
+        _, a_real, j_real = np.linalg.solve(system, [v0, v1, aim - accumulator])
+        a, j = round(a_real), round(j_real)
+    else:
+        a, j = round((v1 - v0) / n), 0
+    # r: the nearest integer that makes the ticks add up to `aim`, then into the goal's step.
+    base = aim - accumulator - a * half - j * sixth
+    r = (2 * base + n) // (2 * n)
+    end = accumulator + r * n + a * half + j * sixth
+    low, high = goal * ACCUMULATOR_STEP, (goal + 1) * ACCUMULATOR_STEP - 1
+    if end < low:
+        r += _ceil_div(low - end, n)
+    elif end > high:
+        r -= _ceil_div(end - high, n)
+    # The command's parameters from the loaded ones (rate - accel/2 + jerk/6, accel - jerk).
+    accel = a + j
+    return r + int(accel / 2) - int(j / 6), accel, j
+
+
+def _check_rates(move: Move) -> None:
+    """Refuse a move any axis of which would have to step more than once per tick."""
+    n = move.ticks
+    for rate, accel, jerk in zip(move.rate, move.accel, move.jerk, strict=True):
+        r, a = rate - int(accel / 2) + int(jerk / 6), accel - jerk
+        ticks = [1, n] + ([round(-a / jerk - 0.5)] if jerk and 1 < -a / jerk - 0.5 < n else [])
+        fastest = max(abs(r + a * k + jerk * k * (k + 1) // 2) for k in ticks)
+        if fastest > _MAX_RATE or max(abs(rate), abs(accel), abs(jerk)) > _MAX_RATE:
+            raise PlacementError(
+                f"motion: a drawing move needs {fastest / ACCUMULATOR_STEP * TICK_HZ:.0f} steps/s"
+                f" on a motor, beyond the EBB's {TICK_HZ} (lower limits.draw_speed)"
+            )
+
+
+def _travel_moves(delta: Steps, profile: Profile) -> list[Move]:
+    """``LM`` moves of a pen-up travel by ``delta`` steps (module docstring)."""
+    longest = max(abs(delta[0]), abs(delta[1]))
+    if longest == 0:
+        return []
+    k = profile.steps_per_mm
+    vmax = profile["limits.travel_speed"] * k  # steps/s along the longer motor axis
+    amax = profile["limits.travel_acceleration"] * k
+    unit = ACCUMULATOR_STEP / TICK_HZ  # rate units per step/s
+    v0 = min(vmax, amax * CRAWL)
+    peak = min(vmax, math.sqrt(longest * amax + v0 * v0))
+    ramp = min(longest // 2, round((peak * peak - v0 * v0) / (2.0 * amax)))
+    if ramp == 0:  # a few steps: one move at the crawl
+        phases = [(longest, v0 * unit, 0.0)]
+    else:
+        # Rates per tick and the constant change that takes v0 to the peak over `ramp` steps.
+        r0, r1 = v0 * unit, peak * unit
+        accel = (r1 * r1 - r0 * r0) / (2.0 * ramp * ACCUMULATOR_STEP)
+        phases = [(ramp, r0, accel), (longest - 2 * ramp, r1, 0.0), (ramp, r1, -accel)]
+    moves = []
+    done = [0, 0]
+    covered = 0
+    for steps, rate, accel in phases:
+        covered += steps
+        share = [round(d * covered / longest) - done[j] for j, d in enumerate(delta)]
+        done = [done[j] + share[j] for j in (0, 1)]
+        if share == [0, 0]:
+            continue
+        scale = [abs(s) / steps for s in share]
+        moves.append(
+            Move(
+                command="LM",
+                rate=(_lm_rate(rate * scale[0], share[0]), _lm_rate(rate * scale[1], share[1])),
+                steps=(share[0], share[1]),
+                accel=(round(accel * scale[0]), round(accel * scale[1])),
+            )
+        )
+    return moves
+
+
+def _lm_rate(rate: float, steps: int) -> int:
+    """An ``LM`` axis's rate: at least 1 when it has steps to take, 0 when it has none."""
+    return max(1, round(rate)) if steps else 0

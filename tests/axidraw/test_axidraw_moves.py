@@ -1,0 +1,138 @@
+"""The job as EBB moves: exact step counts, every tick within the stated error of the plan."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, Move, execute
+from tagbot.axidraw.moves import build_job, run_reference, steps_to_xy
+from tagbot.axidraw.profile import MOTOR_AXES, load_profile
+from tagbot.errors import PlacementError
+from tagbot.plotter.place import place
+
+
+def replay(job):
+    """Every motion entry re-executed from cleared accumulators at home: ticks per entry."""
+    steps, accumulators = np.zeros(2, dtype=np.int64), (0, 0)
+    out = []
+    for entry in job.entries:
+        if entry.move is None:
+            out.append(np.zeros((0, 2), dtype=np.int64))
+            continue
+        relative, accumulators = execute(Move(**vars(entry.move)), accumulators)
+        ticks = relative + steps
+        steps = ticks[-1]
+        out.append(ticks)
+    return out
+
+
+def test_every_move_ends_on_its_target_steps(cae_job):
+    _tag, profile, setpoints, job = cae_job
+    k = profile.steps_per_mm
+    ticks = replay(job)
+    for entry, moved in zip(job.entries, ticks, strict=True):
+        if len(moved):
+            assert tuple(moved[-1]) == entry.steps
+    draws = [e for e in job.entries if e.kind == "draw"]
+    # Each run's draw moves end, in order, on its setpoints rounded to the nearest motor step.
+    ends = [
+        tuple(np.floor(MOTOR_AXES @ xy * k + 0.5).astype(int))
+        for run in setpoints.runs
+        for xy in run.xy[1:]
+    ]
+    assert [e.steps for e in draws] == ends
+    assert len(draws) == sum(len(r.t) - 1 for r in setpoints.runs)
+    # The moves are T3 (the first of each run without jerk) and follow on the tick grid.
+    assert {e.line.split(b",")[0] for e in draws} == {b"T3"}
+    for run, start in zip(setpoints.runs, job.run_start, strict=True):
+        mine = [e for e in draws if abs(e.start - start) < 1e-9]
+        assert len(mine) == 1 and mine[0].move.jerk == (0, 0)
+        assert len([e for e in draws if e.run == mine[0].run]) == len(run.t) - 1
+
+
+def test_every_tick_within_the_stated_error_of_the_plan(cae_job):
+    tag, profile, setpoints, job = cae_job
+    k = profile.steps_per_mm
+    ticks = replay(job)
+    for index, (run, _start) in enumerate(zip(setpoints.runs, job.run_start, strict=True)):
+        mine = [i for i, e in enumerate(job.entries) if e.kind == "draw" and e.run == index]
+        executed = np.concatenate([ticks[i] for i in mine])
+        times = np.arange(1, len(executed) + 1) / TICK_HZ
+        plan = run_reference(tag, run, setpoints.matrix, setpoints.offset)(times)
+        gap = np.hypot(*(steps_to_xy(executed, k) - plan).T)
+        assert gap.max() <= job.run_error[index] + 1e-12
+        assert job.run_error[index] == pytest.approx(gap.max())
+        # Half a step on each motor away from the exact motion (0.00625 mm at 80 steps/mm),
+        # more only on a run's first move (where the pen went down, within a step).
+        assert np.percentile(gap, 99) <= 0.5 / k + 1e-4
+        assert gap.max() < 1.5 / k
+        assert job.move_error[mine].max() == pytest.approx(gap.max())
+    assert len(job.ticks) == sum(len(t) for t in ticks)
+
+
+def test_rates_follow_the_planned_velocity(cae_job):
+    _tag, profile, setpoints, job = cae_job
+    k = profile.steps_per_mm
+    unit = ACCUMULATOR_STEP / TICK_HZ  # rate units per step/s
+    run = setpoints.runs[0]
+    draws = [e for e in job.entries if e.kind == "draw" and e.run == 0]
+    planned = run.v[1:] @ MOTOR_AXES.T * k  # steps/s at each move's end
+    for entry, v in zip(draws[1:], planned[1:], strict=True):
+        m = entry.move
+        n = m.ticks
+        for axis in (0, 1):
+            r = m.rate[axis] - int(m.accel[axis] / 2) + int(m.jerk[axis] / 6)
+            a = m.accel[axis] - m.jerk[axis]
+            last = r + a * n + m.jerk[axis] * n * (n + 1) // 2
+            # Within 2 steps/s of the plan at the end of every move (speeds up to 10^4 steps/s).
+            assert abs(last / unit - v[axis]) < 2.0
+
+
+def test_pen_moves_with_the_servo_time_and_travel_at_the_machine_speed(cae_job):
+    _tag, profile, _setpoints, job = cae_job
+    k = profile.steps_per_mm
+    kinds = "".join({"travel": "T", "pen": "P", "draw": "D"}[e.kind] for e in job.entries)
+    # Travel, pen down, the run, pen up at once (no resting pen), ..., travel home.
+    assert re.fullmatch(r"(T+PD+P){3}T+", kinds)
+    for entry in job.entries:
+        if entry.kind == "pen":
+            down = entry.pen
+            assert entry.line == (b"SP,0,146,1\r" if down else b"SP,1,130,1\r")
+            assert entry.duration == (0.146 if down else 0.130)
+    assert job.entries[-1].steps == (0, 0) and not job.entries[-1].pen
+    ticks = replay(job)
+    window = TICK_HZ // 100  # 10 ms
+    for entry, moved in zip(job.entries, ticks, strict=True):
+        if entry.kind != "travel" or len(moved) < 10 * window:
+            continue
+        assert entry.line.startswith(b"LM,")
+        speed = np.abs(moved[window:] - moved[:-window]).max() / (window / TICK_HZ) / k
+        assert (
+            profile["limits.travel_speed"] * 0.95 < speed <= profile["limits.travel_speed"] * 1.01
+        )
+    duration = sum(e.duration for e in job.entries)
+    assert job.duration == pytest.approx(duration)
+    assert len(job.ticks) / TICK_HZ == pytest.approx(
+        sum(e.duration for e in job.entries if e.kind != "pen")
+    )
+
+
+def test_lt_without_jerk_when_asked(cae_job):
+    tag, _, setpoints, _ = cae_job
+    profile = load_profile(overrides=["motion.jerk=false"])
+    job = build_job(tag, setpoints, profile)
+    draws = [e for e in job.entries if e.kind == "draw"]
+    assert {e.line.split(b",")[0] for e in draws} == {b"LT"}
+    assert max(job.run_error) < 1.5 / profile.steps_per_mm
+
+
+def test_a_move_faster_than_a_step_per_tick_is_refused(cae_job):
+    tag, _, _, _ = cae_job
+    setpoints = place(tag, load_profile(overrides=["limits.draw_speed=312"]).placement())
+    # The same motion on motors of 5x the steps per mm: past one step per 40 us tick.
+    slow = ["motors.steps_per_mm_16x=400", "limits.draw_speed=62", "limits.travel_speed=62"]
+    with pytest.raises(PlacementError, match=r"^motion: a drawing move needs \d+ steps/s on a"):
+        build_job(tag, setpoints, load_profile(overrides=slow))
