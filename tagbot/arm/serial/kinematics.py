@@ -246,6 +246,8 @@ class _PathSolver:
     ALIGN_COST = 0.05  # the axis task's weight against the tip's position (1/m)
     DAMPING = 1e-6
     SETTLE = 1e-5  # rad: an iteration moving no joint more than this has settled the pen's axis
+    SHARED = 8  # iterations with both tasks before the position alone (after the first point)
+    STALL = 1e-9  # rad: an iteration moving no joint more than this has stopped
 
     def __init__(self, arm: SerialArm, normal: Array, max_tilt: float, tol: float, max_iter: int):
         m = arm.model
@@ -271,22 +273,32 @@ class _PathSolver:
     def tip(self) -> Array:
         return self.cfg.data.site_xpos[self.site]
 
-    def converge(self, target: Array, tasks: list, limits: list[mink.Limit], settle: bool) -> bool:
+    def converge(
+        self,
+        target: Array,
+        tasks: list[mink.Task],
+        limits: list[mink.Limit],
+        settle: bool,
+        budget: int | None = None,
+    ) -> bool:
         """Iterate the QP until the tip is within ``tol`` of ``target`` (and, with ``settle``,
-        the step has become negligible); False when ``max_iter`` iterations do not get there."""
+        the steps have become negligible); False when the steps stall short of it or
+        ``budget`` (default ``max_iter``) iterations do not get there."""
         self.position.set_target(mink.SE3.from_translation(target))
-        for _ in range(self.max_iter):
-            near = np.linalg.norm(self.tip() - target) < self.tol
+        for _ in range(self.max_iter if budget is None else budget):
+            near = bool(np.linalg.norm(self.tip() - target) < self.tol)
             if near and not settle:
                 return True
             try:
                 v = mink.solve_ik(self.cfg, tasks, self.DT, SOLVER, self.DAMPING, limits=limits)
             except mink.NoSolutionFound:
                 return False
-            step = v * self.DT
             self.cfg.integrate_inplace(v, self.DT)
-            if settle and np.max(np.abs(step)) < self.SETTLE:
+            step = float(np.max(np.abs(v))) * self.DT
+            if step < self.SETTLE:
                 settle = False
+                if step < self.STALL:
+                    break
         return bool(np.linalg.norm(self.tip() - target) < self.tol)
 
     def solve_point(self, target: Array, guess: Array, first: bool) -> bool:
@@ -295,7 +307,8 @@ class _PathSolver:
         The first point comes from anywhere: its tilt is checked after, not held on the way."""
         self.cfg.update(guess)
         limits = list(self.bounds) if first else [*self.bounds, self.tilt]
-        if self.converge(target, [self.position, self.align], limits, first):
+        budget = None if first else self.SHARED
+        if self.converge(target, [self.position, self.align], limits, first, budget):
             return True
         return self.converge(target, [self.position], limits, False)
 
