@@ -18,6 +18,7 @@ from typing import Any, TypeVar
 
 import click
 
+from sim.ebb.cli import sim_axidraw_command
 from tagbot.arm.cli import sim_arm_command
 from tagbot.corpus_cli import corpus_options, progress_bar, run_corpus
 from tagbot.errors import Interrupted, TagbotError
@@ -641,6 +642,7 @@ def sim_group() -> None:
 
 sim_group.add_command(sim_grbl_command)
 sim_group.add_command(sim_arm_command, name="arm")
+sim_group.add_command(sim_axidraw_command, name="axidraw")
 
 
 def _one_line(message: str) -> str:

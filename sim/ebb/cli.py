@@ -1,0 +1,50 @@
+"""``tagbot sim axidraw``: a simulated EiBotBoard served on a pseudo-terminal until Ctrl-C."""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+__all__ = ["sim_axidraw_command"]
+
+
+def _wait_for_interrupt() -> None:
+    """Sleep until Ctrl-C (KeyboardInterrupt); tests replace it."""
+    while True:
+        time.sleep(0.5)
+
+
+@click.command(name="axidraw")
+@click.option(
+    "--firmware",
+    metavar="VERSION",
+    default=None,
+    help="The firmware version the board reports to V (default: the simulator's 3.x).",
+)
+def sim_axidraw_command(firmware: str | None) -> None:
+    """Serve a simulated EiBotBoard (the AxiDraw's controller) on a pseudo-terminal until Ctrl-C.
+
+    Prints the device path (e.g. /dev/pts/3) on stdout: point the AxiDraw software, or
+    `tagbot draw --device axidraw --port PATH`, at it. The board answers in real time.
+    """
+    from sim.ebb import transport
+    from sim.ebb.device import SimulatedEBB
+    from tagbot.signals import label, signal_of
+
+    options = {} if firmware is None else {"version": firmware}
+    try:
+        device = SimulatedEBB(clock="real", **options)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--firmware") from None
+    path, stop = transport.serve_pty(device)
+    how = ""
+    try:
+        click.echo(path)
+        click.echo(f"simulated EBB (firmware {device.version}) serving; Ctrl-C stops it", err=True)
+        _wait_for_interrupt()
+    except KeyboardInterrupt as e:  # the normal way out
+        how = f" ({label(signal_of(e))})"
+    finally:
+        stop()
+    click.echo(f"stopped{how}", err=True)
