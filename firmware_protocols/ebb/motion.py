@@ -263,8 +263,12 @@ class Move:
         """The exact command text, terminated by ``\\r``."""
         return ",".join([self.command, *map(str, self.params())]).encode("ascii") + b"\r"
 
-    def validate(self) -> None:
-        """The firmware's parse-time checks (limit checks on, as at boot): raise its error."""
+    def validate(self, limit_checks: bool = True) -> None:
+        """The firmware's parse-time checks: raise its error.
+
+        ``limit_checks`` is the ``CU,2`` setting (on at boot); the legacy ``LM`` sign rule is
+        checked either way.
+        """
         if self.command not in ("LM", "LT", "T3"):
             raise ValueError(f"command: must be LM, LT or T3, got {self.command!r}")
         signed = [*self.rate, *self.accel, *self.jerk, *self.steps]
@@ -274,16 +278,16 @@ class Move:
             raise EBBCommandError(INVALID_PARAMETER, "a 32-bit unsigned parameter out of range")
         if self.command == "LM":
             axes = zip(self.rate, self.steps, self.accel, strict=True)
-            if all(s == 0 or (r == 0 and a == 0) for r, s, a in axes):
+            if limit_checks and all(s == 0 or (r == 0 and a == 0) for r, s, a in axes):
                 raise EBBCommandError(INVALID_PARAMETER, "LM: no axis can move")
             for steps, rate, accel in zip(self.steps, self.rate, self.accel, strict=True):
                 lm_direction(steps, rate, accel)
-        elif self.ticks == 0:
+        elif limit_checks and self.ticks == 0:
             raise EBBCommandError(INVALID_PARAMETER, f"{self.command}: Intervals must be > 0")
 
 
 def execute(
-    move: Move, accumulators: tuple[int, int] = (0, 0)
+    move: Move, accumulators: tuple[int, int] = (0, 0), *, limit_checks: bool = True
 ) -> tuple[np.ndarray, tuple[int, int]]:
     """Run ``move`` from ``accumulators``: ``(n, 2)`` int64 positions per tick and the new ones.
 
@@ -291,7 +295,7 @@ def execute(
     ``LM`` lasts until both axes are done (a finished axis holds its position). Invalid
     parameters raise :class:`EBBCommandError` with the firmware's reply.
     """
-    move.validate()
+    move.validate(limit_checks)
     bits = min(move.clear, 3)  # the firmware clamps Clear to 3
     clear = [bool(bits & 1), bool(bits & 2)]
     if move.command == "LM":
