@@ -343,17 +343,17 @@ cli.add_command(studio_command)
 @click.argument("source", metavar="INPUT|PLAN", type=click.Path(dir_okay=False, exists=True))
 @click.option(
     "--device",
-    type=click.Choice(["grbl", "dynamixel"]),
+    type=click.Choice(["grbl", "dynamixel", "axidraw"]),
     default="grbl",
     show_default=True,
-    help="grbl: a pen plotter; dynamixel: the servo arm.",
+    help="grbl: a pen plotter; dynamixel: the servo arm; axidraw: an AxiDraw (EiBotBoard).",
 )
 @click.option(
     "--port",
     metavar="PORT",
     default=None,
-    help="Serial port or pyserial URL of the machine. Without it the run is simulated: "
-    "nothing moves.",
+    help="Serial port or pyserial URL of the machine (axidraw: 'auto' finds the board on "
+    "USB). Without it the run is simulated: nothing moves.",
 )
 @profile_options
 @click.option(
@@ -387,7 +387,8 @@ cli.add_command(studio_command)
     type=click.IntRange(min=2),
     default=None,
     help="Resume an interrupted job at this line of program.gcode (Grbl, needs "
-    "--position-known) or tick of joints.csv (arm: its encoders know where it is).",
+    "--position-known), move of moves.txt (AxiDraw, needs --position-known) or tick of "
+    "joints.csv (arm: its encoders know where it is).",
 )
 @click.option(
     "--position-known",
@@ -440,7 +441,7 @@ def draw_command(
     from tagbot.signals import machine_run
     from tagbot.source import load_source
 
-    if resume_from is not None and not position_known and device == "grbl":
+    if resume_from is not None and not position_known and device in ("grbl", "axidraw"):
         raise InputError(
             "--resume-from: the machine's position must be known first (home it or check it), "
             "then add --position-known"
@@ -468,7 +469,7 @@ def draw_command(
     if not quiet:
         hint = "; space pauses, Ctrl-C stops" if keys.available else "; Ctrl-C stops"
         click.echo(f"drawing {source} on {device} ({where}) into {out}{hint}", err=True)
-    unit = "tick" if device == "dynamixel" else "line"
+    unit = {"dynamixel": "tick", "axidraw": "move"}.get(device, "line")
     with progress_bar(unit, quiet) as bar, keys:
         keys.report = bar.write
         progress = bar_progress(bar)

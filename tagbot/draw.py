@@ -1,11 +1,12 @@
 """``tagbot draw``: a tag on a machine, and a run folder saying what happened.
 
 A back end is chosen by name from :data:`DEVICES` (imported lazily: ``grbl``, the pen plotter;
-``dynamixel``, the servo arm). Each provides ``prepare(tag, *, profile, overrides, port,
-**options)``, which loads the profile, places, retimes and checks the whole job and checks the
-port's name (:func:`tagbot.ports.check_port`) *without writing a file or sending a byte*, and
-returns a :class:`PreparedRun`; its ``run(out, progress=, control=)`` then drives the machine
-(simulated unless a port is named) and returns a :class:`MachineRun`, also after a fault or
+``dynamixel``, the servo arm; ``axidraw``, the EiBotBoard plotter). Each provides
+``prepare(tag, *, profile, overrides, port, **options)``, which loads the profile, places,
+retimes and checks the whole job and checks the port's name (:func:`tagbot.ports.check_port`)
+*without writing a file or sending a byte*, and returns a :class:`PreparedRun`; its
+``run(out, progress=, control=)`` then drives the machine (simulated unless a port is named)
+and returns a :class:`MachineRun`, also after a fault or
 Ctrl-C (with :attr:`MachineRun.error` set: the machine was stopped safely first).
 
 :func:`draw` prepares first, so every refusal happens before the run folder exists, then writes
@@ -65,6 +66,7 @@ __all__ = [
 DEVICES: dict[str, str] = {
     "grbl": "tagbot.plotter.machine:prepare",
     "dynamixel": "tagbot.arm.run:prepare",
+    "axidraw": "tagbot.axidraw.machine:prepare",
 }
 """Back ends by name: ``module:function`` of their ``prepare``."""
 

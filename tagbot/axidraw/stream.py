@@ -25,6 +25,7 @@ stopped position along the job's tick record (:meth:`EBBStreamer.locate`).
 from __future__ import annotations
 
 import re
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -47,6 +48,9 @@ MIN_FIRMWARE = (3, 0, 1)
 
 REPLY_TIMEOUT = 2.0
 """s a reply may take (the board answers every command at once: tagbot never fills its FIFO)."""
+
+_RECHECK = 0.001
+"""s between asks while the board is behind its plan and the FIFO is full."""
 
 _VERSION = re.compile(rb"Version\s+(\d+)\.(\d+)\.(\d+)")
 
@@ -179,14 +183,16 @@ class EBBStreamer:
         self,
         lines: Sequence[bytes],
         *,
+        durations: Sequence[float],
         first: int = 0,
         preamble: Sequence[bytes] = (),
         pen_down: Sequence[bool] = (),
         progress: Callable[[int, int], None] | None = None,
         control: RunControl | None = None,
     ) -> StreamReport:
-        """Send ``preamble`` then ``lines[first:]`` (module docstring); ``pen_down[i]``: the
-        pen is down once line ``i`` has executed (for a pause's lift and lowering)."""
+        """Send ``preamble`` then ``lines[first:]`` (module docstring); ``durations[i]``: line
+        ``i``'s planned s (when the board will have room again); ``pen_down[i]``: the pen is
+        down once line ``i`` has executed (for a pause's lift and lowering)."""
         r = self.report
         r.first, r.executed = first, first
         r.started = self.clock.now()
@@ -195,29 +201,35 @@ class EBBStreamer:
         for line in preamble:  # a resume's travel and pen: done before the job's moves
             self.ask(line)
             self._drain(poll)
-        queue = list(lines[first:])
         total = len(lines)
+        finish: deque[float] = deque()  # when each outstanding line should be done
         next_poll = self.clock.now()
-        k = 0
-        while k < len(queue) or self._outstanding:
+        sent = first
+        while sent < total or self._outstanding:
             now = self.clock.now()
-            if k < len(queue) and self._outstanding < depth and now < next_poll:
-                self.ask(queue[k])
-                k += 1
-                r.sent = k
+            if sent < total and self._outstanding < depth:
+                self.ask(lines[sent])
+                finish.append(max(now, finish[-1] if finish else now) + durations[sent])
+                sent += 1
+                r.sent = sent - first
                 self._outstanding += 1
                 continue
-            if now < next_poll:
-                self.clock.sleep_until(next_poll)
-            next_poll = self.clock.now() + poll
-            self._poll(first + k)
-            if progress is not None:
-                progress(r.executed, total)
-            button = self._button()
-            if button or (control is not None and control.paused):
-                last = first + k - 1
-                down = bool(pen_down[last]) if pen_down and last >= 0 else False
-                self._pause(down, None if button else control, first + k, poll)
+            if now >= next_poll:
+                next_poll = now + poll
+                self._poll(sent)
+                if progress is not None:
+                    progress(r.executed, total)
+                button = self._button()
+                if button or (control is not None and control.paused):
+                    down = bool(pen_down[sent - 1]) if pen_down and sent > first else False
+                    self._pause(down, None if button else control, sent, poll)
+                    finish.clear()
+            else:  # full: ask again when the oldest line should be done
+                wake = min(next_poll, finish[0] if finish else next_poll)
+                self.clock.sleep_until(max(wake, now + _RECHECK))
+                self._count(sent)
+            while len(finish) > self._outstanding:
+                finish.popleft()
         r.ended = self.clock.now()
         if progress is not None:
             progress(r.executed, total)
@@ -231,10 +243,14 @@ class EBBStreamer:
         executing = int(status[1]) if len(status) == 5 else 0
         return executing + int(self.ask("QU,6", data=True).split(b",")[-1])
 
-    def _poll(self, sent_to: int) -> None:
-        """What has executed, and where the motors are (module docstring)."""
+    def _count(self, sent_to: int) -> None:
+        """What has executed (module docstring)."""
         self.report.executed = max(self.report.executed, sent_to - self._state())
         self._outstanding = sent_to - self.report.executed
+
+    def _poll(self, sent_to: int) -> None:
+        """What has executed, and where the motors are."""
+        self._count(sent_to)
         steps = self.position()
         self.report.polls.append((self.clock.now(), self.report.executed, *steps))
 
