@@ -38,7 +38,10 @@ Fault hooks: :meth:`~SimulatedChain.silence`, :meth:`~SimulatedChain.corrupt_nex
 :meth:`~SimulatedChain.set_reply_faults`: status packets that reach the host late (a USB adapter's
 latency timer, a loaded host) or never (a lost packet), in order, as through a real adapter.
 Recorder: :meth:`~SimulatedChain.trace` (joint ticks) and :meth:`~SimulatedChain.pen_trace`
-(planar two-link forward kinematics, see :class:`ArmGeometry`).
+(planar two-link forward kinematics, see :class:`ArmGeometry`). Physics:
+:class:`sim.dynamixel.physics.ArmPhysics` attaches itself as :attr:`~SimulatedChain.plant`; the
+clock then steps it up to each instruction packet before executing it (the recorders above stay
+the servos' profiles; the physics has its own).
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ from bisect import bisect_right, insort
 from collections import deque
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -151,6 +155,14 @@ class ArmGeometry:
         return (np.abs(pen - self.pen_down_ticks) < np.abs(pen - self.pen_up_ticks)).astype(float)
 
 
+class Stepped(Protocol):
+    """What the chain's clock steps: a simulation run up to each instruction's time."""
+
+    def advance_to(self, t: float) -> None:
+        """Run up to simulated time ``t`` (no effect if it is earlier)."""
+        ...
+
+
 class SimulatedChain:
     """Servos on one DYNAMIXEL bus: ``{id: model}`` with model number or name.
 
@@ -192,6 +204,9 @@ class SimulatedChain:
             for id, model in sorted(servos.items())
         ]
         self.geometry: ArmGeometry | None = None
+        self.plant: Stepped | None = None
+        """A physics simulation the clock steps (:class:`sim.dynamixel.physics.ArmPhysics`), or
+        None: the servos track their profiles perfectly."""
         self._decoder = PacketDecoder()
         # host -> bus: bytes written but not yet fed to the decoder, with their timing
         self._in = bytearray()
@@ -263,9 +278,13 @@ class SimulatedChain:
             chunk = bytes(self._in[self._fed - self._in_base : end - self._in_base])
             self._fed = end
             self._trim_input()
+            if self.plant is not None:
+                self.plant.advance_to(at)
             for item in self._decoder.feed(chunk):
                 self._handle(item, at)
         self._t = max(self._t, t)
+        if self.plant is not None:
+            self.plant.advance_to(self._t)
 
     def next_input_event(self) -> float | None:
         """When the next instruction packet (or the last host byte in flight) will have arrived;
@@ -723,4 +742,4 @@ class SimulatedChain:
         return self._bus_free
 
 
-__all__ = ["BITS_PER_BYTE", "ArmGeometry", "SimulatedChain"]
+__all__ = ["BITS_PER_BYTE", "ArmGeometry", "SimulatedChain", "Stepped"]

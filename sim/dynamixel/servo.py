@@ -45,7 +45,9 @@ Moving (122) is 1 while a profile is in progress or the speed exceeds Moving Thr
 Status (123) carries In-Position (bit 0), Profile Ongoing (bit 1) and the profile type (bits
 4–5: 11 trapezoidal, 10 triangular, 01 rectangular, 00 step), as in the e-Manual's Moving Status
 table. Tracking is perfect: Present Position is the profile's position (rounded), Present
-Velocity its velocity, and the trajectory registers (136, 140) equal them. Velocity Control Mode
+Velocity its velocity, and the trajectory registers (136, 140) equal them — unless a
+:class:`Plant` is attached (:mod:`sim.dynamixel.physics`): then the profile drives the plant's
+motor and Present Position, Velocity, PWM and Current are the plant's. Velocity Control Mode
 ramps to Goal Velocity at Profile Acceleration; PWM and Current modes hold still.
 
 Torque on sets Goal Position to the present position and holds there; torque off (also by a
@@ -59,11 +61,13 @@ import math
 from array import array
 from bisect import bisect_right
 from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 
 from firmware_protocols.dynamixel import (
     EEPROM_END,
+    MA_PER_CURRENT_UNIT,
     MODELS,
     RPM2_PER_ACCELERATION_UNIT,
     RPM_PER_VELOCITY_UNIT,
@@ -227,6 +231,23 @@ def plan_time_based(
     return pieces, PROFILE_TRAPEZOIDAL if middle > 0.0 else PROFILE_TRIANGULAR
 
 
+class Plant(Protocol):
+    """The physical horn a servo drives (:mod:`sim.dynamixel.physics`): without one, tracking is
+    perfect (the horn is the profile)."""
+
+    def horn(self) -> tuple[float, float]:
+        """Horn position (ticks, without Homing Offset) and velocity (ticks/s) now."""
+        ...
+
+    def output(self) -> tuple[float, float]:
+        """Present PWM (0.113 % units) and motor current (A) now."""
+        ...
+
+    def turn_to(self, ticks: float) -> None:
+        """Turn the horn by hand to ``ticks`` (without Homing Offset), at rest."""
+        ...
+
+
 _TIME_BASED_PROFILE = int(DriveMode.TIME_BASED_PROFILE)  # a plain int: IntFlag's & is slow
 
 _GOAL_CAPS = {
@@ -350,6 +371,7 @@ class SimulatedServo:
         self.memory = self._image(id=id, baud_code=codes[baud_rate])
         self._size = self.table.size  # a computed property: keep it
         self._layout = {e.key: (e.address, e.end, e.signed) for e in self.table.values()}
+        self._boot_goal_limits()
         self._owner = [None] * self._size  # address -> item covering it
         self._items_at: dict[tuple[int, int], tuple[int, list[ControlTableEntry]]] = {}
         for entry in self.table.values():
@@ -368,6 +390,8 @@ class SimulatedServo:
         """Fault hook: hears and executes, but sends nothing."""
         self.corrupt_pending = 0
         """Fault hook: this many coming status packets get a wrong CRC."""
+        self.plant: Plant | None = None
+        """The physics horn (set by :class:`sim.dynamixel.physics.ArmPhysics`), or None."""
 
     def _image(self, *, id: int, baud_code: int) -> bytearray:
         image = self.table.default_image()
@@ -375,6 +399,13 @@ class SimulatedServo:
         image[7] = id
         image[8] = baud_code
         return image
+
+    def _boot_goal_limits(self) -> None:
+        """Goal PWM and Goal Current start at PWM Limit and Current Limit (what the firmware
+        sets at boot: they limit the position controller's output)."""
+        for goal, limit in (("goal_pwm", "pwm_limit"), ("goal_current", "current_limit")):
+            if goal in self._layout:
+                self._put(goal, self.get(limit))
 
     # -- registers ---------------------------------------------------------------------------
 
@@ -438,11 +469,21 @@ class SimulatedServo:
         """Exact position (ticks) and velocity (ticks/s) at ``t``."""
         return self.trajectory.state(t)
 
+    def present(self, t: float) -> tuple[float, float]:
+        """Present position (ticks) and velocity (ticks/s): the plant's horn plus Homing Offset
+        when a plant is attached, else the profile's at ``t``."""
+        if self.plant is None:
+            return self.trajectory.state(t)
+        p, v = self.plant.horn()
+        return p + self.get("homing_offset"), v
+
     def set_position(self, ticks: float, t: float) -> None:
         """Turn the horn by hand to ``ticks`` (only with torque off)."""
         if self.torque:
             raise RuntimeError("set_position: the torque is on; turn it off first")
         self.trajectory.replan(t, float(ticks), ())
+        if self.plant is not None:
+            self.plant.turn_to(float(ticks) - self.get("homing_offset"))
 
     @property
     def velocity_limit(self) -> float:
@@ -484,9 +525,9 @@ class SimulatedServo:
         self.profile_type = PROFILE_TRAPEZOIDAL if pa else PROFILE_STEP
 
     def _torque_on(self, t: float) -> None:
-        p, _ = self.trajectory.state(t)
+        p, _ = self.present(t)
         self._put("goal_position", round(p))
-        self.trajectory.hold(t)
+        self.trajectory.replan(t, p, ())
         if self._operating_mode() == OperatingMode.VELOCITY:
             self._start_velocity(t)
 
@@ -504,22 +545,29 @@ class SimulatedServo:
     def _refresh(self, t: float) -> None:
         """Write the time-dependent items (present values, Moving, Realtime Tick) for ``t``."""
         p, v = self.trajectory.state(t)
+        present, speed = self.present(t)
         ongoing = t < self.trajectory.end
         threshold = self.get("moving_threshold") * TICKS_PER_S_PER_VELOCITY_UNIT
-        moving = ongoing or abs(v) > threshold
+        moving = ongoing or abs(speed) > threshold
         status = self.profile_type | (PROFILE_ONGOING if ongoing else 0)
         mode = self._operating_mode()
-        if mode in POSITION_MODES and not ongoing and abs(p - self.get("goal_position")) < 1.0:
+        if (
+            mode in POSITION_MODES
+            and not ongoing
+            and abs(present - self.get("goal_position")) < 1.0
+        ):
             status |= IN_POSITION
-        position, velocity = round(p), round(v / TICKS_PER_S_PER_VELOCITY_UNIT)
         self._put("realtime_tick", int((t - self.booted_at) * 1000.0) % 32768)
         self.memory[122] = int(moving)
         self.memory[123] = status
-        self._put("present_pwm", 0)
-        self._put("present_velocity", velocity)
-        self._put("present_position", position)
-        self._put("velocity_trajectory", velocity)
-        self._put("position_trajectory", position)
+        pwm, current = (0.0, 0.0) if self.plant is None else self.plant.output()
+        self._put("present_pwm", round(pwm))
+        if "present_current" in self._layout:
+            self._put("present_current", round(current * 1000.0 / MA_PER_CURRENT_UNIT))
+        self._put("present_velocity", round(speed / TICKS_PER_S_PER_VELOCITY_UNIT))
+        self._put("present_position", round(present))
+        self._put("velocity_trajectory", round(v / TICKS_PER_S_PER_VELOCITY_UNIT))
+        self._put("position_trajectory", round(p))
         self._put("present_input_voltage", self.input_voltage)
         self._put("present_temperature", self.temperature)
 
@@ -655,6 +703,7 @@ class SimulatedServo:
         """REBOOT at time ``t``: RAM to defaults, hardware error cleared, deaf while booting."""
         p, _ = self.trajectory.state(t)
         self.memory[EEPROM_END:] = self._factory[EEPROM_END:]
+        self._boot_goal_limits()
         self.registered = None
         self.trajectory.replan(t, p % TICKS_PER_REV, ())
         self.profile_type = PROFILE_STEP
@@ -686,6 +735,7 @@ __all__ = [
     "PROFILE_TRIANGULAR",
     "TICKS_PER_S2_PER_ACCELERATION_UNIT",
     "TICKS_PER_S_PER_VELOCITY_UNIT",
+    "Plant",
     "SimulatedServo",
     "Trajectory",
     "plan_time_based",
