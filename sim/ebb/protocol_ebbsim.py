@@ -8,7 +8,7 @@ adds ``sim.ebb`` to ``serial.protocol_handler_packages``. The port is the ``grbl
 
 from __future__ import annotations
 
-from serial.serialutil import PortNotOpenError, SerialException
+from serial.serialutil import SerialException
 
 from sim.ebb.transport import Link, device_from_url
 from sim.grbl import protocol_grblsim
@@ -18,6 +18,8 @@ __all__ = ["Serial"]
 
 class Serial(protocol_grblsim.Serial):
     """A ``serial.SerialBase`` whose far end is a simulated EBB (``self.device``)."""
+
+    dropped_message = "ebbsim: the board dropped off the USB"
 
     def open(self) -> None:
         if self._port is None:
@@ -33,10 +35,3 @@ class Serial(protocol_grblsim.Serial):
 
     def _reconfigure_port(self) -> None:
         """The baud rate of a USB CDC port changes nothing."""
-
-    def _live_link(self) -> Link:
-        if not self.is_open or self._link is None:
-            raise PortNotOpenError()
-        if self._dropped:
-            raise SerialException("ebbsim: the board dropped off the USB")
-        return self._link  # type: ignore[return-value]

@@ -20,6 +20,9 @@ from sim.serial_port import SimulatedSerialBase
 class Serial(SimulatedSerialBase):
     """A ``serial.SerialBase`` whose far end is a :class:`SimulatedGrbl` (``self.device``)."""
 
+    dropped_message = "grblsim: connection dropped by the device"
+    """What the port raises once the device has dropped the connection."""
+
     def __init__(self, *args, **kwargs) -> None:
         self.device: SimulatedGrbl | None = None
         self._link: Link | None = None
@@ -76,7 +79,7 @@ class Serial(SimulatedSerialBase):
         if not self.is_open or self._link is None:
             raise PortNotOpenError()
         if self._dropped:
-            raise SerialException("grblsim: connection dropped by the device")
+            raise SerialException(self.dropped_message)
         return self._link
 
     def _host_call(self) -> Link:
@@ -117,7 +120,7 @@ class Serial(SimulatedSerialBase):
                     step = following
             link.advance_to(step)
             if self._dropped:
-                raise SerialException("grblsim: connection dropped by the device")
+                raise SerialException(self.dropped_message)
             out += link.receive(size - len(out))
         return bytes(out)
 
