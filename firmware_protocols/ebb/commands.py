@@ -36,7 +36,7 @@ from .errors import (
     EBBCommandError,
     unknown_command,
 )
-from .motion import Move, lm_direction
+from .motion import Move
 
 MAX_LINE = 256
 """Longest command the EBB buffers, bytes, its terminating ``<CR>`` included."""
@@ -190,12 +190,7 @@ def _check(cmd: Command, limit_checks: bool) -> None:
     """The command-specific checks the firmware makes after reading the parameters."""
     name, p = cmd.name, cmd.params
     if name in ("LM", "LT", "T3"):
-        move = cmd.move()
-        if limit_checks:
-            move.validate()
-        elif name == "LM":  # the legacy sign rule is checked even without limit checks
-            for steps, rate, accel in zip(move.steps, move.rate, move.accel, strict=True):
-                lm_direction(steps, rate, accel)
+        cmd.move().validate(limit_checks)
     elif name in ("SM", "XM") and limit_checks:
         clear = p[3] if len(p) > 3 else 0
         if clear > 3:
