@@ -22,17 +22,16 @@ import numpy as np
 
 from tagbot.config import (
     BOOL,
-    FIT_OR_POSITIVE,
     INT,
     NON_NEGATIVE,
     NUMBER,
     POSITIVE,
-    LayeredProfile,
     load_layered,
     packaged_names,
 )
 from tagbot.errors import ProfileError
-from tagbot.plotter.profile import ALIGNS, SETPOINT_MODES, TIME_SCALES
+from tagbot.plotter.profile import SCHEMA as PLOTTER_SCHEMA
+from tagbot.plotter.profile import SETPOINT_MODES, TIME_SCALES, BedProfile
 from tagbot.plotter.profile import Profile as PlotterProfile
 
 __all__ = [
@@ -55,14 +54,7 @@ TICK_S = 40e-6
 
 SCHEMA: dict[str, dict[str, Any]] = {
     "machine": {"model": MODELS},
-    "bed": {
-        "x_min": NUMBER,
-        "x_max": NUMBER,
-        "y_min": NUMBER,
-        "y_max": NUMBER,
-        "margin": NON_NEGATIVE,
-        "y_down": BOOL,
-    },
+    "bed": PLOTTER_SCHEMA["bed"],
     "motors": {"steps_per_mm_16x": POSITIVE, "microstepping": INT, "max_step_rate": POSITIVE},
     "limits": {
         "draw_speed": POSITIVE,
@@ -97,20 +89,14 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "park_y": NUMBER,
         "jerk": BOOL,
     },
-    "place": {"scale": FIT_OR_POSITIVE, "rotation": NUMBER, "align": ALIGNS},
+    "place": PLOTTER_SCHEMA["place"],
     "serial": {"fifo": INT, "poll": POSITIVE},
 }
 """Every section and key an AxiDraw profile may hold, with the kind of value it takes."""
 
 
-class Profile(LayeredProfile):
+class Profile(BedProfile):
     """A merged, validated AxiDraw profile: ``profile["bed.margin"]`` and named views."""
-
-    @property
-    def bed(self) -> tuple[float, float, float, float]:
-        """``(x_min, x_max, y_min, y_max)`` in mm."""
-        b = self.values["bed"]
-        return b["x_min"], b["x_max"], b["y_min"], b["y_max"]
 
     @property
     def steps_per_mm(self) -> float:
@@ -209,14 +195,7 @@ def load_profile(profile: str | Path | None = None, overrides: Iterable[str] = (
 def _check(p: Profile) -> None:
     """Checks across fields; the error names the source that last set one of them."""
     need = p.need
-    x_min, x_max, y_min, y_max = p.bed
-    need(x_max > x_min, ("bed.x_min", "bed.x_max"), "must be > bed.x_min")
-    need(y_max > y_min, ("bed.y_min", "bed.y_max"), "must be > bed.y_min")
-    need(
-        2 * p["bed.margin"] < min(x_max - x_min, y_max - y_min),
-        ("bed.margin",),
-        "leaves no room on the bed",
-    )
+    p.check_bed()
     need(
         p["motors.microstepping"] in MICROSTEPPING,
         ("motors.microstepping",),
@@ -254,10 +233,4 @@ def _check(p: Profile) -> None:
     )
     need(p["motion.max_dt"] <= 2.0, ("motion.max_dt",), "must be <= 2 s")
     need(p["serial.fifo"] <= 64, ("serial.fifo",), "must be <= 64")
-    if p["motion.park"]:
-        for axis, low, high in (("x", x_min, x_max), ("y", y_min, y_max)):
-            need(
-                low <= p[f"motion.park_{axis}"] <= high,
-                (f"bed.{axis}_min", f"bed.{axis}_max", f"motion.park_{axis}"),
-                "outside the bed",
-            )
+    p.check_park()

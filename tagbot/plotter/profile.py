@@ -31,6 +31,7 @@ from tagbot.errors import ProfileError
 __all__ = [
     "DEVICE_SETTINGS",
     "SCHEMA",
+    "BedProfile",
     "Profile",
     "ProfileError",
     "device_settings",
@@ -101,14 +102,40 @@ SCHEMA: dict[str, dict[str, Any]] = {
 """Every section and key a profile may hold, with the kind of value it takes."""
 
 
-class Profile(LayeredProfile):
-    """A merged, validated plotter profile: ``profile["bed.margin"]`` and named views."""
+class BedProfile(LayeredProfile):
+    """A profile with a rectangular ``bed`` (the plotters': Grbl's and the AxiDraw's)."""
 
     @property
     def bed(self) -> tuple[float, float, float, float]:
         """``(x_min, x_max, y_min, y_max)`` in mm."""
         b = self.values["bed"]
         return b["x_min"], b["x_max"], b["y_min"], b["y_max"]
+
+    def check_bed(self) -> None:
+        """The bed's extent and margin (ProfileError naming the source and the key)."""
+        x_min, x_max, y_min, y_max = self.bed
+        self.need(x_max > x_min, ("bed.x_min", "bed.x_max"), "must be > bed.x_min")
+        self.need(y_max > y_min, ("bed.y_min", "bed.y_max"), "must be > bed.y_min")
+        self.need(
+            2 * self["bed.margin"] < min(x_max - x_min, y_max - y_min),
+            ("bed.margin",),
+            "leaves no room on the bed",
+        )
+
+    def check_park(self) -> None:
+        """With ``motion.park``, the park position on the bed."""
+        if self["motion.park"]:
+            x_min, x_max, y_min, y_max = self.bed
+            for axis, low, high in (("x", x_min, x_max), ("y", y_min, y_max)):
+                self.need(
+                    low <= self[f"motion.park_{axis}"] <= high,
+                    (f"bed.{axis}_min", f"bed.{axis}_max", f"motion.park_{axis}"),
+                    "outside the bed",
+                )
+
+
+class Profile(BedProfile):
+    """A merged, validated plotter profile: ``profile["bed.margin"]`` and named views."""
 
     @property
     def max_speed(self) -> tuple[float, float]:
@@ -149,15 +176,7 @@ def _check(p: Profile) -> None:
     """Checks across fields; the error names the source that last set one of them."""
 
     need = p.need
-    x_min, x_max, y_min, y_max = p.bed
-    need(x_max > x_min, ("bed.x_min", "bed.x_max"), "must be > bed.x_min")
-    need(y_max > y_min, ("bed.y_min", "bed.y_max"), "must be > bed.y_min")
-    margin = p["bed.margin"]
-    need(
-        2 * margin < min(x_max - x_min, y_max - y_min),
-        ("bed.margin",),
-        "leaves no room on the bed",
-    )
+    p.check_bed()
     need(p.dt <= 1.0, ("motion.dt",), "must be <= 1 s (one G-code line per step)")
     # F = 60/dt must fit Grbl's 8 digits at 3 decimals; Grbl cannot parse lines faster anyway.
     need(
@@ -168,17 +187,7 @@ def _check(p: Profile) -> None:
     need(p.dt >= 0.001, ("motion.dt",), "must be >= 0.001 s (F = 60/dt needs <= 8 digits)")
     need(p["motion.max_dt"] >= p.dt, ("motion.dt", "motion.max_dt"), "must be >= motion.dt")
     need(p["motion.max_dt"] <= 2.0, ("motion.max_dt",), "must be <= 2 s")
-    if p["motion.park"]:
-        need(
-            x_min <= p["motion.park_x"] <= x_max,
-            ("bed.x_min", "bed.x_max", "motion.park_x"),
-            "outside the bed",
-        )
-        need(
-            y_min <= p["motion.park_y"] <= y_max,
-            ("bed.y_min", "bed.y_max", "motion.park_y"),
-            "outside the bed",
-        )
+    p.check_park()
     if p["pen.type"] == "servo":
         need(p["pen.up"] >= 0, ("pen.up",), "must be >= 0 (an M3 S value)")
         need(p["pen.down"] >= 0, ("pen.down",), "must be >= 0 (an M3 S value)")
