@@ -581,24 +581,31 @@ class SimulatedEBB:
         line = self._lines.popleft()
         t = self._now
         self._cp_free = t
+        name = line.text.split(b",", 1)[0].upper()
         try:
             command = parse_command(line.text, limit_checks=self.limit_checks)
-            if self.version_tuple < COMMAND_SINCE.get(command.name, (0, 0, 0)):
-                raise EBBCommandError(
-                    unknown_command(command.name.encode()), "not in this firmware"
-                )
-            self._handle(command, line.text, t)
         except EBBCommandError as error:
-            name = line.text.split(b",", 1)[0].upper()
-            if self.future_syntax:
-                self._emit(t, name + b"," + error.reply + b"\n")
-            else:
-                self._emit(t, format_error(error.reply, name.decode("latin-1")))
+            self._refuse(t, name, error.reply, name.decode("latin-1"))
+            return
         except UnsupportedCommand as error:
             # A command the board knows and the shared model does not: never guessed.
             self.recorder.events.append((t, f"not simulated, refused as unknown: {error}"))
-            name = line.text.split(b",", 1)[0][:2].upper()
-            self._emit(t, format_error(unknown_command(name)))
+            self._refuse(t, name[:2], unknown_command(name[:2]))
+            return
+        if self.version_tuple < COMMAND_SINCE.get(command.name, (0, 0, 0)):
+            self._refuse(t, name, unknown_command(command.name.encode()))
+            return
+        try:
+            self._handle(command, line.text, t)
+        except EBBCommandError as error:  # a move the firmware arithmetic refuses
+            self._refuse(t, name, error.reply, command.name)
+
+    def _refuse(self, t: float, name: bytes, reply: bytes, parser: str = "") -> None:
+        """An error line; ``parser``: the command whose parser found it (``QU`` prefixes it)."""
+        if self.future_syntax:
+            self._emit(t, name + b"," + reply + b"\n")
+        else:
+            self._emit(t, format_error(reply, parser))
 
     def _handle(self, command: Command, text: bytes, t: float) -> None:
         name = command.name
@@ -697,7 +704,8 @@ class SimulatedEBB:
             here = self.steps()
             steps = (_wrap32(target[0] - here[0]), _wrap32(target[1] - here[1]))
             if steps != (0, 0):
-                job = _Job(self._next_number(), text, "move", hm_move(frequency, steps))
+                move, full = hm_move(frequency, steps)
+                job = _Job(self._next_number(), text, "move", move, full)
                 self._enqueue(job, when)
             self._answer(when, command)
 

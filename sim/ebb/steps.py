@@ -46,9 +46,10 @@ def sm_move(
     return move, (full[0], full[1])
 
 
-def hm_move(frequency: int, steps: tuple[int, int]) -> Move:
+def hm_move(frequency: int, steps: tuple[int, int]) -> tuple[Move, tuple[bool, bool]]:
     """The move ``HM`` queues to travel ``steps`` (target minus position) in a straight line,
-    the longer axis at ``frequency`` steps/s. The accumulators are not cleared."""
+    the longer axis at ``frequency`` steps/s (25 kHz: :data:`FULL_RATE`), and which axes run at
+    the full rate. The accumulators are not cleared."""
     counts = [abs(s) for s in steps]
     major = 0 if counts[0] >= counts[1] else 1
     minor = 1 - major
@@ -58,8 +59,10 @@ def hm_move(frequency: int, steps: tuple[int, int]) -> Move:
     if counts[minor]:
         scaled = _F32(counts[minor]) * _F32(frequency)
         scaled = _F32(scaled / _F32(counts[major])) * per_hz
-        rates[minor] = 1 if scaled < 1.0 else min(int(scaled), 2**31 - 1)
-    return Move("LM", rate=(rates[0], rates[1]), steps=steps)
+        rates[minor] = 1 if scaled < 1.0 else min(int(scaled), FULL_RATE - 1)
+    full = (rates[0] >= FULL_RATE, rates[1] >= FULL_RATE)
+    rates = [min(r, FULL_RATE - 1) for r in rates]
+    return Move("LM", rate=(rates[0], rates[1]), steps=steps), full
 
 
 def move_positions(
