@@ -4,6 +4,7 @@ the pen servo's timing, HM, a reset, and the tick-resolution record."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -107,7 +108,7 @@ def test_moves_follow_each_other_without_a_gap_at_the_tick():
     idle(device)
     segments = device.recorder.segments
     assert [s.ticks for s in segments] == [250, 250, 250, 75]
-    for before, after in zip(segments, segments[1:]):
+    for before, after in itertools.pairwise(segments):
         assert after.load_tick == before.end_tick
 
 
