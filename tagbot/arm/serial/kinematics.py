@@ -216,7 +216,8 @@ class SerialArm:
         Raises :class:`~tagbot.errors.ReachError` at the first point that cannot be reached
         (``reach``), needs a joint beyond its range (``joint limit``), tilts the pen too far
         (``tilt``), makes the arm touch itself (``self-collision``), or moves a joint by more
-        than ``max_step`` (rad) from the previous point (``jump``: a branch flip).
+        than ``max_step`` (rad) per 2 mm of the tip's travel (``jump``: a branch flip or a
+        singularity; points further apart are followed through points 2 mm apart).
         """
         pts = np.asarray(points, dtype=float)
         if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0 or not np.all(np.isfinite(pts)):
@@ -246,7 +247,8 @@ class _PathSolver:
     ALIGN_COST = 0.05  # the axis task's weight against the tip's position (1/m)
     DAMPING = 1e-6
     SETTLE = 1e-5  # rad: an iteration moving no joint more than this has settled the pen's axis
-    SHARED = 8  # iterations with both tasks before the position alone (after the first point)
+    GAP = 0.002  # m: longer gaps between points are followed in steps this long
+    SHARED = 2  # iterations with both tasks before the position alone (after the first point)
     STALL = 1e-9  # rad: an iteration moving no joint more than this has stopped
 
     def __init__(self, arm: SerialArm, normal: Array, max_tilt: float, tol: float, max_iter: int):
@@ -313,43 +315,71 @@ class _PathSolver:
         return self.converge(target, [self.position], limits, False)
 
     def run(self, pts: Array, q0: Array, max_step: float) -> Array:
+        """Each point in turn; a gap longer than ``GAP`` is followed through points ``GAP``
+        apart on the segment, each checked like the points themselves."""
         out = np.empty((len(pts), self.arm.n_joints))
-        prev = q0
-        for i, target in enumerate(pts):
-            if i >= 2:  # linear extrapolation: the next point's joints to second order
-                guess = np.clip(2.0 * out[i - 1] - out[i - 2], self.arm.lower, self.arm.upper)
-            else:
-                guess = prev
-            if not self.solve_point(target, guess, first=i == 0):
-                self.fall_back(i, target, guess)
-            q = self.cfg.q.copy()
-            tilt = _tilt(_site_axis(self.cfg.data, self.site), self.normal)
-            if tilt > self.max_tilt + 1e-9:
-                raise ReachError(
-                    f"the pen axis would be {math.degrees(tilt):.1f}° from the paper's normal "
-                    f"(max {math.degrees(self.max_tilt):.1f}°)",
-                    i,
-                    "tilt",
-                )
-            touching = self.arm._self_contacts(self.cfg.data)
-            if touching:
-                a, b = touching[0]
-                raise ReachError(
-                    f"the arm would touch itself ({a} against {b})", i, "self-collision"
-                )
-            if i > 0:
-                jump = np.abs(q - prev)
-                j = int(np.argmax(jump))
-                if jump[j] > max_step:
-                    raise ReachError(
-                        f"{self.arm.joint_names[j]} would jump by {jump[j]:.3f} rad from the "
-                        f"previous point (max {max_step} rad): a branch flip or a singularity",
-                        i,
-                        "jump",
-                    )
-            out[i] = q
-            prev = q
+        self.place(0, pts[0], q0, first=True)
+        q1, p1 = self.cfg.q.copy(), pts[0]
+        q2: Array | None = None
+        p2 = p1
+        out[0] = q1
+        for i in range(1, len(pts)):
+            gap = float(np.linalg.norm(pts[i] - p1))
+            count = max(1, math.ceil(gap / self.GAP - 1e-9))
+            start = p1
+            for k in range(1, count + 1):
+                target = pts[i] if k == count else start + (pts[i] - start) * (k / count)
+                guess = q1
+                if q2 is not None:  # linear extrapolation: the next joints to second order
+                    before = float(np.linalg.norm(p1 - p2))
+                    ratio = min(1.0, float(np.linalg.norm(target - p1)) / before) if before else 0.0
+                    guess = np.clip(q1 + ratio * (q1 - q2), self.arm.lower, self.arm.upper)
+                try:
+                    q = self.step(i, target, guess, q1, p1, max_step)
+                except ReachError as exc:
+                    if k == count:
+                        raise
+                    way = f"{exc.detail}, on the way from point {i - 1}"
+                    raise ReachError(way, i, exc.reason) from None
+                q2, p2, q1, p1 = q1, p1, q, target
+            out[i] = q1
         return out
+
+    def step(
+        self, i: int, target: Array, guess: Array, q1: Array, p1: Array, max_step: float
+    ) -> Array:
+        """The pen on ``target`` after ``p1`` (reached at ``q1``): no joint moves more than
+        ``max_step``."""
+        self.place(i, target, guess, first=False)
+        q = self.cfg.q.copy()
+        jump = np.abs(q - q1)
+        j = int(np.argmax(jump))
+        if jump[j] > max_step:
+            raise ReachError(
+                f"{self.arm.joint_names[j]} would jump by {jump[j]:.3f} rad in "
+                f"{np.linalg.norm(target - p1) * 1e3:.2f} mm (max {max_step} rad per "
+                f"{self.GAP * 1e3:g} mm): a branch flip or a singularity",
+                i,
+                "jump",
+            )
+        return q
+
+    def place(self, i: int, target: Array, guess: Array, first: bool) -> None:
+        """The pen on ``target`` (for point ``i``), then the tilt and self-contacts checked."""
+        if not self.solve_point(target, guess, first):
+            self.fall_back(i, target, guess)
+        tilt = _tilt(_site_axis(self.cfg.data, self.site), self.normal)
+        if tilt > self.max_tilt + 1e-9:
+            raise ReachError(
+                f"the pen axis would be {math.degrees(tilt):.1f}° from the paper's normal "
+                f"(max {math.degrees(self.max_tilt):.1f}°)",
+                i,
+                "tilt",
+            )
+        touching = self.arm._self_contacts(self.cfg.data)
+        if touching:
+            a, b = touching[0]
+            raise ReachError(f"the arm would touch itself ({a} against {b})", i, "self-collision")
 
     def fall_back(self, i: int, target: Array, guess: Array) -> None:
         """Point ``i`` by the position alone within the ranges, if that is within the tilt;

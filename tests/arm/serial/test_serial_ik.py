@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import mink
 import numpy as np
@@ -84,19 +85,25 @@ def test_a_circle_on_a_tilted_board(arm: SerialArm) -> None:
 def test_an_unreachable_point_is_refused_with_its_index(arm: SerialArm) -> None:
     path = np.array([[0.15, 0.0, 0.0]] * 5 + [[0.50, 0.0, 0.0]])
     with pytest.raises(ReachError) as err:
-        arm.solve_path(path, UP, TILT, np.zeros(4))
+        arm.solve_path(path, UP, math.radians(89), np.zeros(4))
     assert err.value.index == 5 and err.value.reason == "reach"
-    assert str(err.value).startswith(
-        "point 5: (0.5000, 0.0000, 0.0000) m is out of the arm's reach"
+    # followed 2 mm at a time from point 4, the tip stops where the arm is stretched out
+    assert re.fullmatch(
+        r"point 5: \(0\.4\d\d0, 0\.0000, 0\.0000\) m is out of the arm's reach \(the pen's "
+        r"point gets no closer than \d\.\d\d mm\), on the way from point 4",
+        str(err.value),
     )
     assert isinstance(err.value, PlacementError)
 
 
 def test_a_joint_limit_is_refused(arm: SerialArm) -> None:
     # behind the base at the table's height the elbow (joint3) would have to bend past 1.4 rad
-    with pytest.raises(ReachError, match=r"needs joint3 = 1\.\d+ rad, outside its range") as err:
-        arm.solve_path([[0.15, 0, 0], [-0.15, 0.0, 0.0]], UP, math.radians(89), np.zeros(4))
-    assert (err.value.index, err.value.reason) == (1, "joint limit")
+    with pytest.raises(
+        ReachError,
+        match=r"^point 0: .* needs joint3 = 1\.\d+ rad, outside its range -1\.500…1\.400$",
+    ) as err:
+        arm.solve_path([[-0.15, 0.0, 0.0]], UP, math.radians(89), np.zeros(4))
+    assert (err.value.index, err.value.reason) == (0, "joint limit")
 
 
 def test_the_tilt_is_refused_and_held(arm: SerialArm) -> None:
@@ -117,10 +124,16 @@ def test_self_collision_is_refused(arm: SerialArm) -> None:
 
 
 def test_a_jump_between_points_is_refused(arm: SerialArm) -> None:
-    line = np.array([[0.17, 0.0, 0.0], [0.17, 0.01, 0.0]])  # 1 cm: joint1 turns ~0.06 rad
-    arm.solve_path(line, UP, TILT, np.zeros(4), max_step=0.1)
-    with pytest.raises(ReachError, match=r"joint1 would jump by 0\.0\d+ rad") as err:
-        arm.solve_path(line, UP, TILT, np.zeros(4), max_step=0.03)
+    # 1 cm across at 17 cm from the base, followed 2 mm at a time: joint1 turns ~12 mrad a step
+    line = np.array([[0.17, 0.0, 0.0], [0.17, 0.01, 0.0]])
+    arm.solve_path(line, UP, TILT, np.zeros(4), max_step=0.02)
+    with pytest.raises(ReachError) as err:
+        arm.solve_path(line, UP, TILT, np.zeros(4), max_step=0.005)
+    assert re.fullmatch(
+        r"point 1: joint1 would jump by 0\.01\d rad in 2\.00 mm \(max 0\.005 rad per 2 mm\): "
+        r"a branch flip or a singularity, on the way from point 0",
+        str(err.value),
+    )
     assert (err.value.index, err.value.reason) == (1, "jump")
 
 
