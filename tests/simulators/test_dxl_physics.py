@@ -125,7 +125,7 @@ def test_goal_position_through_the_sdk_follows_the_servo_dynamics(arm, port, ph)
 
 
 def test_holding_against_gravity_matches_the_gain_and_motor_model(arm, port, ph):
-    chain, physics = arm
+    _, physics = arm
     robotis_settings(port, ph, gains=(800, 0, 0))  # P only: a steady error carries the load
     clock = port.ser.clock
     goal = 2048 + round(0.6 * TICKS_PER_RAD)  # joint2 leans the arm forwards
@@ -206,10 +206,10 @@ def test_pen_pressed_on_the_paper_then_lifted():
     torque_on(chain)
     sheet = physics.sheet
     on_paper = np.array([0.17, 0.0, 0.0])  # 70 mm, 105 mm on the default sheet
-    go_to(chain, pose_for(physics, on_paper + [0, 0, 0.01]))  # 1 cm above
+    go_to(chain, pose_for(physics, on_paper + np.array([0, 0, 0.01])))  # 1 cm above
     chain.advance(1.5)
     assert np.all(physics.pen_trace()[:, 3:] == 0.0)  # no contact on the way
-    go_to(chain, pose_for(physics, on_paper + [0, 0, -0.002]))  # 2 mm into the paper
+    go_to(chain, pose_for(physics, on_paper + np.array([0, 0, -0.002])))  # 2 mm into the paper
     chain.advance(1.5)
     t, x, y, pen, force = physics.pen_trace().T
     settled = t > chain.now() - 0.3
@@ -226,7 +226,7 @@ def test_pen_pressed_on_the_paper_then_lifted():
     nib_force = spring.preload - spring.stiffness * slide  # what the spring pushes with
     assert force[-1] == pytest.approx(nib_force, abs=0.05)  # + the nib's weight, 29 mN
     lifted = chain.now()
-    go_to(chain, pose_for(physics, on_paper + [0, 0, 0.01]))
+    go_to(chain, pose_for(physics, on_paper + np.array([0, 0, 0.01])))
     chain.advance(1.5)
     t, x, y, pen, force = physics.pen_trace().T
     up = t > lifted + 0.8
@@ -305,7 +305,7 @@ def test_serve_pty_with_physics(ph):
             before = chain.now()
             present, result, error = ph.read4ByteTxRx(port, 11, 132)
             after = chain.now()
-            if (result, error) == OK and present == 2148 or time.monotonic() > deadline:
+            if ((result, error) == OK and present == 2148) or time.monotonic() > deadline:
                 break  # (a host starved of CPU may miss a reply: read again)
         t, ticks = physics.joint_trace(11).T
         window = (t >= before - physics.timestep) & (t <= after)
