@@ -248,7 +248,7 @@ class _PathSolver:
     DAMPING = 1e-6
     SETTLE = 1e-5  # rad: an iteration moving no joint more than this has settled the pen's axis
     GAP = 0.002  # m: longer gaps between points are followed in steps this long
-    SHARED = 2  # iterations with both tasks before the position alone (after the first point)
+    SHARED = 1  # iterations with both tasks before the position alone, after the first point
     STALL = 1e-9  # rad: an iteration moving no joint more than this has stopped
 
     def __init__(self, arm: SerialArm, normal: Array, max_tilt: float, tol: float, max_iter: int):
