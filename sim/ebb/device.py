@@ -24,6 +24,12 @@ connection drops). Fault hooks: :meth:`~SimulatedEBB.stall_usb`,
 :meth:`~SimulatedEBB.reset_board`, :meth:`~SimulatedEBB.press_button`. Everything executed is
 in :attr:`~SimulatedEBB.recorder` (:class:`~sim.ebb.recorder.Recorder`).
 
+Refusals: the error line (``format_error``) and nothing after it, as the firmware 3.0.3 source
+(``CheckForAndPrintErrors``) prints it, not the ``OK`` the reference's prose mentions; commands
+the shared parser knows but does not model (``UnsupportedCommand``: ``TP``, ``QR``, ``QL``,
+``L3``...) are refused as unknown and noted in the recorder's events, never guessed. A line with
+characters after its last parameter runs, answers, then ``!7`` (``format_reply``).
+
 Documented simplifications: ``CS`` during a move clears the accumulators from the next move on;
 for ``LT``/``T3`` ``QM`` reports a motor moving while the move lasts if it has a nonzero rate,
 accel or jerk; limit switches, the engraver, GPIO and analog commands are not simulated
@@ -186,6 +192,8 @@ class SimulatedEBB:
         self._scheduled: list[tuple[float, int, Callable[[], None]]] = []
         self._order = 0
         self._number = 0
+        self._lines: deque[_Line] = deque()
+        self._reader = LineReader()
         self._boot(0.0)
 
     # -- clock and bytes ------------------------------------------------------------------
@@ -306,8 +314,6 @@ class SimulatedEBB:
     def _boot(self, t: float) -> None:
         servo_min, servo_max, rate, timeout = self._boot_servo
         self._boot_time = t
-        self._lines: deque[_Line] = deque()
-        self._reader = LineReader()
         self._cp_free = t
         self._waiting: tuple[_Job, Command] | None = None  # a motion line with no room yet
         self._blocked: Callable[[float], None] | None = None  # HM, CU,4: wait for no motion
@@ -339,10 +345,12 @@ class SimulatedEBB:
         t = self._now
         self._blocked = None
         self._stop_motion(t)
-        self._out = [(when, chunk) for when, chunk in self._out if when <= t]
         self.recorder.events.append((t, "reboot" if drop_usb else "reset (R)"))
         self._boot(t)
-        if drop_usb:
+        if drop_usb:  # what the host sent or was to receive is lost with the USB connection
+            self._out = [(when, chunk) for when, chunk in self._out if when <= t]
+            self._lines.clear()
+            self._reader = LineReader()
             self.drop_connection()
 
     def _servo_period(self) -> float:

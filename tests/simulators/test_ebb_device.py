@@ -233,6 +233,22 @@ def test_es_stops_mid_move_and_the_rest_is_never_stepped():
     assert send(device, b"QS", b"QM") == reply + b"QM,0,0,0,0\n\r"
     assert len(device.recorder.segments) == 1  # the queued SM was flushed
     assert send(device, b"ES") == b"0\n\rOK\r\n"
+    # The accumulators stay where the ISR left them: k ticks at a constant rate from 0.
+    k = segment.ticks
+    acc = (k * 85899346 % 2**31, k * 42949673 % 2**31)
+    assert send(device, b"QU,200") == f"QU,{acc[0]},{acc[1]}\r\nOK\r\n".encode()
+
+
+def test_r_reinitialises_and_rb_reboots_off_the_usb():
+    device = SimulatedEBB()
+    dropped = []
+    device.on_close.append(lambda: dropped.append(device.now))
+    send(device, b"CU,4,5", b"SC,4,1000", b"SM,100,10,0", b"LT,1000,%d,0,0,0" % RATE_1K)
+    assert send(device, b"R", b"QU,3", b"QM") == OK + b"QU,1\r\nOK\r\n" + b"QM,0,0,0,0\n\r"
+    assert dropped == [] and device.servo_min == 22565
+    assert device.recorder.moves()[0].ticks < 2500  # the SM was cut short
+    assert send(device, b"RB", b"QS") == b""  # no answer: the board is gone from the USB
+    assert dropped and send(device, b"QS") == b"0,0\n\rOK\r\n"
 
 
 def test_em_sets_the_step_mode_and_clears_the_counters():
