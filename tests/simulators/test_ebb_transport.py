@@ -3,6 +3,7 @@ real-time pseudo-terminal and ``tagbot sim axidraw``."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import serial
 from click.testing import CliRunner
@@ -109,6 +110,31 @@ def test_a_deeper_fifo_takes_the_moves_at_the_parsers_pace():
         assert ask(port, b"QU,6\r") == b"QU,3\r\nOK\r\n"  # firmware: ebb_print_uint, unpadded
     finally:
         port.close()
+
+
+def streamed_load_ticks(ticks_per_move: int, count: int = 12) -> list[int]:
+    """Stream ``count`` identical LM moves as fast as the board takes them (FIFO at its boot
+    depth): the tick each was loaded on, and the tick the last one ended."""
+    steps = ticks_per_move // 5
+    device = SimulatedEBB()
+    with open_url(attach_device(device, "board")) as port:
+        port.write(f"LM,{2**31 // 5 + 1},{steps},0,0,0,0\r".encode() * count)
+        for _ in range(count):
+            assert port.read_until(OK) == OK
+        port.clock.sleep_until(port.clock.now() + 2 * count * ticks_per_move / TICK_HZ)
+    segments = device.recorder.moves()
+    assert [s.ticks for s in segments] == [ticks_per_move] * count
+    return [s.load_tick for s in segments] + [segments[-1].end_tick]
+
+
+def test_streamed_moves_have_no_gaps_only_when_longer_than_the_boards_parse_time():
+    """Reference "Performance": LM moves streamed back to back run without gaps only if each
+    lasts at least the board's time to parse and queue one (4 ms for LM on firmware 3.0)."""
+    parse_ticks = round(DEFAULT_COMMAND_TIME["LM"] * TICK_HZ)
+    loads = streamed_load_ticks(parse_ticks + 25)  # 5 ms moves: end to end
+    assert set(np.diff(loads)) == {parse_ticks + 25}
+    loads = streamed_load_ticks(parse_ticks - 25)  # 3 ms moves: one each 4 ms, idle between
+    assert set(np.diff(loads[:-1])) <= {parse_ticks, parse_ticks + 1}
 
 
 def test_a_usb_stall_holds_replies_while_the_motors_run():
