@@ -17,7 +17,11 @@ from tagbot.errors import PortError
 
 __all__ = ["check_port"]
 
-SIMULATED_SCHEMES = {"grblsim": "sim.grbl.transport", "dxlsim": "sim.dynamixel"}
+SIMULATED_SCHEMES = {
+    "grblsim": "sim.grbl.transport",
+    "dxlsim": "sim.dynamixel",
+    "ebbsim": "sim.ebb.transport",
+}
 """URL schemes of tagbot's in-process simulators, and the module that registers each."""
 
 _PYSERIAL_SCHEMES = ("alt", "cp2110", "hwgrep", "loop", "rfc2217", "socket", "spy")

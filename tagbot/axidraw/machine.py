@@ -244,7 +244,7 @@ class AxiDrawJob:
         job, p = self.job, self.profile
         if device is not None:
             trace = device.recorder.trace()
-            keep = slice(None, None, TRACE_STEP)
+            keep = np.unique(np.append(np.arange(0, len(trace.t), TRACE_STEP), len(trace.t) - 1))
             t = trace.t[keep] - report.started
             xy = steps_to_xy(
                 np.column_stack([trace.motor1[keep], trace.motor2[keep]]), job.steps_per_mm

@@ -200,7 +200,7 @@ class EBBStreamer:
         poll = float(self.profile["serial.poll"])
         for line in preamble:  # a resume's travel and pen: done before the job's moves
             self.ask(line)
-            self._drain(poll)
+            self._drain(self.clock.now(), poll)
         total = len(lines)
         finish: deque[float] = deque()  # when each outstanding line should be done
         next_poll = self.clock.now()
@@ -222,7 +222,8 @@ class EBBStreamer:
                 button = self._button()
                 if button or (control is not None and control.paused):
                     down = bool(pen_down[sent - 1]) if pen_down and sent > first else False
-                    self._pause(down, None if button else control, sent, poll)
+                    until = finish[-1] if finish else now
+                    self._pause(down, None if button else control, sent, until, poll)
                     finish.clear()
             else:  # full: ask again when the oldest line should be done
                 wake = min(next_poll, finish[0] if finish else next_poll)
@@ -254,10 +255,12 @@ class EBBStreamer:
         steps = self.position()
         self.report.polls.append((self.clock.now(), self.report.executed, *steps))
 
-    def _drain(self, poll: float) -> None:
-        """Wait until the board has executed every motion command it holds."""
+    def _drain(self, until: float, step: float = _RECHECK) -> None:
+        """Wait until the board has executed every motion command it holds: first until
+        ``until`` (when it should have), then asking every ``step`` s."""
+        self.clock.sleep_until(until)
         while self._state():
-            self.clock.sleep_until(self.clock.now() + poll)
+            self.clock.sleep_until(self.clock.now() + step)
 
     def _button(self) -> bool:
         """``QB``: the PRG button pressed since the last ask."""
@@ -265,12 +268,14 @@ class EBBStreamer:
         self.report.button_presses += pressed
         return pressed
 
-    def _pause(self, down: bool, control: RunControl | None, sent_to: int, poll: float) -> None:
-        """Drain, lift, wait for the resume (``control``, or without it the button pressed
-        again), lower, drain."""
-        while self._outstanding:
-            self.clock.sleep_until(self.clock.now() + poll)
-            self._poll(sent_to)
+    def _pause(
+        self, down: bool, control: RunControl | None, sent_to: int, until: float, poll: float
+    ) -> None:
+        """Drain (the last move should end at ``until``), lift, wait for the resume
+        (``control``, or without it the button pressed again), lower: the pause is from the
+        motors' stop to the pen's return, and the stream goes on at once."""
+        self._drain(until)
+        self._count(sent_to)
         start = self.clock.now()
         if down:
             self.ask(self.pen_line(False))
@@ -281,15 +286,17 @@ class EBBStreamer:
                 break
         if down:
             self.ask(self.pen_line(True))
-            self._drain(poll)
+            self._drain(self.clock.now() + self.profile.pen_time(True))
         self.report.pauses.append((start, self.clock.now() - start))
 
     def stop(self) -> tuple[int, int] | None:
-        """``ES``, ``QS``, pen up; the stopped position (None if the board did not answer)."""
+        """``ES``, ``QS``, pen up (waited for); the stopped position (None if the board did
+        not answer)."""
         try:
             self.ask("ES", data=True)
             steps = self.position()
             self.ask(self.pen_line(False))
+            self._drain(self.clock.now() + self.profile.pen_time(False))  # the pen is up
         except DeviceError:
             return None
         self.report.stopped_at = steps
