@@ -173,3 +173,12 @@ def test_the_tilt_row_is_the_cosines_derivative(arm: SerialArm) -> None:
         change = cosine(q + dq) - cosine(q)
         assert row.G[0] @ dq == pytest.approx(-change, rel=1e-4, abs=1e-13)
     assert row.h[0] == pytest.approx(0.95 * (cosine(q) - math.cos(math.radians(60))))
+
+
+def test_outside_the_cone_the_tilt_row_only_forbids_tilting_further(arm: SerialArm) -> None:
+    site = arm.model.site(PEN_SITE).id
+    limit = TiltLimit(arm.model, site, UP, math.radians(10))
+    cfg = mink.Configuration(arm.model)
+    cfg.update(np.zeros(4))  # the pen horizontal: 90° from the normal
+    row = limit.compute_qp_inequalities(cfg, 0.01)
+    assert row.h[0] == 0.0 and np.abs(row.G).max() > 0.1

@@ -84,8 +84,19 @@ def test_a_longer_pen_moves_the_tip_and_the_nib(arm: SerialArm) -> None:
     np.testing.assert_allclose(off.fk(np.zeros(4))[0], (0.306, 0, 0.1775), atol=1e-12)
 
 
-def test_self_contacts_exclude_adjacent_links(arm: SerialArm) -> None:
+def test_self_contacts_exclude_adjacent_links_and_the_scene(arm: SerialArm, tmp_path) -> None:
     assert arm.contacts(np.zeros(4)) == []
+    # a block in the scene where the pen is at q = 0: a contact, but not the arm's own
+    text = OPEN_MANIPULATOR_X.read_text().replace(
+        "<worldbody>",
+        '<worldbody><geom name="block" type="box" pos="0.30 0 0.1875" size="0.02 0.02 0.02"/>',
+    )
+    (tmp_path / "scene.xml").write_text(text)
+    scene = SerialArm.load(tmp_path / "scene.xml")
+    data = mujoco.MjData(scene.model)
+    mujoco.mj_forward(scene.model, data)
+    assert data.ncon > 0 and scene.contacts(np.zeros(4)) == []
+    assert scene.contacts([0, 0, 1.4, 1.97]) == arm.contacts([0, 0, 1.4, 1.97])
     folded = arm.contacts([0, 0, 1.4, 1.97])  # the gripper folded back onto the arm
     assert ("link3_arm", "link5_body") in folded
     assert all("link1" not in a or "link2" not in b for a, b in folded)
