@@ -27,6 +27,7 @@ most :data:`MAX_TICKS` ticks, so ``|C_k| < 2**31 (MAX_TICKS + 1)`` cannot overfl
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -207,7 +208,11 @@ def lm_axis(
     done_ticks = 0
     taken = 0
     position = 0
-    chunk = int(min(MAX_TICKS, max(256, 2 * count * ACCUMULATOR_STEP // max(abs(rate), 1))))
+    distance = count * ACCUMULATOR_STEP  # a first guess of the duration; chunks double after it
+    guesses = [distance // abs(rate) if rate else MAX_TICKS]
+    if accel:
+        guesses.append(math.isqrt(2 * distance // abs(accel)))
+    chunk = min(65_536, max(64, 5 * min(guesses) // 4 + 16))
     while True:
         total = _accumulated(start, accumulator, chunk)
         positions = (total >> 31) + position
