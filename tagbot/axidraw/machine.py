@@ -33,7 +33,7 @@ import numpy as np
 import serial
 
 from firmware_protocols.ebb.motion import TICK_HZ
-from tagbot.axidraw.moves import Job, _travel_moves, build_job, steps_to_xy
+from tagbot.axidraw.moves import Job, _travel_moves, build_job, run_reference
 from tagbot.axidraw.profile import Profile, load_profile
 from tagbot.axidraw.stream import EBBStreamer, StreamReport, entry_end_ticks, locate
 from tagbot.control import RunControl
@@ -52,6 +52,8 @@ _names = itertools.count()
 
 TIMELINE_STEP = 0.01
 """s between the samples of motion.csv's planned timeline."""
+PLAN_STEP = 0.001
+"""s between the samples of each run's plan in the comparison."""
 TRACE_STEP = 25
 """Ticks between the executed trace's samples (1 ms)."""
 
@@ -178,7 +180,7 @@ class AxiDrawJob:
         if isinstance(error, DeviceError) and error.where is None:
             error = type(error)(str(error), _where(job, done))
         executed, runs = self._trace(report, device)
-        planned = _runs_from(job, first)
+        planned = _runs_from(self._planned_runs(), job, first)
         total = len(job.entries)
         return MachineRun(
             device="axidraw",
@@ -211,6 +213,17 @@ class AxiDrawJob:
             pauses=[(a - report.started, n) for a, n in report.pauses],
             until=None if error is None else _until(job, done),
         )
+
+    def _planned_runs(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per run, the plan's continuous motion every :data:`PLAN_STEP` s on the job's clock
+        (what the executed path and speed are compared with, not the setpoints' polyline)."""
+        out = []
+        for run, start in zip(self.job.runs, self.job.run_start, strict=True):
+            at = run_reference(self.tag, run, self.setpoints.matrix, self.setpoints.offset)
+            end = float(run.t[-1])
+            t = np.append(np.arange(0.0, end, PLAN_STEP), end)
+            out.append((start + t, at(t)))
+        return out
 
     def _preamble(self, streamer: EBBStreamer, first: int) -> list[bytes]:
         """A resume's pen up, travel to where move ``first`` starts, and pen down if needed."""
@@ -246,9 +259,7 @@ class AxiDrawJob:
             trace = device.recorder.trace()
             keep = np.unique(np.append(np.arange(0, len(trace.t), TRACE_STEP), len(trace.t) - 1))
             t = trace.t[keep] - report.started
-            xy = steps_to_xy(
-                np.column_stack([trace.motor1[keep], trace.motor2[keep]]), job.steps_per_mm
-            )
+            xy = job.xy(np.column_stack([trace.motor1[keep], trace.motor2[keep]]))
             up, down = p.servo_position(p["pen.up"]), p.servo_position(p["pen.down"])
             width = trace.pen[keep]
             pen = (np.abs(width - down) < np.abs(width - up)).astype(float)
@@ -285,12 +296,14 @@ class AxiDrawJob:
         }
 
 
-def _runs_from(job: Job, first: int) -> list[tuple[tuple[np.ndarray, np.ndarray], int]]:
-    """The planned runs (and each one's plan) from entry ``first``'s start on (a resumed
+def _runs_from(
+    planned: list[tuple[np.ndarray, np.ndarray]], job: Job, first: int
+) -> list[tuple[tuple[np.ndarray, np.ndarray], int]]:
+    """The ``planned`` runs (and each one's plan) from entry ``first``'s start on (a resumed
     job's: what is left of each)."""
     start = job.entries[first].start if first else 0.0
     kept = []
-    for (t, xy), run in zip(job.planned_runs(), job.runs, strict=True):
+    for (t, xy), run in zip(planned, job.runs, strict=True):
         rest = t >= start - 1e-9
         if rest.sum() >= 2:
             kept.append(((t[rest], xy[rest]), run.plan))
