@@ -55,6 +55,9 @@ __all__ = ["Entry", "Job", "build_job", "run_reference", "steps_to_xy"]
 Array = NDArray[np.float64]
 Steps = tuple[int, int]
 
+SETTLE = 0.002
+"""s: with ``T3``, a run's first move, which takes up the pen-down position's fraction of a step
+(module docstring)."""
 CRAWL = 0.001
 """s of travel acceleration a pen-up move starts and ends at (its slowest rate)."""
 _MAX_RATE = ACCUMULATOR_STEP - 1
@@ -135,12 +138,10 @@ def run_reference(tag: Tag, run: Run, matrix: Array, offset: Array) -> Callable[
 
 def build_job(tag: Tag, setpoints: Setpoints, profile: Profile, start: Steps = (0, 0)) -> Job:
     """Every command of the job from the home position ``start`` (global steps): travel, pen
-    down, the run's ``LT`` moves, pen up, ... and back to the park position."""
+    down, the run's ``T3`` (or ``LT``) moves, pen up, ... and back to the park position."""
     k = profile.steps_per_mm
     builder = _Builder(profile, start)
-    for run in setpoints.runs:
-        if len(run.t) < 2:
-            continue
+    for run in setpoints.runs:  # a dot (one setpoint): pen down and up there
         reference = run_reference(tag, run, setpoints.matrix, setpoints.offset)
         builder.travel(_motor(run.xy[0], k))
         builder.pen(down=True, run=len(builder.runs))
@@ -215,14 +216,22 @@ class _Builder:
         index = len(self.runs)
         self.runs.append(run)
         self.run_start.append(self.time)
-        grid = np.round(run.t * TICK_HZ).astype(np.int64)
+        command = "T3" if self.profile["motion.jerk"] else "LT"
+        t, xy, v = run.t, run.xy, run.v
+        if command == "T3" and len(t) > 1 and t[1] > 2 * SETTLE:
+            # A short first move takes up where the pen went down, so that the next one starts
+            # on the plan, at the planned rate.
+            here, ahead = reference(np.array([SETTLE, SETTLE + 1.0 / TICK_HZ]))
+            t = np.insert(t, 1, SETTLE)
+            xy = np.insert(xy, 1, here, axis=0)
+            v = np.insert(v, 1, (ahead - here) * TICK_HZ, axis=0)
+        grid = np.round(t * TICK_HZ).astype(np.int64)
         keep = np.concatenate([[True], np.diff(grid) > 0])
-        grid, m, v = grid[keep], run.xy[keep] @ MOTOR_AXES.T * self.k, run.v[keep] @ MOTOR_AXES.T
+        grid, m, v = grid[keep], xy[keep] @ MOTOR_AXES.T * self.k, v[keep] @ MOTOR_AXES.T
         target = np.floor(m + 0.5).astype(np.int64)
         # Accumulator-unit positions (m + 1/2) and per-tick rates (velocity) at the setpoints.
         aim = [[round((float(x) + 0.5) * ACCUMULATOR_STEP) for x in row] for row in m]
         rate = (v * self.k * (ACCUMULATOR_STEP / TICK_HZ)).tolist()
-        command = "T3" if self.profile["motion.jerk"] else "LT"
         first, parts = len(self.entries), len(self.tick_parts)
         for i in range(len(grid) - 1):
             n = int(grid[i + 1] - grid[i])
@@ -234,8 +243,8 @@ class _Builder:
                     aim[i + 1][j] - self.steps[j] * ACCUMULATOR_STEP,
                     (rate[i][j], rate[i + 1][j]),
                     goal[j] - self.steps[j],
-                    # A run's first move also takes up where the pen went down (within a step
-                    # of its first point): no end rates to hold it to.
+                    # A run's first move takes up where the pen went down (within a step of
+                    # its first point): no end rates to hold it to.
                     command == "T3" and i > 0,
                 )
                 for j in (0, 1)
@@ -304,10 +313,13 @@ def _axis(
                 [n, half, sixth],
             ]
         )
-        _, a_real, j_real = np.linalg.solve(system, [v0, v1, aim - accumulator])
-        a, j = round(a_real), round(j_real)
+        j = round(float(np.linalg.solve(system, [v0, v1, aim - accumulator])[2]))
+        # What the whole jerk leaves to the acceleration and the rate (below, as for LT).
+        v0 -= 0.375 * j
+        v1 -= j * (n + 0.5) * (n + 1.5) / 2
     else:
-        a, j = round((v1 - v0) / n), 0
+        j = 0
+    a = round((v1 - v0) / n)
     # r: the nearest integer that makes the ticks add up to `aim`, then into the goal's step.
     base = aim - accumulator - a * half - j * sixth
     r = (2 * base + n) // (2 * n)
