@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import time
+from typing import Any
 
 import click
 
@@ -27,6 +30,7 @@ def sim_axidraw_command(firmware: str | None) -> None:
 
     Prints the device path (e.g. /dev/pts/3) on stdout: point the AxiDraw software, or
     `tagbot draw --device axidraw --port PATH`, at it. The board answers in real time.
+    SIGUSR1 presses its PRG (pause) button: kill -USR1 PID.
     """
     from sim.ebb import transport
     from sim.ebb.device import SimulatedEBB
@@ -37,14 +41,26 @@ def sim_axidraw_command(firmware: str | None) -> None:
         device = SimulatedEBB(clock="real", **options)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--firmware") from None
+
+    def press_button(signum: int, frame: Any) -> None:
+        with device.lock:
+            device.poll()
+            device.press_button(device.now)
+
     path, stop = transport.serve_pty(device)
+    before = signal.signal(signal.SIGUSR1, press_button)
     how = ""
     try:
         click.echo(path)
-        click.echo(f"simulated EBB (firmware {device.version}) serving; Ctrl-C stops it", err=True)
+        click.echo(
+            f"simulated EBB (firmware {device.version}) serving; kill -USR1 {os.getpid()}"
+            " presses its PRG button; Ctrl-C stops it",
+            err=True,
+        )
         _wait_for_interrupt()
     except KeyboardInterrupt as e:  # the normal way out
         how = f" ({label(signal_of(e))})"
     finally:
+        signal.signal(signal.SIGUSR1, before)
         stop()
     click.echo(f"stopped{how}", err=True)

@@ -3,6 +3,9 @@ real-time pseudo-terminal and ``tagbot sim axidraw``."""
 
 from __future__ import annotations
 
+import os
+import signal
+
 import numpy as np
 import pytest
 import serial
@@ -251,10 +254,19 @@ def test_sim_axidraw_prints_the_path_and_serves_until_interrupted(monkeypatch):
 
     def talk_then_interrupt() -> None:
         served["replies"] = talk_real_time(str(served["path"]))
+        with serial.Serial(str(served["path"]), timeout=5) as port:
+            buttons = []
+            for press in (False, True, False):
+                if press:
+                    os.kill(os.getpid(), signal.SIGUSR1)  # handled before the next line runs
+                port.write(b"QB\r")
+                buttons.append(port.read_until(OK))
+        served["buttons"] = buttons
         raise KeyboardInterrupt
 
     monkeypatch.setattr(transport, "serve_pty", serve)
     monkeypatch.setattr(ebb_cli, "_wait_for_interrupt", talk_then_interrupt)
+    before = signal.getsignal(signal.SIGUSR1)
     result = CliRunner().invoke(ebb_cli.sim_axidraw_command, ["--firmware", "3.0.2"])
     assert result.exit_code == 0, result.output
     assert result.stdout.splitlines() == [served["path"]]
@@ -262,7 +274,10 @@ def test_sim_axidraw_prints_the_path_and_serves_until_interrupted(monkeypatch):
     assert isinstance(replies, list)
     assert replies[0] == b"EBBv13_and_above EB Firmware Version 3.0.2\r\n"
     assert replies[1:] == [OK, b"QM,0,0,0,0\n\r", b"10,2\n\rOK\r\n"]
+    assert served["buttons"] == [b"0\r\nOK\r\n", b"1\r\nOK\r\n", b"0\r\nOK\r\n"]
     assert "simulated EBB (firmware 3.0.2) serving" in result.stderr
+    assert f"kill -USR1 {os.getpid()} presses its PRG button" in result.stderr
+    assert signal.getsignal(signal.SIGUSR1) == before  # restored
     assert result.stderr.splitlines()[-1] == "stopped (Ctrl-C)"
 
 
