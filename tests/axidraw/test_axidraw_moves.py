@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 
 import numpy as np
@@ -11,6 +12,7 @@ from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, Move, execu
 from tagbot.axidraw.moves import SETTLE, build_job, run_reference, steps_to_xy
 from tagbot.axidraw.profile import MOTOR_AXES, load_profile
 from tagbot.errors import PlacementError
+from tagbot.model import Plan, Tag
 from tagbot.plotter.place import place
 
 
@@ -134,3 +136,20 @@ def test_a_move_faster_than_a_step_per_tick_is_refused(cae_job):
     slow = ["motors.steps_per_mm_16x=400", "limits.draw_speed=62", "limits.travel_speed=62"]
     with pytest.raises(PlacementError, match=r"^motion: a drawing move needs \d+ steps/s on a"):
         build_job(tag, setpoints, load_profile(overrides=slow))
+
+
+def test_a_dot_is_drawn_as_pen_down_and_up_where_it_is():
+    stroke = dict(dt=[0.0], mu=[math.log(0.2)], sigma=[0.3], phi1=[0.0], phi2=[0.0])
+    line = Plan(targets=[[0.0, 0.0], [10.0, 0.0]], start=0.0, **stroke)
+    dot = Plan(targets=[[5.0, 5.0], [5.0 + 1e-6, 5.0]], start=line.end(10.0) + 0.5, **stroke)
+    tag = Tag(plans=(line, dot))
+    profile = load_profile()
+    setpoints = place(tag, profile.placement())
+    assert [len(r.t) > 1 for r in setpoints.runs] == [True, False]
+    job = build_job(tag, setpoints, profile)
+    kinds = "".join({"travel": "T", "pen": "P", "draw": "D"}[e.kind] for e in job.entries)
+    assert re.fullmatch(r"T+PD+PT+PPT+", kinds)
+    down = kinds.index("PP", kinds.index("D"))
+    here = steps_to_xy(job.entries[down].steps, profile.steps_per_mm)
+    assert np.hypot(*(here - setpoints.runs[1].xy[0])) == pytest.approx(job.run_error[1])
+    assert job.run_error[1] < 1.0 / profile.steps_per_mm
