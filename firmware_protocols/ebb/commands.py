@@ -166,11 +166,12 @@ def _number(body: bytes, i: int, kind: Kind) -> tuple[int, int]:
 
 
 def _sm_rate_check(duration_ms: int, steps: tuple[int, int]) -> None:
-    """``SM``/``XM`` limit checks (firmware ``process_simple_motor_move_fp``, 32-bit floats)."""
+    """``SM``/``XM`` limit checks (firmware ``process_simple_motor_move_fp``, 32-bit floats).
+
+    An axis without steps has no rate to check (both without steps: a delay).
+    """
     if duration_ms == 0:
         raise EBBCommandError(INVALID_PARAMETER, "Duration 0")
-    if steps == (0, 0):
-        return  # a delay
     per_step = np.float32(SM_RATE_FACTOR) / np.float32(duration_ms)
     for axis, count in enumerate(steps, start=1):
         if count == 0:
@@ -492,13 +493,14 @@ class LineReader:
     """Bytes from the host cut into command lines as the firmware's receive loop cuts them.
 
     ``<CR>`` or ``<NL>`` ends a line (a ``<CR><NL>`` pair ends one); other control bytes are
-    dropped; a line of 256 bytes or more becomes ``b"!3"`` material: :func:`parse_command`
-    refuses it with ``!3 Err: RX Buffer overrun``.
+    dropped. A line of 256 bytes or more: :func:`parse_command` refuses it with ``!3 Err: RX
+    Buffer overrun``. A terminator first after boot gives an empty line ``b""``, which the
+    firmware answers with an ``!8`` error made of stale buffer bytes (not modelled).
     """
 
     def __init__(self) -> None:
         self._buffer = bytearray()
-        self._after_end = True
+        self._after_end = False
 
     def feed(self, data: bytes) -> list[bytes]:
         """The complete lines (without terminator) that ``data`` finishes."""

@@ -127,6 +127,8 @@ ERRORS = [
     (b"XM,100000000,1,0", b"!0 Err: <axis1> step rate too slow"),
     (b"SM,1,26", b"!0 Err: <axis1> step rate too high"),  # 25 steps/ms is the most
     (b"SM,85899360,1", b"!0 Err: <axis1> step rate too slow"),
+    (b"SM,257698040,3", b"!0 Err: <axis1> step rate too slow"),  # 0.99999994 in float32
+    (b"SR,-5", b"!6 Err: Invalid parameter value"),  # a sign on an unsigned parameter
     (b"CU,1,2", b"!6 Err: Invalid parameter value"),
     (b"CU,2,2", b"!6 Err: Invalid parameter value"),
     (b"CU,3,5", b"!6 Err: Invalid parameter value"),
@@ -157,6 +159,7 @@ def test_boundaries_accepted() -> None:
     assert parse_command(b"LM,-2147483648,1,0,0,0,0").params[0] == -(2**31)
     assert parse_command(b"LM,2147483647,1,0,0,0,0").params[0] == 2**31 - 1
     assert parse_command(b"LT,4294967295,1,0,1,0").params[0] == 2**32 - 1
+    assert parse_command(b"SR,4294967297").params == (1,)  # read into 32 bits
     assert parse_command(b"CU,61,-32768").params == (61, -32768)
     assert parse_command(b"SC,255,65535").params == (255, 65535)
     assert parse_command(b"S2,0,24").params == (0, 24)
@@ -165,6 +168,9 @@ def test_boundaries_accepted() -> None:
     # SM/XM step rates in the firmware's 32-bit floats: 25 steps/ms is exactly 2**31 per tick.
     assert parse_command(b"SM,1,25,-25").params == (1, 25, -25)
     assert parse_command(b"SM,85899344,1").params == (85899344, 1)
+    assert parse_command(b"SM,85899346,1").params == (85899346, 1)  # float32(85899346) == 85899344
+    assert parse_command(b"SM,10,10,10,3").params == (10, 10, 10, 3)
+    assert parse_command(b"SM,100,5,").params == (100, 5)
     assert parse_command(b"XM,1,12,-13").params == (1, 12, -13)
     assert parse_command(b"SM,100000000,0,0").params == (100000000, 0, 0)  # a delay
     assert parse_command(b"CU,4,100").params == (4, 100)  # the firmware clamps it to 32
@@ -192,6 +198,8 @@ def test_not_modelled_and_not_lines() -> None:
         parse_command(b"QT\r")
     with pytest.raises(UnsupportedCommand):
         parse_command(b"CU,250,1\r")
+    with pytest.raises(UnsupportedCommand):
+        parse_command(b"CU,257,0\r")
     with pytest.raises(ValueError, match="empty"):
         parse_command(b"\r\n")
     with pytest.raises(ValueError, match="more than one line"):
@@ -427,7 +435,8 @@ def test_format_command_refuses_what_the_firmware_would() -> None:
 
 def test_line_reader_cuts_like_the_firmware() -> None:
     reader = LineReader()
-    assert reader.feed(b"V\r\nQS\rSM,1\x01,2\n\n") == [b"V", b"QS", b"SM,1,2"]
+    assert reader.feed(b"\r\nV\r\nQS\rSM,1\x01,2\n\n") == [b"", b"V", b"QS", b"SM,1,2"]
+    assert reader.feed(b"S M,1\r") == [b"S M,1"]  # a space is kept (and refused by the parser)
     assert reader.feed(b"QU,") == []
     assert reader.feed(b"2\r") == [b"QU,2"]
     assert reader.feed(b"\n\r\r") == []
