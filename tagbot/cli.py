@@ -18,8 +18,8 @@ from typing import Any, TypeVar
 
 import click
 
-from sim.ebb.cli import sim_axidraw_command
 from tagbot.arm.cli import sim_arm_command
+from tagbot.axidraw.sim_cli import sim_axidraw_command
 from tagbot.corpus_cli import corpus_options, progress_bar, run_corpus
 from tagbot.errors import Interrupted, TagbotError
 from tagbot.plotter.cli import gcode_command, profile_options, sim_grbl_command

@@ -11,7 +11,7 @@ import pytest
 import serial
 from click.testing import CliRunner
 
-import sim.ebb.cli as ebb_cli
+import tagbot.axidraw.sim_cli as ebb_cli
 from firmware_protocols.ebb.motion import TICK_HZ
 from sim.ebb import transport
 from sim.ebb.device import DEFAULT_COMMAND_TIME, FIFO_MAX, SimulatedEBB

@@ -1,4 +1,8 @@
-"""``tagbot sim axidraw``: a simulated EiBotBoard served on a pseudo-terminal until Ctrl-C."""
+"""``tagbot sim axidraw``: a simulated EiBotBoard served on a pseudo-terminal until Ctrl-C.
+
+Here rather than in :mod:`sim.ebb` (simulators never import tagbot), and light to import: the
+simulator loads when the command runs.
+"""
 
 from __future__ import annotations
 
