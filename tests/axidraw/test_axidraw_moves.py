@@ -153,3 +153,14 @@ def test_a_dot_is_drawn_as_pen_down_and_up_where_it_is():
     here = steps_to_xy(job.entries[down].steps, profile.steps_per_mm)
     assert np.hypot(*(here - setpoints.runs[1].xy[0])) == pytest.approx(job.run_error[1])
     assert job.run_error[1] < 1.0 / profile.steps_per_mm
+
+
+def test_runs_are_retimed_to_the_speed_along_each_motor(cae_job):
+    _tag, profile, setpoints, _job = cae_job
+    along = np.concatenate([np.abs(r.v @ MOTOR_AXES.T) for r in setpoints.runs])
+    # cae.json is faster than the machine: the fastest motor runs at the limit, never above.
+    assert along.max() <= profile["limits.draw_speed"] * (1 + 1e-6)
+    assert along.max() >= profile["limits.draw_speed"] * 0.99
+    # Along x alone a motor turns at the speed of the pen: |vx| + |vy| is what is limited.
+    speed = np.concatenate([np.abs(r.v).sum(axis=1) for r in setpoints.runs])
+    np.testing.assert_allclose(speed.max(), along.max())
