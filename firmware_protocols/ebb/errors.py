@@ -1,7 +1,8 @@
 """The EBB's error replies (reference: "Returned Errors"; firmware 3.0 ``UBW.c``).
 
-In legacy response mode an error line is the text below followed by ``<CR><NL>``, and the
-command's normal reply (``OK<CR><NL>``) still follows it.
+In legacy response mode an error line is the text below followed by ``<CR><NL>``, and no
+``OK<CR><NL>`` follows it in firmware 3.0.3 (``CheckForAndPrintErrors``; the reference says one
+does): :func:`.commands.format_error` gives the exact bytes.
 """
 
 from __future__ import annotations
