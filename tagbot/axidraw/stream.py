@@ -3,8 +3,8 @@
 **Connect.** ``V`` reads the firmware version; below :data:`MIN_FIRMWARE` the run is refused
 before any motion command (``LT``/``T3``, the settable FIFO and ``QU,6`` need 3.0.1). Then
 ``QU,2`` (the largest FIFO the firmware has) and ``CU,4,n`` (the depth asked, capped there),
-``EM`` (motors on, the profile's microstepping), ``SC,4``/``SC,5``/``SC,11``/``SC,12`` (pen
-positions and rates) and a pen-up ``SP,1``.
+``EM`` (motors on, the profile's microstepping; it also zeroes the step counters),
+``SC,4``/``SC,5``/``SC,11``/``SC,12`` (pen positions and rates) and a pen-up ``SP,1``.
 
 **Stream.** A motion command is sent only while the board has room for it (one executing, ``n``
 in the FIFO), so the board answers it at once and its queries stay answered: every
@@ -144,8 +144,12 @@ class EBBStreamer:
         return reply
 
     # -- connect ----------------------------------------------------------------------------
-    def connect(self) -> tuple[int, int, int]:
-        """Version, FIFO depth, motors and pen set up (module docstring); the version."""
+    def connect(self, *, keep_position: bool = False) -> tuple[int, int, int]:
+        """Version, FIFO depth, motors and pen set up (module docstring); the version.
+
+        ``EM`` clears the board's step counters: the job's steps count from where the motors
+        are (home), or with ``keep_position`` (a resume) from where the counters said they
+        were before it."""
         p = self.profile
         version = parse_version(self.ask("V", data=True, ok=False))
         self.report.firmware = version
@@ -160,7 +164,9 @@ class EBBStreamer:
         depth = max(1, min(int(p["serial.fifo"]), largest))
         self.ask(f"CU,4,{depth}")
         self.report.fifo = depth
+        before = self.position()
         self.ask(f"EM,{p.step_mode},{p.step_mode}")
+        self.origin = before if keep_position else (0, 0)
         self.ask(f"SC,4,{p.servo_position(p['pen.up'])}")
         self.ask(f"SC,5,{p.servo_position(p['pen.down'])}")
         self.ask(f"SC,11,{p.servo_rate(p['pen.rate_raise'])}")
@@ -168,10 +174,13 @@ class EBBStreamer:
         self.ask("QB", data=True)  # forget a press from before the job
         return version
 
+    origin: tuple[int, int] = (0, 0)
+    """The job's step position where the board's counters read 0."""
+
     def position(self) -> tuple[int, int]:
-        """The global step position (``QS``)."""
+        """The job's step position: the board's global step counters (``QS``) + origin."""
         a, b = self.ask("QS", data=True).split(b",")
-        return int(a), int(b)
+        return int(a) + self.origin[0], int(b) + self.origin[1]
 
     def pen_line(self, down: bool) -> bytes:
         """``SP`` with the servo's travel time as the board's delay."""

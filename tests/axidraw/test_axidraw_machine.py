@@ -14,7 +14,6 @@ import pytest
 from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device
 from tagbot.axidraw.machine import AxiDrawJob, prepare
-from tagbot.cli import main
 from tagbot.control import RunControl
 from tagbot.draw import draw
 from tagbot.errors import DeviceError, Interrupted, PlacementError, ProfileError
@@ -185,6 +184,8 @@ def test_resume_draws_nothing_twice_and_the_button_pauses(job, tag, tmp_path):
     recorded = [s.line for s in device.recorder.moves() if not s.line.startswith(b"LM")]
     planned = [e.line.rstrip(b"\r") for e in job.job.entries if e.kind == "draw"]
     assert Counter(recorded) == Counter(planned)
+    # Parked home at the end, within the one step per motor the cleared accumulators allow.
+    assert max(map(abs, device.motor_position())) <= 1
 
 
 def on_port(job: AxiDrawJob, port: str, resume_from: int | None = None) -> AxiDrawJob:
@@ -193,6 +194,8 @@ def on_port(job: AxiDrawJob, port: str, resume_from: int | None = None) -> AxiDr
 
 
 def test_cli_device_choice_and_one_line_errors(tmp_path, capsys):
+    from tagbot.cli import main
+
     args = ["draw", str(LETTER_B), "--device", "axidraw", "--out", str(tmp_path / "c"), "-q"]
     assert main([*args, "--set", "motors.microstepping=3"]) == 2  # a usage error
     err = capsys.readouterr().err
