@@ -52,6 +52,9 @@ REPLY_TIMEOUT = 2.0
 _RECHECK = 0.001
 """s between asks while the board is behind its plan and the FIFO is full."""
 
+RESYNC_TIMEOUT = 10.0
+"""s a stop waits for the board to answer again (a stalled USB) before giving up."""
+
 _VERSION = re.compile(rb"Version\s+(\d+)\.(\d+)\.(\d+)")
 
 
@@ -101,9 +104,9 @@ class EBBStreamer:
         self._buffer = b""
 
     # -- the wire ---------------------------------------------------------------------------
-    def _line(self, command: bytes) -> bytes:
+    def _line(self, command: bytes, timeout: float = REPLY_TIMEOUT) -> bytes:
         """The next non-empty reply line (legacy mode ends lines with CR, LF or both)."""
-        deadline = self.clock.now() + REPLY_TIMEOUT
+        deadline = self.clock.now() + timeout
         while True:
             parts = re.split(rb"[\r\n]+", self._buffer.lstrip(b"\r\n"), maxsplit=1)
             if len(parts) == 2:
@@ -111,7 +114,7 @@ class EBBStreamer:
                 return parts[0]
             if self.clock.now() >= deadline:
                 name = command.split(b",")[0].strip().decode("ascii", "replace")
-                raise DeviceTimeout(f"{name}: no reply from the EBB in {REPLY_TIMEOUT:g} s")
+                raise DeviceTimeout(f"{name}: no reply from the EBB in {timeout:g} s")
             try:
                 chunk = self.link.read(max(1, getattr(self.link, "in_waiting", 0) or 1))
             except (OSError, ValueError) as e:
@@ -121,12 +124,7 @@ class EBBStreamer:
     def ask(self, command: str | bytes, *, data: bool = False, ok: bool = True) -> bytes:
         """Send ``command`` (``\\r`` added); its data line if ``data``, then ``OK`` if ``ok``.
         An error line (``!N Err: ...``) is a :class:`DeviceFault` naming the command."""
-        line = command.encode("ascii") if isinstance(command, str) else command
-        line = line if line.endswith(b"\r") else line + b"\r"
-        try:
-            self.link.write(line)
-        except (OSError, ValueError) as e:
-            raise ConnectionLost(f"the EBB's line failed: {e}") from e
+        line = self._send(command)
         answer = b""
         if data:
             answer = self._checked(line, self._line(line))
@@ -135,6 +133,23 @@ class EBBStreamer:
             if end != b"OK":
                 raise DeviceError(f"{_name(line)}: expected OK from the EBB, got {end!r}")
         return answer
+
+    def _send(self, command: str | bytes) -> bytes:
+        line = command.encode("ascii") if isinstance(command, str) else command
+        line = line if line.endswith(b"\r") else line + b"\r"
+        try:
+            self.link.write(line)
+        except (OSError, ValueError) as e:
+            raise ConnectionLost(f"the EBB's line failed: {e}") from e
+        return line
+
+    def _resync(self) -> None:
+        """Drop every reply in flight (after a late one, replies no longer match asks): ask
+        ``V`` and read up to its reply, waiting up to :data:`RESYNC_TIMEOUT` s."""
+        line = self._send("V")
+        deadline = self.clock.now() + RESYNC_TIMEOUT
+        while not _VERSION.search(self._line(line, max(0.0, deadline - self.clock.now()))):
+            pass
 
     def _checked(self, line: bytes, reply: bytes) -> bytes:
         if reply.startswith(b"!"):
@@ -302,7 +317,8 @@ class EBBStreamer:
         """``ES``, ``QS``, pen up (waited for); the stopped position (None if the board did
         not answer)."""
         try:
-            self.ask("ES", data=True)
+            self._send("ES")  # first: the motors stop as soon as it arrives
+            self._resync()  # past its reply and any late one
             steps = self.position()
             self.ask(self.pen_line(False))
             self._drain(self.clock.now() + self.profile.pen_time(False))  # the pen is up

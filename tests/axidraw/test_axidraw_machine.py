@@ -16,7 +16,14 @@ from sim.ebb.transport import attach_device
 from tagbot.axidraw.machine import AxiDrawJob, prepare
 from tagbot.control import RunControl
 from tagbot.draw import draw
-from tagbot.errors import DeviceError, Interrupted, PlacementError, ProfileError
+from tagbot.errors import (
+    ConnectionLost,
+    DeviceError,
+    DeviceTimeout,
+    Interrupted,
+    PlacementError,
+    ProfileError,
+)
 from tagbot.io.planfile import load_plan
 
 from .conftest import LETTER_B
@@ -208,3 +215,23 @@ def test_cli_device_choice_and_one_line_errors(tmp_path, capsys):
         "tagbot: error: --port auto: no EiBotBoard found on USB (is the AxiDraw plugged in?)"
     ]
     assert not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize("fault", ["stall", "reset"])
+def test_a_board_fault_ends_in_a_safe_stop_naming_the_last_move(job, tag, tmp_path, fault):
+    device = SimulatedEBB()
+    if fault == "stall":  # the USB carries nothing for 3 s: a reply is 2 s late
+        device.stall_usb(4.0, 3.0)
+        expected = DeviceTimeout
+    else:  # the board resets: motion stops, the USB connection drops
+        device.reset_board(4.0)
+        expected = ConnectionLost
+    with pytest.raises(expected, match=r"^after move \d+ of \d+ \(moves.txt\): "):
+        draw(tag, tmp_path / fault, prepared=on_port(job, _url(device)), pictures=False)
+    report = json.loads((tmp_path / fault / "report.json").read_text())
+    assert not report["completed"] and 0 < report["executed"] < report["total"]
+    assert report["resume_from"] > report["executed"]
+    assert f"after move {report['executed']} " in report["error"]
+    if fault == "stall":  # ES reached the board once the USB moved again: pen up, stopped
+        assert device.pen_up and report["details"]["stopped_at_steps"] is not None
+        assert any(text.startswith("ES") for _, text in device.recorder.events)
