@@ -152,7 +152,8 @@ class AxiDrawJob:
             link = serial.serial_for_url(url, timeout=0.01)
         except (serial.SerialException, OSError, ValueError) as e:
             raise ConnectionLost(f"cannot open {url}: {e}") from e
-        streamer = EBBStreamer(link, profile)
+        pens = {e.pen: (e.line, e.duration) for e in job.entries if e.kind == "pen"}
+        streamer = EBBStreamer(link, profile, pens)
         first = 0 if self.resume_from is None else self.resume_from - 1
         error: BaseException | None = None
         try:
@@ -231,7 +232,7 @@ class AxiDrawJob:
     def _preamble(self, streamer: EBBStreamer, first: int) -> list[bytes]:
         """A resume's pen up, travel to where move ``first`` starts, and pen down if needed."""
         if first == 0:  # the motors are home: EM zeroed the counters there
-            return [streamer.pen_line(False)]
+            return [streamer.pen_line(False)] if streamer.pens else []
         here = streamer.position()
         before = self.job.entries[first - 1]
         delta = (before.steps[0] - here[0], before.steps[1] - here[1])

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import re
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -96,9 +96,14 @@ class StreamReport:
 class EBBStreamer:
     """One EBB on an open serial ``link`` (pyserial-like: ``write``, ``read``)."""
 
-    def __init__(self, link: Any, profile: Profile) -> None:
+    def __init__(
+        self, link: Any, profile: Profile, pens: Mapping[bool, tuple[bytes, float]]
+    ) -> None:
+        """``pens[down]``: the job's ``SP`` line lowering (True) or lifting the pen, and how
+        long it takes (s), for pauses, stops and resumes."""
         self.link = link
         self.profile = profile
+        self.pens = pens
         self.clock = port_clock(link)
         self.report = StreamReport()
         self._buffer = b""
@@ -198,9 +203,8 @@ class EBBStreamer:
         return int(a) + self.origin[0], int(b) + self.origin[1]
 
     def pen_line(self, down: bool) -> bytes:
-        """``SP`` with the servo's travel time as the board's delay."""
-        ms = max(1, round(1000.0 * self.profile.pen_time(down)))
-        return f"SP,{0 if down else 1},{ms},{self.profile['pen.pin']}\r".encode()
+        """The job's own ``SP`` lowering (``down``) or lifting the pen."""
+        return self.pens[down][0]
 
     # -- stream -----------------------------------------------------------------------------
     def stream(
@@ -310,7 +314,7 @@ class EBBStreamer:
                 break
         if down:
             self.ask(self.pen_line(True))
-            self._drain(self.clock.now() + self.profile.pen_time(True))
+            self._drain(self.clock.now() + self.pens[True][1])
         self.report.pauses.append((start, self.clock.now() - start))
 
     def stop(self) -> tuple[int, int] | None:
@@ -320,8 +324,9 @@ class EBBStreamer:
             self._send("ES")  # first: the motors stop as soon as it arrives
             self._resync()  # past its reply and any late one
             steps = self.position()
-            self.ask(self.pen_line(False))
-            self._drain(self.clock.now() + self.profile.pen_time(False))  # the pen is up
+            if False in self.pens:  # a job without pen moves never lowered it
+                self.ask(self.pen_line(False))
+                self._drain(self.clock.now() + self.pens[False][1])  # the pen is up
         except DeviceError:
             return None
         self.report.stopped_at = steps
