@@ -294,6 +294,7 @@ class AxiDrawJob:
             "steps_per_mm": job.steps_per_mm,
             "polls": len(report.polls),
             "button_presses": report.button_presses,
+            "most_on_board": report.most_on_board,
             "errors": list(report.errors),
             "stopped_at_steps": list(report.stopped_at) if report.stopped_at else None,
         }

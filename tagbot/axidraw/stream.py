@@ -86,6 +86,9 @@ class StreamReport:
     stopped_at: tuple[int, int] | None = None
     """Global steps where ``ES`` stopped the motors (None: the job ran to its end)."""
     button_presses: int = 0
+    most_on_board: int = 0
+    """The most job commands the board held at once (one executing, the FIFO's): at most
+    ``fifo + 1``, so the board always has room and answers every query at once."""
     errors: list[str] = field(default_factory=list)
 
     @property
@@ -241,6 +244,7 @@ class EBBStreamer:
                 sent += 1
                 r.sent = sent - first
                 self._outstanding += 1
+                r.most_on_board = max(r.most_on_board, self._outstanding)
                 continue
             if now >= next_poll:
                 next_poll = now + poll

@@ -86,6 +86,8 @@ def test_a_whole_tag_follows_the_plan(drawn, job):
     assert report["path_deviation_max_mm"] <= 0.02
     assert report["executed_source"] == "simulator tick record, 1 ms"
     assert report["details"]["fifo"] == 4 and report["details"]["firmware"] == "3.0.3"
+    # Streamed ahead by the FIFO's depth and never beyond (one executing, four queued).
+    assert report["details"]["most_on_board"] == 5
     # What was sent, one command a line, the job's own.
     sent = (out / "moves.txt").read_text().splitlines()
     assert sent == [e.line.decode().rstrip("\r") for e in job.job.entries]
@@ -128,11 +130,12 @@ def test_refusals_happen_before_the_first_byte(tag, tmp_path):
     assert not (tmp_path / "never").exists()
 
 
-def test_old_firmware_is_refused_at_connect(job, tag, tmp_path):
+@pytest.mark.parametrize("version", ["2.8.1", "3.0.0"])
+def test_old_firmware_is_refused_at_connect(job, tag, tmp_path, version):
     base = job
-    device = SimulatedEBB(version="2.8.1")
+    device = SimulatedEBB(version=version)
     job = on_port(base, _url(device))
-    with pytest.raises(DeviceError, match=r"firmware 2\.8\.1 is not supported.*3\.0\.1"):
+    with pytest.raises(DeviceError, match=rf"firmware {version} is not supported.*3\.0\.1"):
         draw(tag, tmp_path / "old", prepared=job, pictures=False)
     report = json.loads((tmp_path / "old" / "report.json").read_text())
     assert not report["completed"] and report["executed"] == 0
