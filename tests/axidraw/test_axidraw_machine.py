@@ -14,6 +14,7 @@ import pytest
 from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device
 from tagbot.axidraw.machine import AxiDrawJob, prepare
+from tagbot.axidraw.profile import load_profile
 from tagbot.control import RunControl
 from tagbot.draw import draw
 from tagbot.errors import (
@@ -147,9 +148,12 @@ def test_ctrl_c_stops_safely_naming_the_last_move(job, tag, tmp_path):
         if done >= total // 3:
             raise KeyboardInterrupt
 
+    # A FIFO deeper than the firmware's (QU,2: 32) is capped there.
+    deep = replace(job, profile=load_profile(overrides=("serial.fifo=40",)))
     with pytest.raises(Interrupted, match=r"after move \d+ of \d+ \(moves.txt\): interrupted"):
-        draw(tag, tmp_path / "stop", prepared=job, pictures=False, progress=progress)
+        draw(tag, tmp_path / "stop", prepared=deep, pictures=False, progress=progress)
     report = json.loads((tmp_path / "stop" / "report.json").read_text())
+    assert report["details"]["fifo"] == 32 and report["details"]["most_on_board"] == 33
     done = report["executed"]
     assert report["total"] // 3 <= done < report["total"]
     assert f"after move {done} " in report["error"]
