@@ -93,7 +93,11 @@ COMMON_KEYS = {
 
 @pytest.mark.parametrize(
     ("device", "program", "deviation"),
-    [("grbl", "program.gcode", 0.05), ("dynamixel", "joints.csv", 0.3)],
+    [
+        ("grbl", "program.gcode", 0.05),
+        ("dynamixel", "joints.csv", 0.3),
+        ("axidraw", "moves.txt", 0.02),
+    ],
 )
 def test_both_devices_write_the_same_run_folder(tmp_path, device, program, deviation):
     result = draw(load_plan(LETTER_B), tmp_path / device, device=device)

@@ -194,7 +194,7 @@ class AxiDrawJob:
             executed=executed,
             executed_runs=runs,
             executed_source=(
-                "simulator tick record, 1 ms"
+                "simulator recorder, 1 ms"
                 if device is not None
                 else f"QS polls, {1.0 / float(profile['serial.poll']):g} Hz"
             ),

@@ -85,7 +85,7 @@ def test_a_whole_tag_follows_the_plan(drawn, job):
     # The goals: speed SNR >= 35 dB against the plan, path deviation <= 0.02 mm.
     assert report["speed_snr_db"] >= 35.0
     assert report["path_deviation_max_mm"] <= 0.02
-    assert report["executed_source"] == "simulator tick record, 1 ms"
+    assert report["executed_source"] == "simulator recorder, 1 ms"
     assert report["details"]["fifo"] == 4 and report["details"]["firmware"] == "3.0.3"
     # Streamed ahead by the FIFO's depth and never beyond (one executing, four queued).
     assert report["details"]["most_on_board"] == 5
@@ -93,18 +93,6 @@ def test_a_whole_tag_follows_the_plan(drawn, job):
     sent = (out / "moves.txt").read_text().splitlines()
     assert sent == [e.line.decode().rstrip("\r") for e in job.job.entries]
     assert json.loads((out / "report.json").read_text())["executed"] == len(sent)
-
-
-def test_report_keys_are_the_other_machines(drawn):
-    _out, report = drawn
-    shared = {
-        "device", "port", "simulated", "completed", "error", "warnings", "unit", "total",
-        "sent", "executed", "resume_from", "planned_duration_s", "executed_duration_s",
-        "paused_s", "pauses", "longest_pause_s", "stalled_s", "stalls", "longest_stall_s",
-        "executed_source", "placement", "path_deviation_mean_mm", "path_deviation_max_mm",
-        "speed_snr_db", "details",
-    }  # fmt: skip
-    assert shared <= set(report)
 
 
 def test_the_executed_trace_ends_pen_up_at_home_and_pauses_pen_up(drawn, job):
