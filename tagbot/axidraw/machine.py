@@ -215,6 +215,7 @@ class AxiDrawJob:
             details=self._details(report),
             error=error,
             pauses=[(a - report.started, n) for a, n in report.pauses],
+            stalls=[(a - report.started, n) for a, n in report.stalls],
             until=None if error is None else _until(job, done),
         )
 

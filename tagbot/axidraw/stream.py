@@ -13,6 +13,10 @@ waiting) and ``QS`` (global step position) say what has executed:
 ``executed = sent − waiting − executing`` (read in that order, a race can only count one move
 fewer, never one more), and ``QB`` (the PRG button) asks for a pause.
 
+A **stall** is the board found idle when the host sends again while the job has more: the
+host was late (descheduled, a stalled USB); it lasts from when the last command sent should
+have ended until then (:attr:`StreamReport.stalls`, the report's ``stalls``).
+
 **Pause** (the button or :class:`~tagbot.control.RunControl`): nothing more is sent, the FIFO
 drains, the pen lifts (``SP,1``) and waits; on resume the pen lowers and the stream goes on from
 the next move: the motors never moved, so the motion after it is the plan's, exactly.
@@ -83,6 +87,9 @@ class StreamReport:
     polls: list[tuple[float, int, int, int]] = field(default_factory=list)
     """``(t, executed, motor 1, motor 2)`` at each ``QS``."""
     pauses: list[tuple[float, float]] = field(default_factory=list)
+    stalls: list[tuple[float, float]] = field(default_factory=list)
+    """The board found idle when the host sent its next command: from when the last one
+    should have ended to then (the host was late: a descheduled host, a slow USB)."""
     stopped_at: tuple[int, int] | None = None
     """Global steps where ``ES`` stopped the motors (None: the job ran to its end)."""
     button_presses: int = 0
@@ -234,13 +241,20 @@ class EBBStreamer:
             self._drain(self.clock.now(), poll)
         total = len(lines)
         finish: deque[float] = deque()  # when each outstanding line should be done
+        last: float | None = None  # when the last line sent should be done
         next_poll = self.clock.now()
         sent = first
         while sent < total or self._outstanding:
             now = self.clock.now()
             if sent < total and self._outstanding < depth:
+                if last is not None and now > last + _RECHECK:  # late: did the board run dry?
+                    self._count(sent)
+                    if not self._outstanding:
+                        r.stalls.append((last, now - last))
+                    last = now  # the board is at least this far behind the estimate
                 self.ask(lines[sent])
-                finish.append(max(now, finish[-1] if finish else now) + durations[sent])
+                last = max(now, last if last is not None else now) + durations[sent]
+                finish.append(last)
                 sent += 1
                 r.sent = sent - first
                 self._outstanding += 1
@@ -257,6 +271,7 @@ class EBBStreamer:
                     until = finish[-1] if finish else now
                     self._pause(down, None if button else control, sent, until, poll)
                     finish.clear()
+                    last = None
             else:  # full: ask again when the oldest line should be done
                 wake = min(next_poll, finish[0] if finish else next_poll)
                 self.clock.sleep_until(max(wake, now + _RECHECK))

@@ -89,6 +89,7 @@ def test_a_whole_tag_follows_the_plan(drawn, job):
     assert report["details"]["fifo"] == 4 and report["details"]["firmware"] == "3.0.3"
     # Streamed ahead by the FIFO's depth and never beyond (one executing, four queued).
     assert report["details"]["most_on_board"] == 5
+    assert report["stalls"] == 0  # the board never ran dry
     # What was sent, one command a line, the job's own.
     sent = (out / "moves.txt").read_text().splitlines()
     assert sent == [e.line.decode().rstrip("\r") for e in job.job.entries]
@@ -230,3 +231,14 @@ def test_a_board_fault_ends_in_a_safe_stop_naming_the_last_move(job, tag, tmp_pa
     if fault == "stall":  # ES reached the board once the USB moved again: pen up, stopped
         assert device.pen_up and report["details"]["stopped_at_steps"] is not None
         assert any(text.startswith("ES") for _, text in device.recorder.events)
+
+
+def test_a_short_usb_stall_is_reported_as_a_stall(job, tag, tmp_path):
+    device = SimulatedEBB()
+    device.stall_usb(4.0, 1.0)  # shorter than a reply's 2 s: the run goes on
+    report = draw(tag, tmp_path / "s", prepared=on_port(job, _url(device)), pictures=False)
+    report = report.report
+    assert report["completed"] and report["executed"] == report["total"]
+    # The board ran dry: 1 s less what it held (at most FIFO + 1 moves) is the stall.
+    holds = (report["details"]["fifo"] + 1) * max(e.duration for e in job.job.entries)
+    assert report["stalls"] == 1 and 1.0 - holds <= report["stalled_s"] <= 1.0
