@@ -71,8 +71,8 @@ DEVICES: dict[str, str] = {
 """Back ends by name: ``module:function`` of their ``prepare``."""
 
 Progress = Callable[[int, int], None]
-"""``progress(executed, total)``: program lines (plotter) or ticks (arm) the machine has
-executed so far, out of the job's total."""
+"""``progress(executed, total)``: program lines (plotter), ticks (arm) or moves (AxiDraw) the
+machine has executed so far, out of the job's total."""
 
 
 @dataclass
@@ -98,7 +98,8 @@ class MachineRun:
     """With :attr:`sparse`: the pen-down run (index in :attr:`planned_runs`) of each executed
     sample, -1 for none; else None (runs are found from the pen column)."""
     unit: str
-    """``"line"`` (1-based line of program.gcode) or ``"tick"`` (row of joints.csv)."""
+    """``"line"`` (1-based line of program.gcode), ``"tick"`` (row of joints.csv) or ``"move"``
+    (line of moves.txt)."""
     total: int
     """Lines or ticks in the job."""
     sent: int
