@@ -356,7 +356,8 @@ class EBBStreamer:
 def locate(job: Job, steps: tuple[int, int], after: int, before: int) -> int:
     """Entries executed in full when the motors stood at ``steps``: the first tick at or after
     the end of entry ``after`` (executed entries) and before the end of entry ``before`` (sent)
-    where the job's tick record is at ``steps``; ``after`` when none is."""
+    where the job's tick record is at ``steps`` (``after`` when none is); a move whose rest
+    takes no step counts as executed."""
     ends = entry_end_ticks(job)
     lo = int(ends[after - 1]) if after > 0 else 0
     hi = int(ends[min(before, len(ends)) - 1]) if before > 0 else 0
@@ -365,7 +366,13 @@ def locate(job: Job, steps: tuple[int, int], after: int, before: int) -> int:
     if not len(hits):
         return after
     tick = lo + int(hits[0]) + 1  # ticks done
-    return max(after, int(np.searchsorted(ends, tick, side="right")))
+    done = int(np.searchsorted(ends, tick, side="left"))  # entries ended before that tick
+    if done < len(ends) and job.entries[done].move is not None:
+        # The move under way counts as done when the rest of it stays where the motors are
+        # (no step left to take); a pen move after it does not (ES flushed it).
+        rest = job.ticks[tick - 1 : int(ends[done])]
+        done += bool((rest == np.asarray(steps)).all())
+    return max(after, done)
 
 
 def entry_end_ticks(job: Job) -> np.ndarray:

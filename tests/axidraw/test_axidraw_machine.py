@@ -15,6 +15,7 @@ from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device
 from tagbot.axidraw.machine import AxiDrawJob, prepare
 from tagbot.axidraw.profile import load_profile
+from tagbot.axidraw.stream import entry_end_ticks, locate
 from tagbot.control import RunControl
 from tagbot.draw import draw
 from tagbot.errors import (
@@ -242,3 +243,19 @@ def test_a_short_usb_stall_is_reported_as_a_stall(job, tag, tmp_path):
     # The board ran dry: 1 s less what it held (at most FIFO + 1 moves) is the stall.
     holds = (report["details"]["fifo"] + 1) * max(e.duration for e in job.job.entries)
     assert report["stalls"] == 1 and 1.0 - holds <= report["stalled_s"] <= 1.0
+
+
+def test_the_stopped_position_names_the_moves_executed(job):
+    """ES flushes what was queued: a stop at a run's last tick has executed that move, not the
+    pen lift after it; a stop inside a move has executed the moves before it."""
+    entries, ticks = job.job.entries, job.job.ticks
+    ends = entry_end_ticks(job.job)
+    last = max(i for i, e in enumerate(entries) if e.kind == "draw")
+    assert entries[last + 1].kind == "pen"
+    assert locate(job.job, entries[last].steps, last - 3, last + 3) == last + 1
+    inside = next(i for i, e in enumerate(entries) if e.kind == "draw" and i > 10)
+    middle = tuple(ticks[(int(ends[inside - 1]) + int(ends[inside])) // 2])
+    assert middle != entries[inside].steps
+    assert locate(job.job, middle, inside - 2, inside + 2) == inside
+    # Nowhere on the record after the executed moves: as many as the board said.
+    assert locate(job.job, (10**6, 10**6), 5, 9) == 5
