@@ -15,12 +15,14 @@ from firmware_protocols.ebb.errors import EBBCommandError, MoveTooLong
 from firmware_protocols.ebb.motion import (
     ACCUMULATOR_STEP,
     TICK_HZ,
+    AxisStart,
     Move,
     axis_final,
     axis_positions,
     cleared_accumulator,
     execute,
     lm_axis,
+    wrap32,
 )
 
 INT32 = st.integers(-(2**31), 2**31 - 1)
@@ -83,19 +85,23 @@ def test_time_limited_axis_matches_the_isr_tick_by_tick(ticks, rate, accel, jerk
     assert axis_final(ticks, rate, accel, jerk, acc) == (expected[-1], expected_acc)
 
 
+@st.composite
+def _within_int32(draw):
+    """A time-limited axis whose rate stays within int32 (plotink's closed forms assume it)."""
+    ticks = draw(st.integers(1, 200_000))
+    rate = draw(st.integers(-(2**30), 2**30))
+    accel_bound = min(5000, 2**29 // ticks)
+    accel = draw(st.integers(-accel_bound, accel_bound))
+    jerk_bound = min(3, 2**29 // (ticks * ticks))
+    jerk = draw(st.integers(-jerk_bound, jerk_bound))
+    return ticks, rate, accel, jerk
+
+
 @settings(max_examples=200, deadline=None)
-@given(
-    ticks=st.integers(1, 200_000),
-    rate=st.integers(-(2**30), 2**30),
-    accel=st.integers(-5000, 5000),
-    jerk=st.integers(-3, 3),
-    acc=st.one_of(st.none(), ACCUMULATOR),
-)
-def test_time_limited_final_state_equals_plotink(ticks, rate, accel, jerk, acc):
+@given(case=_within_int32(), acc=st.one_of(st.none(), ACCUMULATOR))
+def test_time_limited_final_state_equals_plotink(case, acc):
     """Final step position and accumulator equal ``move_dist_t3``/``move_dist_lt`` exactly."""
-    # plotink's closed forms hold while the rate stays within int32 (the firmware's contract).
-    extreme = max(abs(rate) + abs(accel) * ticks + abs(jerk) * ticks * ticks, 0)
-    assume(extreme < 2**31)
+    ticks, rate, accel, jerk = case
     start = cleared_accumulator(rate, accel, jerk) if acc is None else acc
     oracle_acc = "clear" if acc is None else acc
     got = axis_final(ticks, rate, accel, jerk, start)
@@ -239,6 +245,43 @@ def test_clear_of_a_backward_axis_starts_at_2_31_minus_1():
     positions, accumulators = execute(Move("LT", (-(2**30), 0), ticks=2, clear=3))
     assert positions[:, 0].tolist() == [0, -1]  # 2**31-1 - 2**30 >= 0, then below 0: one step
     assert accumulators == (2**31 - 1, 0)  # -1 after two ticks, + 2**31 with the step
+
+
+@pytest.mark.parametrize(
+    ("rate", "accel", "jerk", "expected"),
+    [(-2, 6, -6, 2**31 - 1), (-3, 6, -5, 0), (0, 0, 0, 0), (3, -6, 0, 2**31 - 1), (-3, 6, 0, 0)],
+)
+def test_clear_looks_ahead_while_the_rate_is_zero(rate, accel, jerk, expected):
+    """First tick's rate zero: the second's sign decides, then the jerk's (firmware order)."""
+    assert cleared_accumulator(rate, accel, jerk) == expected
+    assert isr(rate, accel, jerk, 12345, ticks=1, clear=True) == isr(
+        rate, accel, jerk, expected, ticks=1
+    )
+    ticks = 50
+    assert axis_final(ticks, rate, accel, jerk, expected) == ebb_calc.move_dist_t3(
+        ticks, rate, accel, jerk, "clear"
+    )
+
+
+def test_rate_that_wraps_only_mid_move_is_summed_tick_by_tick():
+    """The rate peaks above 2**31 - 1 between two in-range ends: the closed form must not apply."""
+    args = (200, 0, 2**26, -(2**26) // 100, 0)
+    expected, expected_acc = isr(*args[1:4], args[4], ticks=args[0])
+    assert axis_final(*args) == (expected[-1], expected_acc)
+
+
+def test_continuing_a_loaded_axis_is_the_same_sequence():
+    start = AxisStart.load(123_456, -789, 35)
+    for done, more in [(1, 1), (64, 500), (1000, 3)]:
+        assert start.after(done).rate_at(more) == wrap32(start.rate_at(done + more))
+
+
+def test_lm_longer_than_its_first_guess():
+    """A slow start that accelerates hard: several chunks, joined without a seam."""
+    positions, final = lm_axis(-90, 5_000_000, 4_000, clear=True)
+    expected, expected_acc = isr(5_000_000, 4_000, 0, 0, steps=-90, clear=True)
+    assert positions.tolist() == expected
+    assert final == expected_acc
 
 
 def test_lines_are_the_documented_syntax():
