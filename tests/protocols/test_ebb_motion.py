@@ -320,3 +320,12 @@ def test_invalid_moves_get_the_firmware_reply(move, limit_checked):
 def test_constants():
     assert TICK_HZ == 25_000
     assert ACCUMULATOR_STEP == 2**31
+
+
+def test_zero_interval_move_without_limit_checks_only_clears():
+    """``CU,2,0`` lets ``LT,0,...`` through: no tick runs, the clear bits still act at load."""
+    positions, accumulators = execute(
+        Move("LT", (5, 5), ticks=0, clear=2), (7, 8), limit_checks=False
+    )
+    assert positions.shape == (0, 2)
+    assert accumulators == (7, 0)
