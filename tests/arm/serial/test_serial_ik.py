@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tagbot.arm.serial.kinematics import PEN_SITE, SerialArm, TiltLimit
+from tagbot.arm.serial.kinematics import PEN_SITE, SerialArm, TiltLimit, _PathSolver
 from tagbot.errors import PlacementError, ReachError
 
 UP = np.array([0.0, 0.0, 1.0])  # a table's normal
@@ -135,6 +135,31 @@ def test_a_jump_between_points_is_refused(arm: SerialArm) -> None:
         str(err.value),
     )
     assert (err.value.index, err.value.reason) == (1, "jump")
+    # the bound is the largest joint step itself: 1 % under it refused, 1 % over it passes
+    short = line[:1] + [[0.0, 0.002, 0.0]] * np.arange(2)[:, None]
+    step = np.abs(np.diff(arm.solve_path(short, UP, TILT, np.zeros(4)), axis=0)).max()
+    arm.solve_path(short, UP, TILT, np.zeros(4), max_step=1.01 * step)
+    with pytest.raises(ReachError, match="would jump"):
+        arm.solve_path(short, UP, TILT, np.zeros(4), max_step=0.99 * step)
+
+
+def test_the_first_point_is_held_to_the_tilt(arm: SerialArm) -> None:
+    # the first point comes from anywhere and its tilt is checked after: 27.6 cm out on the
+    # table the pen leans 10.3°
+    with pytest.raises(
+        ReachError, match=r"^point 0: the pen axis would be 10\.3° .*\(max 10\.0°\)"
+    ):
+        arm.solve_path([[0.276, 0.0, 0.0]], UP, math.radians(10), np.zeros(4))
+    arm.solve_path([[0.276, 0.0, 0.0]], UP, math.radians(10.5), np.zeros(4))
+
+
+def test_a_point_the_cone_blocks_is_taken_by_the_position_alone(arm: SerialArm) -> None:
+    """The fall-back keeps a pose found without the cone when it is within the tilt."""
+    solver = _PathSolver(arm, UP, TILT, 1e-6, 200)
+    target = np.array([0.17, 0.0, 0.0])
+    solver.fall_back(0, target, np.zeros(4))
+    assert np.linalg.norm(solver.tip() - target) < 1e-6
+    assert tilts(arm.fk(solver.cfg.q)[1][None], UP)[0] <= TILT
 
 
 @pytest.mark.parametrize(

@@ -59,6 +59,7 @@ def test_a_job_is_solved_with_its_approach_retreat_and_travel(arm: SerialArm) ->
     assert set(job.run[travel]) == {1}
     assert np.degrees(np.arccos(np.clip(-axis[:, 2], -1, 1))).max() <= 30 + 1e-9
     assert np.abs(np.diff(job.q, axis=0)).max() < 0.05
+    assert np.linalg.norm(np.diff(job.points, axis=0), axis=1).min() > 0  # no point twice
 
 
 def test_a_job_out_of_reach_names_the_run_and_the_move(arm: SerialArm) -> None:
