@@ -9,10 +9,13 @@ name an ``end_effector`` site from which ``tool_offset`` places the point. Joint
 iteration, solver daqp): a position task on the pen tip, a light axis-alignment task pulling the
 pen towards the paper's normal, and as inequalities the joint limits, the velocity limits (a
 step bound per iteration) and the tilt cone (:class:`TiltLimit`). Each point is iterated until
-the tip is within ``tol`` of it, warm-started from the previous solution extrapolated linearly,
-so the joints move continuously along the path; a point that cannot be reached, needs a joint
-beyond its range, tilts the pen too far or makes the arm touch itself raises
-:class:`~tagbot.errors.ReachError` naming its index and the reason.
+the tip is within ``tol`` of it (1 µm by default), warm-started from the previous solution
+extrapolated linearly; points more than 2 mm apart are joined through points 2 mm apart, so the
+joints move continuously along the path. A point that cannot be reached, needs a joint beyond
+its range, tilts the pen too far, makes the arm touch itself or moves a joint more than
+``max_step`` in 2 mm raises :class:`~tagbot.errors.ReachError` naming its index and the reason.
+Cost: about 0.15-0.25 ms per point on a table, 0.3-0.4 ms on a board whose normal leaves the
+arm's plane (one core, tags sampled at 100 Hz).
 """
 
 from __future__ import annotations
