@@ -335,6 +335,8 @@ class _Drive:
         self.integral = 0.0  # Σe (ticks · control periods), or Σ velocity error in velocity mode
         self.force = 0.0
         self.torque_on = False
+        self.regime: tuple[bool, int] = (False, -1)  # (torque on, operating mode)
+        self.emf_in_damping = False  # the back-EMF acts as joint damping (not in current mode)
 
     def horn(self) -> tuple[float, float]:
         d = self.physics.data
@@ -347,10 +349,10 @@ class _Drive:
         if not self.torque_on:
             return 0.0, 0.0
         motor = self.motor
-        unit = self._pwm_torque()
-        speed = float(self.physics.data.qvel[self.dof])
-        torque = self.force - motor.back_emf_damping * speed
-        return self.force / unit, motor.stall_current * torque / motor.stall_torque
+        emf = motor.back_emf_damping * float(self.physics.data.qvel[self.dof])
+        torque = self.force - emf if self.emf_in_damping else self.force
+        pwm = (torque + emf) / self._pwm_torque()
+        return pwm, motor.stall_current * torque / motor.stall_torque
 
     def turn_to(self, ticks: float) -> None:
         d = self.physics.data
@@ -366,18 +368,19 @@ class _Drive:
     def control(self, t: float, dt: float) -> None:
         """Set the actuator for the step that starts at ``t`` (``dt`` long)."""
         servo, m, d = self.servo, self.physics.model, self.physics.data
-        on = servo.torque
-        if on != self.torque_on:
-            self.torque_on = on
-            self.integral = 0.0
-            emf = self.motor.back_emf_damping if on else 0.0
+        on, mode = servo.torque, servo.memory[11]
+        if (on, mode) != self.regime:
+            self.regime, self.torque_on, self.integral = (on, mode), on, 0.0
+            self.emf_in_damping = on and mode != OperatingMode.CURRENT
+            emf = self.motor.back_emf_damping if self.emf_in_damping else 0.0
             m.dof_damping[self.dof] = self.base_damping + emf
-        kp = kv = ctrl = limit = 0.0
+        kp = kv = ctrl = 0.0
+        low = high = 0.0
         if on:
             unit = self._pwm_torque()
             pwm_cap = min(servo.get("pwm_limit"), abs(servo.get("goal_pwm")))
-            limit = unit * pwm_cap
-            mode = servo.memory[11]
+            high = unit * pwm_cap
+            low = -high
             q, speed = float(d.qpos[self.qadr]), float(d.qvel[self.dof])
             periods = dt / CONTROL_PERIOD
             if mode in POSITION_MODES:
@@ -393,7 +396,8 @@ class _Drive:
                 kv = unit * kpd * CONTROL_PERIOD * TICKS_PER_RAD
                 ctrl = kp * q_ref + kv * w_ref + unit * kpi * self.integral
                 if mode == OperatingMode.CURRENT_BASED_POSITION and self.has_current:
-                    limit = min(limit, self._current_torque(servo.get("goal_current"), abs_=True))
+                    high = min(high, abs(self._current_torque(servo.get("goal_current"))))
+                    low = -high
             elif mode == OperatingMode.VELOCITY:
                 per_unit = TICKS_PER_S_PER_VELOCITY_UNIT / TICKS_PER_RAD  # rad/s per unit
                 _, v_ref = servo.trajectory.state(t)
@@ -406,14 +410,19 @@ class _Drive:
             elif mode == OperatingMode.PWM:
                 ctrl = unit * servo.get("goal_pwm")
             elif mode == OperatingMode.CURRENT and self.has_current:
+                # the current loop drives the current (so the torque) whatever the speed, as
+                # long as its voltage (within the PWM limit) covers the back-EMF
                 ctrl = self._current_torque(servo.get("goal_current"))
+                emf = self.motor.back_emf_damping * speed
+                low, high = low - emf, high - emf
         m.actuator_biasprm[self.act, 1] = -kp
         m.actuator_biasprm[self.act, 2] = -kv
-        m.actuator_forcerange[self.act] = (-limit, limit)
+        m.actuator_forcerange[self.act] = (low, high)
         d.ctrl[self.act] = ctrl
 
-    def _current_torque(self, units: int, *, abs_: bool = False) -> float:
-        amps = (abs(units) if abs_ else units) * MA_PER_CURRENT_UNIT / 1000.0
+    def _current_torque(self, units: int) -> float:
+        """N·m the motor gives at ``units`` of current (2.69 mA each)."""
+        amps = units * MA_PER_CURRENT_UNIT / 1000.0
         return self.motor.stall_torque * amps / self.motor.stall_current
 
     def after_step(self) -> None:
