@@ -110,6 +110,22 @@ def test_moves_follow_each_other_without_a_gap_at_the_tick():
     assert [s.ticks for s in segments] == [250, 250, 250, 75]
     for before, after in itertools.pairwise(segments):
         assert after.load_tick == before.end_tick
+    # The record holds each position from the tick it was stepped to the next step.
+    trace = device.recorder.trace()
+    for segment in segments:
+        assert trace.motor1[segment.load_tick] == segment.origin[0]
+        assert trace.motor1[segment.end_tick] == segment.positions()[-1][0]
+    assert trace.motor1[: segments[0].load_tick + 1].tolist() == [0] * (segments[0].load_tick + 1)
+
+
+def test_a_move_loads_on_the_first_tick_after_the_board_has_read_it():
+    device = SimulatedEBB()
+    device.advance(0.00001)  # the LT is read by 0.00401 s: tick 100.25, so loaded on tick 101
+    send(device, b"LT,10,%d,0,0,0" % RATE_1K)
+    assert device.recorder.segments[0].load_tick == 101
+    assert send(device, b"SM,150000,0,0", wait=0.0) == b""
+    device.run_until_idle()
+    assert device.recorder.segments[-1].ticks == 100_000 * 25  # SM delays are capped at 100 s
 
 
 MOVES = st.one_of(
@@ -199,8 +215,16 @@ def test_qm_and_qg_while_moving_and_idle():
     # LM example 4: both at 1 ms/step, axis 1 for 500 steps, axis 2 for 250.
     send(device, b"LM,85899346,500,0,85899346,250,0", wait=0.1)
     assert send(device, b"QM", b"QG", wait=0.01) == b"QM,1,1,1,0\n\r" + b"1E\r\n"
-    device.advance_to(0.4)  # axis 2 is done (0.25 s after the LM began), axis 1 is not
-    assert send(device, b"QM", wait=0.01) == b"QM,1,1,0,0\n\r"
+    # Written at 0.05 s and read by 0.054 s, the LM was loaded on tick 1350; axis 2 takes its
+    # last step on the tick where its column last changes.
+    positions, _ = execute(Move("LM", (85899346, 85899346), steps=(500, 250)))
+    last_step = (1350 + np.flatnonzero(np.diff(positions[:, 1]))[-1] + 2) / TICK_HZ
+    read = device.other_command_time
+    device.advance_to(last_step - 1 / TICK_HZ - read)
+    assert send(device, b"QM", wait=read) == b"QM,1,1,1,0\n\r"  # read a tick before it
+    device.advance_to(last_step - read)
+    assert send(device, b"QM", wait=read) == b"QM,1,1,0,0\n\r"  # read on its tick
+    assert device.recorder.segments == []  # the LM is still running
     idle(device)
     assert send(device, b"QM", b"QS") == b"QM,0,0,0,0\n\r" + b"500,250\n\rOK\r\n"
 
@@ -272,6 +296,9 @@ def test_sm_rates_are_the_firmware_32_bit_float_arithmetic():
     assert send(device, b"QS") == b"250,-766\n\rOK\r\n"
     segment = device.recorder.moves()[0]
     assert abs(segment.ticks - TICK_HZ) <= 1
+    # The PIC's 32-bit floats: 85899345.92f / 1000 is 85899.34375, times 766 is 65798897.3,
+    # which single precision (steps of 4 there) holds as 65798896; in exact arithmetic 65798898.
+    assert segment.move.rate == (21474836, 65798896)
     # 25 kHz exactly: rate 2**31, a step on every tick.
     move, full = sm_move(1, (25, 0))
     assert full == (True, False)
@@ -289,6 +316,9 @@ def test_hm_waits_for_the_motion_then_goes_home_in_a_straight_line():
     assert send(device, b"QS") == b"0,0\n\rOK\r\n"
     home = device.recorder.moves()[-1]
     assert home.move.steps == (-300, 100)
+    # 3000 * 85899.34375 (85899.34592f) is 257698031.25, held as 257698032 (steps of 16);
+    # the minor axis: 100 * 3000 / 300 * 85899.34375 = 85899343.75, held as 85899344.
+    assert home.move.rate == (257698032, 85899344)
     # 300 steps at 3000 steps/s; the accumulators are not cleared: within one step period.
     assert abs(home.ticks - 300 * TICK_HZ / 3000) <= TICK_HZ / 3000
     send(device, b"HM,25000,40,-40")
