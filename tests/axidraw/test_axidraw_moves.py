@@ -7,9 +7,11 @@ import re
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, Move, execute
-from tagbot.axidraw.moves import SETTLE, build_job, run_reference, steps_to_xy
+from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, Move, axis_final, execute
+from tagbot.axidraw.moves import SETTLE, _axis, build_job, run_reference, steps_to_xy
 from tagbot.axidraw.profile import MOTOR_AXES, load_profile
 from tagbot.errors import PlacementError
 from tagbot.model import Plan, Tag
@@ -164,3 +166,57 @@ def test_runs_are_retimed_to_the_speed_along_each_motor(cae_job):
     # Along x alone a motor turns at the speed of the pen: |vx| + |vy| is what is limited.
     speed = np.concatenate([np.abs(r.v).sum(axis=1) for r in setpoints.runs])
     np.testing.assert_allclose(speed.max(), along.max())
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(
+    n=st.integers(3, 2500),
+    accumulator=st.integers(0, ACCUMULATOR_STEP - 1),
+    speed=st.floats(-0.7, 0.7),
+    change=st.tuples(st.floats(-0.1, 0.1), st.floats(-0.1, 0.1)),
+    edge=st.sampled_from([None, "low", "high"]),
+    jerk=st.booleans(),
+)
+def test_one_axis_ends_on_its_goal_within_half_a_tick_of_rate(
+    n, accumulator, speed, change, edge, jerk
+):
+    # Steps per tick: under one, as the profile's limits keep them; planned rates near the mean.
+    distance = speed * n
+    rates = ((speed + change[0]) * ACCUMULATOR_STEP, (speed + change[1]) * ACCUMULATOR_STEP)
+    aim = round(distance * ACCUMULATOR_STEP)
+    goal = math.floor(distance)
+    if edge == "low":  # aimed a hair below its goal's step: the rate brings it in
+        aim = goal * ACCUMULATOR_STEP - 1
+    elif edge == "high":
+        aim = (goal + 1) * ACCUMULATOR_STEP
+    rate, accel, j = _axis(n, accumulator, aim, rates, goal, jerk)
+    steps, final = axis_final(n, rate, accel, j, accumulator)
+    assert steps == goal
+    end = steps * ACCUMULATOR_STEP + final
+    # The nearest whole rate: within n/2 accumulator units of the aim; within n of the goal's
+    # step where the aim is not inside it by n.
+    low, high = goal * ACCUMULATOR_STEP, (goal + 1) * ACCUMULATOR_STEP - 1
+    if low + n <= aim <= high - n:
+        assert abs(end - aim) <= n / 2
+    else:
+        assert abs(end - min(max(aim, low), high)) < n
+    assert j == 0 or jerk
+
+
+def test_travel_starts_and_ends_at_a_crawl(cae_job):
+    _tag, profile, _setpoints, job = cae_job
+    unit = ACCUMULATOR_STEP / TICK_HZ
+    crawl = profile["limits.travel_acceleration"] * profile.steps_per_mm * 0.001  # steps/s
+    travel = [e.move for e in job.entries if e.kind == "travel"]
+    for accelerate, _cruise, decelerate in zip(
+        travel[::3], travel[1::3], travel[2::3], strict=True
+    ):
+        dominant = int(np.argmax(np.abs(accelerate.steps)))
+        assert accelerate.rate[dominant] == round(crawl * unit)
+        # v^2 = v0^2 + 2 a s, per tick, back down to the crawl over the last phase's steps.
+        peak = decelerate.rate[dominant]
+        slowest = (
+            peak**2
+            + 2 * decelerate.accel[dominant] * abs(decelerate.steps[dominant]) * ACCUMULATOR_STEP
+        )
+        assert math.sqrt(slowest) / unit == pytest.approx(crawl, rel=0.01)

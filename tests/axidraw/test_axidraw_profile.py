@@ -7,6 +7,9 @@ import pytest
 
 from tagbot.axidraw.profile import load_profile, packaged_profiles
 from tagbot.errors import ProfileError
+from tagbot.io.planfile import load_plan
+from tagbot.plotter.place import place
+from tests.axidraw.conftest import CAE
 
 
 def test_packaged_models_have_their_travel():
@@ -51,6 +54,14 @@ def test_placement_limits_hold_along_the_motor_axes():
         (["pen.up=120"], "--set: pen.up: must be <= 100"),
         (["bed.x_max=-1"], "--set: bed.x_max: must be > bed.x_min"),
         (["pen.colour=1"], "--set: pen.colour: unknown"),
+        (["pen.pin=8"], "--set: pen.pin: must be <= 7"),
+        (["serial.fifo=65"], "--set: serial.fifo: must be <= 64"),
+        (["pen.servo_max=70000"], "--set: pen.servo_max: must be <= 65535"),
+        (["pen.servo_min=30000"], "--set: pen.servo_max: must be > pen.servo_min"),
+        (["motion.dt=0.00001"], "--set: motion.dt: must be >= 0.00004 s"),
+        (["motion.max_dt=0.01"], "--set: motion.max_dt: must be >= motion.dt"),
+        (["motion.park_x=400"], "--set: motion.park_x: outside the bed"),
+        (["pen.rate_raise=10000"], "--set: pen.rate_raise: gives an SC,11/12 rate outside"),
     ],
 )
 def test_bad_values_are_one_line_naming_source_and_key(overrides, message):
@@ -68,3 +79,23 @@ def test_a_user_file_is_named_in_its_errors(tmp_path):
     path.write_text("[limits]\ndraw_speed = 5000.0\n", encoding="utf-8")
     with pytest.raises(ProfileError, match=r"mine\.toml: limits\.draw_speed: must be <="):
         load_profile(path)
+
+
+@pytest.mark.parametrize("overrides", [[], ["motion.dt=0.002"], ["motion.setpoints=adaptive"]])
+def test_placement_has_none_of_grbls_own_limits(overrides):
+    """On cae.json (faster than the machine) only the speed and acceleration limits slow a
+    run: no look-ahead (which short lines would meet), junction or host-pause buffer (which
+    adaptive lines would) of Grbl's."""
+    tag = load_plan(CAE)
+    setpoints = place(tag, load_profile(overrides=overrides).placement())
+    limits = setpoints.limits
+    assert limits["junction"] == limits["buffer"] == 1.0
+    assert limits["segment"] <= max(limits["speed"], limits["acceleration"]) * 1.01
+    for run in setpoints.runs:
+        assert run.scale == pytest.approx(
+            max(run.limits["speed"], run.limits["acceleration"]), rel=0.01
+        )
+        if not overrides:  # the fixed grid (a setpoint on the last one's step is left out)
+            grid = np.diff(run.t)[:-1] / 0.05
+            np.testing.assert_allclose(grid, np.round(grid), atol=1e-9)
+            assert np.median(grid) == pytest.approx(1.0)
