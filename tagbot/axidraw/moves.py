@@ -4,26 +4,30 @@
 is the motor position ``m = k·(x + y, x − y)`` steps (``k`` steps per mm,
 :attr:`~tagbot.axidraw.profile.Profile.steps_per_mm`).
 
-**Drawing** (``LT``). Between consecutive setpoints of a pen-down run (the plotter's placement
-and retiming by run, :func:`tagbot.plotter.place.place`) one ``LT`` move of ``N`` ticks (40 µs;
-the setpoint times rounded to the tick grid, so no rounding accumulates). The firmware adds
-``Rate − trunc(Accel/2) + Accel·i`` to each axis's accumulator at tick ``i`` and steps whenever it
-passes a multiple of 2³¹, so an axis holds ``P = p + accumulator / 2³¹`` steps, a quadratic in
-time over the move. Per axis, ``Accel`` is the planned change of rate over the move (planned
-velocity at both setpoints) and ``Rate`` is the integer that makes ``P`` end on ``m + ½`` at the
-next setpoint: the executed step position ``floor(P)`` is then ``m`` rounded, exactly (the end
-is checked with the firmware's own arithmetic, :func:`firmware_protocols.ebb.motion.execute`,
-and ``Rate`` nudged by whole accumulator units until the move ends on its target steps). The
-accumulators carry from move to move (never cleared), so no fraction of a step is lost.
+**Drawing** (``T3``; ``LT`` with ``motion.jerk = false``). Between consecutive setpoints of a
+pen-down run (the plotter's placement and retiming by run, :func:`tagbot.plotter.place.place`)
+one move of ``n`` ticks (40 µs; the setpoint times rounded to the tick grid, so no rounding
+accumulates). At tick ``k`` the firmware adds ``R_k = r + a·k + j·k(k+1)/2`` to each axis's
+accumulator (``r, a, j`` the loaded rate, acceleration and jerk) and steps whenever it passes a
+multiple of 2³¹, so an axis holds ``P = p + accumulator / 2³¹`` steps, a cubic in time over the
+move (a quadratic for ``LT``). Per axis: the jerk makes the rate start and end at the planned
+velocities and the distance exact (the jerk rounded to an integer, what it leaves balanced
+between both ends); the acceleration is the planned change of rate; ``r`` is the integer that
+makes ``P`` end on ``m + ½`` at the next setpoint (``m`` the setpoint's motor position): the
+executed step position ``floor(P)`` is then ``m`` rounded, exactly, the firmware's own arithmetic
+(:mod:`firmware_protocols.ebb.motion`) deciding. The accumulators carry from move to move (never
+cleared): no fraction of a step is lost, and the rate is continuous from move to move. A run
+starts with a 2 ms move (:data:`SETTLE`) that takes up the fraction of a step by which the pen
+went down away from the plan's first point, so the next move starts on the plan.
 
 **The error, stated.** Every tick's step position is computed with the firmware's arithmetic
-and compared with the plan's continuous motion at that tick: :attr:`Job.move_error` (mm, the
-largest distance over each move's ticks) and :attr:`Job.run_error` (each run's largest). By
-construction it is at most half a step per motor from the quadratic ``P`` (``√(e₁² + e₂²)/(√2·k)``
-mm with ``e ≤ ½``: 0.00625 mm at 80 steps/mm) plus how far the quadratic strays from the plan
-within a move (its ``O(h³·jerk)`` interpolation error; at ``motion.dt = 10`` ms on the examples a
-few thousandths of a mm) plus, on a run's first move only, the fraction of a step the pen-down
-position differs from the plan's first point.
+(:func:`~firmware_protocols.ebb.motion.execute`) and compared with the plan's continuous motion
+at that tick: :attr:`Job.move_error` (mm, the largest distance over each move's ticks) and
+:attr:`Job.run_error` (each run's largest). It is half a step per motor away from ``P`` (at most
+``½/k`` mm: 0.00625 mm at 80 steps/mm), plus how far ``P`` strays from the plan within a move,
+plus, in a run's first 2 ms, up to a step more. Measured on ``cae.json`` (AxiDraw V3): at
+``motion.dt`` = 10, 30, 50, 100 ms 0.0062, 0.0063, 0.0070, 0.022 mm with ``T3``; 0.011, 0.015,
+0.015, 0.044 mm with ``LT``.
 
 **Travel** (``LM``, pen up): a trapezoid along the longer motor axis at ``limits.travel_speed``
 and ``limits.travel_acceleration`` (accelerate, cruise, decelerate: three ``LM``, step-exact per
@@ -69,7 +73,7 @@ class Entry:
     """One command of the job, in the order sent."""
 
     kind: str
-    """``"travel"`` (LM), ``"draw"`` (LT), ``"pen"`` (SP)."""
+    """``"travel"`` (LM), ``"draw"`` (T3 or LT), ``"pen"`` (SP)."""
     line: bytes
     start: float
     """Planned start on the job's clock, s."""
