@@ -242,7 +242,19 @@ def test_pen_pressed_on_the_paper_then_lifted():
     t, x, y, pen, force = physics.pen_trace().T
     up = t > lifted + 0.8
     assert np.all(pen[up] == 0.0) and np.all(force[up] == 0.0)
+    touching = physics.pen_trace(threshold=0.0)[:, 3]
+    assert np.array_equal(touching, (force > 0.0).astype(float)) and touching.any()
+    # on the table beside the sheet: a contact, but no ink
+    beside = np.array([0.08, 0.0, -0.002])
+    go_to(chain, pose_for(physics, beside))
+    chain.advance(1.5)
+    nib = physics.model.geom("pen_nib").id
+    table = physics.model.geom("table").id
+    d = physics.data
+    assert any({d.contact[i].geom1, d.contact[i].geom2} == {nib, table} for i in range(d.ncon))
+    assert physics.pen_trace()[-1, 3:].tolist() == [0.0, 0.0]
     # the recorder steps with the physics: one row per step, from the attach time
+    t = physics.pen_trace()[:, 0]
     assert np.allclose(np.diff(t), physics.timestep) and t[0] == 0.0
     assert t[-1] == pytest.approx(chain.now(), abs=physics.timestep)
 
@@ -369,6 +381,66 @@ def test_pwm_current_and_velocity_modes():
     # Current: the current asked for, accelerating (the PWM rises with the back-EMF)
     got = spin_joint1(0, 102, 2, 100, 0.3)
     assert got["current"] == 100 and 0 < got["pwm"] < PWM_FULL_SCALE and got["velocity"] > 50
-    # Velocity: the PI loop reaches Goal Velocity
+    # ... until its voltage cannot cover the back-EMF: full PWM, less current
+    got = spin_joint1(0, 102, 2, 100, 0.55)
+    assert got["pwm"] >= PWM_FULL_SCALE - 1 and 0 < got["current"] < 100
+    # Velocity: the PI loop reaches Goal Velocity; its P term drives the first moments
+    # (20 ms in: 19.6 units, where the I term alone would have reached 8)
+    assert 15 <= spin_joint1(1, 104, 4, 100, 0.02)["velocity"] <= 25
     got = spin_joint1(1, 104, 4, 100, 0.8)
     assert abs(got["velocity"] - 100) <= 2
+    # Current-based Position: Goal Current caps the torque; joint2 cannot hold the arm
+    chain, physics = new_arm()
+    torque_on(chain)
+    servo = chain.servo(12)
+    assert servo.write(64, b"\x00", 0.0) == 0
+    assert servo.write(11, bytes([5]), 0.0) == 0
+    assert servo.write(64, b"\x01", 0.0) == 0
+    assert servo.write(102, (50).to_bytes(2, "little"), 0.0) == 0
+    goal = 2048 + round(0.6 * TICKS_PER_RAD)
+    assert servo.write(116, goal.to_bytes(4, "little"), 0.0) == 0
+    assert chain.servo(13).write(116, (4096 - goal).to_bytes(4, "little"), 0.0) == 0
+    chain.advance(3.0)  # down to joint2's limit (slowly: the back-EMF brakes)
+    error, data = servo.read(126, 2, chain.now())
+    assert error == 0 and int.from_bytes(data, "little", signed=True) == -50
+    assert physics.joint_trace(12)[-1, 1] > goal + 100
+
+
+def max_lag(gains: tuple[int, int, int]) -> float:
+    """Joint1's largest lag behind its profile in a 45° move (ROBOTIS's profile)."""
+    chain, physics = new_arm()
+    torque_on(chain, gains)
+    servo = chain.servo(11)
+    assert servo.write(116, (2048 + 512).to_bytes(4, "little"), 0.0) == 0
+    chain.advance(1.0)
+    t, ticks = physics.joint_trace(11).T
+    return float(np.max(servo.trajectory.sample(t) - ticks))
+
+
+def test_the_d_gain_acts_on_the_error():
+    # KPD·Δe with e = profile − present: the D term pushes along the profile's velocity (less
+    # lag), where a D on the measured speed alone would brake (more lag)
+    # (KPD = D/16 per 1 ms period: D = 4000 takes 16.6 ticks off the 109-tick lag)
+    assert 12.0 < max_lag((800, 0, 0)) - max_lag((800, 0, 4000)) < 22.0
+
+
+def test_goal_pwm_limits_and_the_integral_does_not_wind_up():
+    chain, physics = new_arm()
+    torque_on(chain, (800, 200, 0))
+    goal = 2048 + round(0.6 * TICKS_PER_RAD)
+    assert chain.servo(13).write(116, (4096 - goal).to_bytes(4, "little"), 0.0) == 0
+    servo = chain.servo(12)
+    assert servo.write(116, goal.to_bytes(4, "little"), 0.0) == 0
+    chain.advance(1.0)
+    assert servo.write(100, (100).to_bytes(2, "little"), chain.now()) == 0  # Goal PWM 100
+    chain.advance(1.0)
+    assert physics.joint_trace(12)[-1, 1] > goal + 100  # too weak: it sags
+    error, data = servo.read(124, 2, chain.now())
+    assert error == 0 and int.from_bytes(data, "little", signed=True) == -100
+    back = chain.now()
+    assert servo.write(100, (885).to_bytes(2, "little"), back) == 0
+    chain.advance(1.5)
+    t, ticks = physics.joint_trace(12).T
+    # the I term was held within the PWM limit while saturated: it lifts back, barely past
+    assert np.min(ticks[t > back] - goal) > -8.0
+    assert abs(ticks[-1] - goal) < 1.0
