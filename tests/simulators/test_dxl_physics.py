@@ -14,6 +14,7 @@ import pytest
 import serial
 
 import sim.dynamixel  # noqa: F401  (registers dxlsim://)
+from firmware_protocols.dynamixel import InstructionPacket, PacketDecoder, encode_instruction
 from sim.dynamixel import PtyServer, SimulatedChain, attach_chain, detach_chain
 from sim.dynamixel.physics import (
     MOTORS,
@@ -444,3 +445,26 @@ def test_goal_pwm_limits_and_the_integral_does_not_wind_up():
     # the I term was held within the PWM limit while saturated: it lifts back, barely past
     assert np.min(ticks[t > back] - goal) > -8.0
     assert abs(ticks[-1] - goal) < 1.0
+
+
+def test_each_packet_sees_the_physics_at_its_own_arrival():
+    # forty READs written at once reach joint1's servo one after the other (14 bytes, 140 µs
+    # each at 1 Mbit/s) while it turns: each answers with the horn at its own step
+    chain, physics = new_arm()
+    torque_on(chain, (800, 0, 0))
+    assert chain.servo(11).write(116, (2048 + 512).to_bytes(4, "little"), 0.0) == 0
+    chain.advance(0.2)  # mid-move, about 2500 ticks/s
+    start = chain.now()
+    packet = encode_instruction(InstructionPacket.read(11, 132, 4))
+    chain.write(packet * 40)
+    chain.advance(0.05)
+    decoder = PacketDecoder()
+    replies = decoder.feed(chain.read()) + decoder.flush()
+    values = [int.from_bytes(r.params, "little", signed=True) for r in replies]
+    assert len(values) == 40
+    t, ticks = physics.joint_trace(11).T
+    for k, value in enumerate(values):
+        arrival = start + (k + 1) * len(packet) * chain.byte_time
+        step = np.searchsorted(t, arrival + 1e-9) - 1  # the last step at or before it
+        assert value in {round(ticks[step - 1]), round(ticks[step])}
+    assert values[-1] - values[0] > 5
