@@ -120,9 +120,17 @@ def test_goal_position_through_the_sdk_follows_the_servo_dynamics(arm, port, ph)
     trajectory, *result = ph.read4ByteTxRx(port, 11, 140)
     assert tuple(result) == OK
     assert 2048 < present < trajectory - 5  # moving, behind the profile by a following error
+    clock.sleep_until(start + 0.45)  # the profile has ended (0.41 s); the horn catches up
+    assert clock.now() > chain.servo(11).trajectory.end
+    moving, *result = ph.read1ByteTxRx(port, 11, 122)
+    assert tuple(result) == OK and moving == 1  # faster than Moving Threshold
+    status, *result = ph.read1ByteTxRx(port, 11, 123)
+    assert tuple(result) == OK and status == 0x20  # triangular profile, done, not in position
     clock.sleep_until(start + 1.5)
     present, horn = read_present(port, ph, physics, 11)
     assert present in horn and present == 2048 + 512  # arrived, to the tick
+    status, *result = ph.read1ByteTxRx(port, 11, 123)
+    assert tuple(result) == OK and status == 0x21
     t, ticks = physics.joint_trace(11).T
     profile = chain.servo(11).trajectory.sample(t)
     moving = (t > start) & (t < start + 1.5)
@@ -298,6 +306,22 @@ def test_attach_and_detach():
         ArmPhysics(SimulatedChain({1: "XM430-W350"}), joints={1: "joint9"})
     with pytest.raises(KeyError, match="servo 15"):
         physics.joint_trace(15)
+
+
+def test_torque_on_holds_where_the_arm_fell_and_reboot_restores_the_goal_limits():
+    chain, physics = new_arm()
+    chain.advance(1.0)  # torque off: the arm folds under its weight
+    servo = chain.servo(12)
+    fallen = physics.joint_trace(12)[-1, 1]
+    assert abs(fallen - 2048) > 100
+    assert servo.write(64, b"\x01", chain.now()) == 0
+    assert servo.get("goal_position") == round(fallen)
+    chain.advance(0.5)
+    assert abs(physics.joint_trace(12)[-1, 1] - fallen) < 30  # held there, not pulled back
+    assert (servo.get("goal_pwm"), servo.get("goal_current")) == (885, 1193)
+    assert servo.write(100, (100).to_bytes(2, "little"), chain.now()) == 0
+    servo.reboot(chain.now())
+    assert (servo.get("goal_pwm"), servo.get("torque_enable")) == (885, 0)
 
 
 def test_homing_offset_and_turning_by_hand_stay_with_the_servo():
