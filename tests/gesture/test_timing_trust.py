@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from tagbot.gesture import reconstruction
@@ -28,15 +28,16 @@ from tagbot.model.motion import sample_ink
 from tagbot.model.plan import Plan, random_timed_plan
 
 
-def trace_errors(traces: list[Trace], tag) -> list[tuple[float, float]]:
-    """Each trace's mean and max shape error against what its plan inks, as fractions of the
-    tag's size (as the fit's margins are stated)."""
+def trace_errors(traces: list[Trace], tag, size: float | None = None) -> list[tuple[float, float]]:
+    """Each trace's mean and max shape error against what its plan inks, as fractions of
+    ``size`` (default the tag's own; the fit's margins are stated as fractions of one size)."""
+    size = tag.size if size is None else size
     out = []
     for k, trace in enumerate(traces):
         down, up = tag.plans[k].ink_window(tag.size)
         ((_, xy, _),) = sample_ink(tag, min(0.005, (up - down) / 1000), [k])
         error = shape_error([trace.xy], [xy])
-        out.append((error.mean * error.size / tag.size, error.max * error.size / tag.size))
+        out.append((error.mean * error.size / size, error.max * error.size / size))
     return out
 
 
@@ -46,11 +47,16 @@ def assert_within_margin(traces: list[Trace], timing: str) -> object:
     geometric = reconstruction(traces, timing="ignore").tag
     fitted = reconstruction(traces, timing=timing)
     assert fitted.tag.n_strokes <= 1.5 * geometric.n_strokes  # TimingOptions.max_stroke_ratio
+    # Both as fractions of one size, the drawing's diagonal, as the fit states its margins (a
+    # tag's own size is its targets' span: a timed fit's virtual targets may span 12 % less).
+    size = float(np.hypot(*np.ptp(np.concatenate([tr.xy for tr in traces]), axis=0)))
     for k, ((mean, largest), (mean_g, max_g)) in enumerate(
-        zip(trace_errors(traces, fitted.tag), trace_errors(traces, geometric), strict=True)
+        zip(
+            trace_errors(traces, fitted.tag, size),
+            trace_errors(traces, geometric, size),
+            strict=True,
+        )
     ):
-        # The geometric errors are measured on the geometric tag's size; both tags' sizes are
-        # their targets' spans, within a few percent of each other.
         slack = 1.05
         assert mean <= slack * mean_g + SHAPE_MARGIN_MEAN, (k, timing, mean, mean_g)
         assert largest <= slack * max(SHAPE_MARGIN_MAX[0] * max_g, max_g + SHAPE_MARGIN_MAX[1]), (
@@ -235,6 +241,7 @@ def test_runs_touch_down_and_lift_off_on_the_recorded_clock() -> None:
     scale=st.sampled_from([0.05, 0.3, 1.0, 4.0]),
     timing=st.sampled_from(["auto", "match"]),
 )
+@example(seed=2_475_188_494, scale=1.0, timing="auto")  # targets spanning 12 % less
 def test_the_shape_margin_holds_over_random_plans_and_clocks(seed, scale, timing) -> None:
     rng = np.random.default_rng(seed)
     recorded = capture(random_timed_plan(rng), rng, jitter=0.002)
