@@ -185,14 +185,15 @@ def test_holding_against_gravity_matches_the_gain_and_motor_model(arm, port, ph)
     assert present > goal + 100  # it sags forwards
 
 
-def pose_for(physics: ArmPhysics, target: np.ndarray) -> np.ndarray:
-    """Joint angles that put the pen tip at ``target`` (arm frame, m) with the pen upright."""
+def pose_for(physics: ArmPhysics, target: np.ndarray, tilt: float = 0.0) -> np.ndarray:
+    """Joint angles that put the pen tip at ``target`` (arm frame, m) with the pen upright
+    (``tilt`` rad: leaning back towards the arm)."""
     m = physics.model
     d = mujoco.MjData(m)
     tip = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, "pen_tip")
 
     def tip_at(q: np.ndarray) -> np.ndarray:
-        d.qpos[:4] = [q[0], q[1], q[2], math.pi / 2 - q[1] - q[2]]
+        d.qpos[:4] = [q[0], q[1], q[2], math.pi / 2 - q[1] - q[2] - tilt]
         mujoco.mj_kinematics(m, d)
         return d.site_xpos[tip].copy()
 
@@ -492,3 +493,24 @@ def test_each_packet_sees_the_physics_at_its_own_arrival():
         step = np.searchsorted(t, arrival + 1e-9) - 1  # the last step at or before it
         assert value in {round(ticks[step - 1]), round(ticks[step])}
     assert values[-1] - values[0] > 5
+
+
+def test_a_tilted_pen_inks_where_its_nib_touches():
+    chain, physics = new_arm()
+    torque_on(chain)
+    go_to(chain, pose_for(physics, np.array([0.17, 0.0, -0.002]), tilt=0.4))
+    chain.advance(1.5)
+    m, d = physics.model, physics.data
+    nib = m.geom("pen_nib")
+    radius = float(nib.size[0])
+    axis = d.geom_xmat[nib.id].reshape(3, 3)[:, 2]  # the capsule's axis (towards the point)
+    tip = d.site_xpos[m.site("pen_tip").id]
+    centre = tip - radius * axis * np.sign(axis @ (tip - d.geom_xpos[nib.id]))
+    sheet = physics.sheet
+    expected = (centre - np.asarray(sheet.origin)) @ np.array([sheet.x_axis, sheet.y_axis]).T
+    row = physics.pen_trace()[-1]
+    assert row[3] == 1.0
+    # the nib's rounded end touches 2 mm·sin(tilt) behind the tip's own projection
+    assert row[1:3] == pytest.approx(expected * 1000.0, abs=0.05)
+    tip_x = (tip - np.asarray(sheet.origin)) @ np.asarray(sheet.x_axis) * 1000.0
+    assert abs(row[1] - tip_x) > 0.5
