@@ -1,8 +1,8 @@
 """MuJoCo physics behind the simulated DYNAMIXEL bus: the arm moves, the pen touches the paper.
 
-:class:`ArmPhysics` builds a scene from a serial arm's MJCF (the shipped OpenManipulator-X by
-default, :data:`tagbot.arm.serial.OPEN_MANIPULATOR_X`), attaches itself to a
-:class:`~sim.dynamixel.chain.SimulatedChain` and from then on:
+:class:`ArmPhysics` builds a scene from a serial arm's MJCF (the caller's robot description,
+e.g. ``tagbot.arm.serial.OPEN_MANIPULATOR_X``: the simulator imports nothing of tagbot),
+attaches itself to a :class:`~sim.dynamixel.chain.SimulatedChain` and from then on:
 
 - the chain's clock steps the physics at a fixed timestep (1 ms by default) up to each
   instruction packet before executing it, so what a READ sees is the physics at that step
@@ -61,7 +61,7 @@ Example::
 
     chain = SimulatedChain({11: "XM430-W350", 12: "XM430-W350", 13: "XM430-W350",
                             14: "XM430-W350"})
-    physics = ArmPhysics(chain)              # the OpenManipulator-X, paper at DEFAULT_PAPER
+    physics = ArmPhysics(chain, OPEN_MANIPULATOR_X)  # the arm's MJCF, paper at DEFAULT_PAPER
     url = attach_chain(chain, "arm")         # drive it with dynamixel-sdk as usual
     ...
     t, x, y, pen, force = physics.pen_trace().T
@@ -449,7 +449,7 @@ class ArmPhysics:
     def __init__(
         self,
         chain: SimulatedChain,
-        model: str | Path | None = None,
+        model: str | Path,
         *,
         joints: Mapping[int, str] = OPEN_MANIPULATOR_X_JOINTS,
         paper: Any = DEFAULT_PAPER,
@@ -459,10 +459,6 @@ class ArmPhysics:
     ) -> None:
         if not (math.isfinite(timestep) and 0 < timestep <= 0.01):
             raise ValueError(f"timestep: must be > 0 and <= 0.01 s, got {timestep!r}")
-        if model is None:
-            from tagbot.arm.serial import OPEN_MANIPULATOR_X
-
-            model = OPEN_MANIPULATOR_X
         if chain.plant is not None:
             raise ValueError("chain: already has a physics simulation attached")
         self.chain = chain

@@ -25,6 +25,7 @@ from sim.dynamixel.physics import (
     Sheet,
 )
 from sim.dynamixel.servo import TICKS_PER_S_PER_VELOCITY_UNIT
+from tagbot.arm.serial import OPEN_MANIPULATOR_X
 
 IDS = (11, 12, 13, 14)
 OK = (dxl.COMM_SUCCESS, 0)
@@ -55,7 +56,7 @@ class PatientPortHandler(dxl.PortHandler):
 
 def new_arm(clock: str = "simulated") -> tuple[SimulatedChain, ArmPhysics]:
     chain = SimulatedChain({id: "XM430-W350" for id in IDS}, clock=clock)
-    return chain, ArmPhysics(chain)
+    return chain, ArmPhysics(chain, OPEN_MANIPULATOR_X)
 
 
 @pytest.fixture
@@ -287,10 +288,11 @@ def test_same_commands_same_trace():
 
 def test_attach_and_detach():
     chain = SimulatedChain({id: "XM430-W350" for id in (*IDS, 15)})
-    physics = ArmPhysics(chain, paper=Sheet(origin=(0.1, -0.1, 0.0), size=(0.2, 0.2)))
+    sheet = Sheet(origin=(0.1, -0.1, 0.0), size=(0.2, 0.2))
+    physics = ArmPhysics(chain, OPEN_MANIPULATOR_X, paper=sheet)
     assert chain.plant is physics and chain.servo(15).plant is None  # the gripper: no joint
     with pytest.raises(ValueError, match="already has a physics"):
-        ArmPhysics(chain)
+        ArmPhysics(chain, OPEN_MANIPULATOR_X)
     torque_on(chain)
     go_to(chain, np.array([0.5, 0.0, 0.0, 0.0]))
     chain.advance(0.2)
@@ -304,7 +306,7 @@ def test_attach_and_detach():
     assert len(physics.joint_trace(11)) == steps
     assert servo.present(chain.now()) == servo.state(chain.now())
     with pytest.raises(ValueError, match="joint9"):
-        ArmPhysics(SimulatedChain({1: "XM430-W350"}), joints={1: "joint9"})
+        ArmPhysics(SimulatedChain({1: "XM430-W350"}), OPEN_MANIPULATOR_X, joints={1: "joint9"})
     with pytest.raises(KeyError, match="servo 15"):
         physics.joint_trace(15)
 
