@@ -41,7 +41,6 @@ bus timing that Grbl's ``Link`` models lives in the chain here.
 from __future__ import annotations
 
 import math
-import threading
 from collections.abc import Callable
 from urllib.parse import parse_qsl, urlsplit
 
@@ -49,20 +48,18 @@ import serial
 
 from sim import pty
 from sim.dynamixel.chain import SimulatedChain
+from sim.serial_port import Attached
 
 POLL_QUANTUM = 50e-6
 """Simulated seconds an empty read moves the clock by when nothing is on its way (5 bytes at
 1 Mbit/s)."""
 
-_PACKAGE = "sim.dynamixel"
-_attached: dict[str, SimulatedChain] = {}
-_attached_lock = threading.Lock()
+_attached: Attached[SimulatedChain] = Attached("sim.dynamixel", "dxlsim")
 
 
 def register() -> None:
     """Make ``serial.serial_for_url`` know the ``dxlsim://`` scheme (idempotent)."""
-    if _PACKAGE not in serial.protocol_handler_packages:
-        serial.protocol_handler_packages.append(_PACKAGE)
+    _attached.register()
 
 
 def attach_chain(chain: SimulatedChain, name: str) -> str:
@@ -73,15 +70,12 @@ def attach_chain(chain: SimulatedChain, name: str) -> str:
         raise TypeError(f"chain: expected SimulatedChain, got {chain!r}")
     if chain.clock != "simulated":
         raise ValueError("chain: dxlsim:// needs clock='simulated'; serve_pty() serves real time")
-    with _attached_lock:
-        _attached[name] = chain
-    return f"dxlsim://{name}"
+    return _attached.attach(chain, name)
 
 
 def detach_chain(name: str) -> SimulatedChain | None:
     """Forget the chain attached as ``name`` (returns it, or None)."""
-    with _attached_lock:
-        return _attached.pop(name, None)
+    return _attached.take(name)
 
 
 def chain_from_url(url: str) -> SimulatedChain:
@@ -94,8 +88,7 @@ def chain_from_url(url: str) -> SimulatedChain:
         if parts.netloc:
             if options:
                 raise ValueError("options only apply to a new chain")
-            with _attached_lock:
-                chain = _attached.get(parts.netloc)
+            chain = _attached.get(parts.netloc)
             if chain is None:
                 raise ValueError(f"no chain attached as {parts.netloc!r}")
             return chain

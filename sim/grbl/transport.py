@@ -32,7 +32,6 @@ gets them.
 from __future__ import annotations
 
 import math
-import threading
 import time
 from collections import deque
 from collections.abc import Callable
@@ -43,6 +42,7 @@ import serial
 from firmware_protocols.grbl import is_realtime_byte
 from sim import pty
 from sim.grbl.device import SimulatedGrbl
+from sim.serial_port import Attached
 
 BITS_PER_BYTE = 10
 """A start bit, 8 data bits and a stop bit."""
@@ -50,29 +50,21 @@ BITS_PER_BYTE = 10
 POLL_QUANTUM = 0.001
 """Simulated seconds a read moves the clock by per step, and an empty ``in_waiting`` poll."""
 
-_PACKAGE = "sim.grbl"
-_attached: dict[str, SimulatedGrbl] = {}
-_attached_lock = threading.Lock()
+_attached: Attached[SimulatedGrbl] = Attached("sim.grbl", "grblsim")
 
 
 def register() -> None:
     """Make ``serial.serial_for_url`` know the ``grblsim://`` scheme (idempotent)."""
-    if _PACKAGE not in serial.protocol_handler_packages:
-        serial.protocol_handler_packages.append(_PACKAGE)
+    _attached.register()
 
 
 def attach_device(device: SimulatedGrbl, name: str) -> str:
     """Make ``device`` the one ``grblsim://<name>`` opens (once); returns that URL."""
-    if not name.isidentifier():
-        raise ValueError(f"name: must be an identifier, got {name!r}")
-    with _attached_lock:
-        _attached[name] = device
-    return f"grblsim://{name}"
+    return _attached.attach(device, name)
 
 
 def take_attached(name: str) -> SimulatedGrbl | None:
-    with _attached_lock:
-        return _attached.pop(name, None)
+    return _attached.take(name)
 
 
 def device_from_url(url: str) -> tuple[SimulatedGrbl, float | None]:

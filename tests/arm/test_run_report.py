@@ -353,6 +353,6 @@ def test_a_simulated_run_leaves_no_simulated_bus_behind(tmp_path) -> None:
     drawing again and again does not keep every past bus (and its recorded trace) alive."""
     from sim.dynamixel import transport
 
-    before = set(transport._attached)
+    before = transport._attached.names()
     prepare(small_tag()).run(tmp_path)
-    assert set(transport._attached) == before
+    assert transport._attached.names() == before
