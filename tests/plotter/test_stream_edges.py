@@ -3,10 +3,13 @@ outside a job, and stray answers that arrive when no line is in flight."""
 
 from __future__ import annotations
 
-from firmware_protocols.grbl import State
-from sim.grbl import SimulatedGrbl
+import pytest
 
-from .test_stream import SETTINGS, connected, square_program
+from firmware_protocols.grbl import State, parse_message
+from sim.grbl import SimulatedGrbl
+from tagbot.plotter.stream import GrblStreamer, StreamOptions, _xy_of, resume_lines
+
+from .test_stream import PEN_UP, SETTINGS, connected, open_device, square_program
 
 
 def test_a_line_numbered_firmware_gets_numbered_lines():
@@ -86,3 +89,35 @@ def test_what_arrives_with_the_awaited_report_is_not_lost():
         assert [type(m).__name__ for m in streamer._messages()] == ["Ok"]
     finally:
         port.close()
+
+
+def test_resuming_after_a_line_grbl_would_refuse_names_it_from_one():
+    """The lines before the resume point run through Grbl's parser: one it would refuse is
+    named by its line number in the program, counting from 1, as the CLI names lines."""
+    lines = ["G21\n", "G1X1Y1\n", "G1X2Y2F100\n", "G1X3Y3\n"]  # line 2: a feed move with no F
+    with pytest.raises(ValueError, match=r"^line 2: Grbl would refuse it \(error:22\)$"):
+        resume_lines(lines, 3, PEN_UP, [])
+
+
+def test_work_coordinates_give_the_machine_position():
+    """Status reports in work coordinates (``$10=0``): the machine position is WPos plus the
+    last work offset, on both axes."""
+    status = parse_message("<Idle|WPos:1.000,2.000,0.000|WCO:10.000,-20.000,0.000>")
+    assert _xy_of(status) == (11.0, -18.0)
+    assert _xy_of(parse_message("<Idle|WPos:1.000,2.000,0.000>")) == (1.0, 2.0)
+
+
+def test_the_tracker_names_its_evidence_and_the_trace_hook_its_direction():
+    """With ``$10=3`` the executing line comes from the free planner blocks (``Bf:``), and the
+    report says so; the trace hook is told which way each chunk went."""
+    device = SimulatedGrbl({**SETTINGS, 10: 3}, pen_servo=(30, 50))
+    port = open_device(device)
+    directions: set[str] = set()
+    streamer = GrblStreamer(port, StreamOptions(), trace=lambda way, data: directions.add(way))
+    try:
+        streamer.connect()
+        report = streamer.stream(square_program(200))
+    finally:
+        port.close()
+    assert report.tracking == "status Bf"
+    assert directions == {"tx", "rx"}
