@@ -49,11 +49,21 @@ SPIN = textwrap.dedent(
 )
 
 
+def _default_hangup() -> None:
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+
+
 def _spin(tmp_path, n: int, machine: bool = False) -> subprocess.Popen[str]:
     script = tmp_path / "spin.py"
     script.write_text(SPIN.format(n=n, machine=machine))
     process = subprocess.Popen(
-        [sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [sys.executable, str(script)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        # As from a terminal: a suite started under nohup would pass SIGHUP on ignored, and an
+        # ignored SIGHUP rightly stays ignored (tagbot takes over no ignored signal).
+        preexec_fn=_default_hangup,
     )
     assert process.stdout is not None
     assert process.stdout.readline() == "ready\n", process.communicate(timeout=60)
