@@ -8,8 +8,8 @@ falling back to a bare string: ``pen.type=z``). Every key must be known and ever
 line naming the file and the field, e.g. ``default.toml: bed.x_max: must be > bed.x_min``.
 
 Kinds: ``NUMBER``, ``POSITIVE``, ``NON_NEGATIVE``, ``BOOL``, ``INT`` (positive integer),
-``INTEGER`` (any integer), ``FIT_OR_POSITIVE`` (``"fit"`` or a number > 0), or a tuple of the
-allowed strings.
+``INTEGER`` (any integer), ``FIT_OR_POSITIVE`` (``"fit"`` or a number > 0), ``TEXT`` (a non-empty
+string, e.g. a file name), or a tuple of the allowed strings.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ __all__ = [
     "NON_NEGATIVE",
     "NUMBER",
     "POSITIVE",
+    "TEXT",
     "LayeredProfile",
     "ProfileError",
     "load_layered",
@@ -50,6 +51,7 @@ BOOL = "bool"
 INT = "positive integer"
 INTEGER = "integer"
 FIT_OR_POSITIVE = "fit or positive"
+TEXT = "text"
 
 Schema = Mapping[str, Mapping[str, Any]]
 
@@ -203,6 +205,10 @@ def convert(source: str, field: str, kind: Any, value: Any) -> Any:
     if kind == BOOL:
         if not isinstance(value, bool):
             raise fail("true or false")
+        return value
+    if kind == TEXT:
+        if not isinstance(value, str) or not value.strip():
+            raise fail("a non-empty text")
         return value
     if kind == FIT_OR_POSITIVE and value == "fit":
         return value

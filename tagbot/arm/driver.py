@@ -74,7 +74,7 @@ import math
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import dynamixel_sdk as sdk
 import numpy as np
@@ -112,6 +112,8 @@ MAX_POSITION_LIMIT = 48
 MIN_POSITION_LIMIT = 52
 TORQUE_ENABLE = 64
 HARDWARE_ERROR_STATUS = 70
+POSITION_PID = (84, 82, 80)
+"""Position P, I and D Gain addresses (2 bytes each)."""
 PROFILE_ACCELERATION = 108
 PROFILE_VELOCITY = 112
 GOAL_POSITION = 116
@@ -143,6 +145,14 @@ SETTLE = 0.001
 
 STATUS = 0x55
 """Protocol 2.0 status packet instruction."""
+
+
+class Lifter(Protocol):
+    """How a serial arm lifts its pen by itself: :meth:`up` gives the goal rows (one a period,
+    every servo in bus order) from the pose ``row`` to the pen-up height above it along the
+    paper's normal, empty when the pen is up already; lowering is the same rows backwards."""
+
+    def up(self, row: NDArray[np.int64]) -> NDArray[np.int64]: ...
 
 
 class Scheduler:
@@ -640,7 +650,11 @@ class ArmDriver:
     def __init__(self, port: str, profile: ArmProfile, *, clock: Clock | None = None) -> None:
         self.port_name = port
         self.profile = profile
-        self.ids = [profile[f"{role}.id"] for role in ("shoulder", "elbow", "pen")]
+        self.ids = list(profile.bus_ids)
+        self.lifter: Lifter | None = None
+        """A serial arm's pen lift by the arm itself (None: the profile's pen servo lifts it)."""
+        self.last_row: list[int] | None = None
+        """The last goal row sent (ticks per servo in bus order)."""
         self.roles = profile.names
         self.port: UrlPortHandler | None = None
         self.ph = sdk.PacketHandler(2.0)
@@ -650,6 +664,8 @@ class ArmDriver:
         self.torque_on = False
         self.models: dict[int, int] = {}
         self.stopped = False
+        self.lifted = False
+        """Whether a serial arm's safe stop lifted the pen by the arm."""
 
     # -- context -----------------------------------------------------------------------------
 
@@ -808,6 +824,10 @@ class ArmDriver:
                 self._ensure(id, MAX_POSITION_LIMIT, 4, high, where)
             self._write(id, PROFILE_ACCELERATION, 4, acceleration, where)
             self._write(id, PROFILE_VELOCITY, 4, velocity, where)
+            gains = getattr(p, "gains", None)  # a serial arm's position PID (RAM)
+            if gains is not None:
+                for address, value in zip(POSITION_PID, gains, strict=True):
+                    self._write(id, address, 2, value, where)
         self.set_torque(self.ids, True, where, reply=True)
         log.info(
             "configured: time-based profile %d ms (ramps %d ms), torque on", velocity, acceleration
@@ -864,7 +884,11 @@ class ArmDriver:
         return int(value)
 
     def _write(self, id: int, address: int, size: int, value: int, where: str) -> None:
-        call = {1: self.ph.write1ByteTxRx, 4: self.ph.write4ByteTxRx}[size]
+        call = {
+            1: self.ph.write1ByteTxRx,
+            2: self.ph.write2ByteTxRx,
+            4: self.ph.write4ByteTxRx,
+        }[size]
         result, error = self._transact(
             lambda: call(self.port, id, address, value & 0xFFFFFFFF), f"write {address}", where
         )
@@ -901,17 +925,18 @@ class ArmDriver:
         own time-based profile (ramps a quarter of the time each way); the streaming profile is
         restored afterwards. The pen goes first, in ``pen.move_time``."""
         p = self.profile
-        pen_ms = max(1, round(1000 * p["pen.move_time"]))
         arm_ms = max(1, math.ceil(1000 * duration))
         if arm_ms > 32737:
             raise DeviceError(f"the move to park would take {duration:.1f} s (> 32.7 s)", where)
-        pen = p["pen.id"]
-        self._profile_all({pen: (pen_ms, pen_ms // 4)}, where)
-        self._goals({pen: int(goals[2])}, where)
-        self.clock.sleep_until(self.clock.now() + pen_ms / 1000)
-        arm = {p["shoulder.id"]: (arm_ms, arm_ms // 4), p["elbow.id"]: (arm_ms, arm_ms // 4)}
-        self._profile_all(arm, where)
-        self._goals({p["shoulder.id"]: int(goals[0]), p["elbow.id"]: int(goals[1])}, where)
+        pen = self.pen_id
+        if pen is not None:
+            pen_ms = max(1, round(1000 * p["pen.move_time"]))
+            self._profile_all({pen: (pen_ms, pen_ms // 4)}, where)
+            self._goals({pen: int(goals[self.ids.index(pen)])}, where)
+            self.clock.sleep_until(self.clock.now() + pen_ms / 1000)
+        moving = [id for id in self.ids if id != pen]
+        self._profile_all({id: (arm_ms, arm_ms // 4) for id in moving}, where)
+        self._goals({id: int(goals[self.ids.index(id)]) for id in moving}, where)
         arrive = self.clock.now() + arm_ms / 1000
         self.clock.sleep_until(arrive)
         # Servos slower than asked (Velocity Limit) or a busy host: wait a little longer.
@@ -933,6 +958,36 @@ class ArmDriver:
             p.profile_ms, int(p["servo.acceleration_fraction"] * p.profile_ms)
         )
         self._profile_all({id: streaming for id in self.ids}, where)
+        self.last_row = [int(g) for g in goals]
+
+    @property
+    def pen_id(self) -> int | None:
+        """The pen servo's ID, or None when the arm lifts the pen itself."""
+        return self.profile.pen_servo
+
+    def _rows(self, rows: NDArray[np.int64], readback: ReadBack | None, where: str) -> None:
+        """Stream goal rows (every servo) one a period, the read-back (if any) watching, then
+        wait for the last one's own move."""
+        clock, period = self.clock, self.profile.period
+        writer = sdk.GroupSyncWrite(self.port, self.ph, GOAL_POSITION, 4)
+        for id in self.ids:
+            writer.addParam(id, _u32(0))
+        t0 = clock.now()
+        for i, row in enumerate(np.asarray(rows, dtype=np.int64).tolist()):
+            free = readback.bus_free if readback is not None else -math.inf
+            clock.sleep_until(max(t0 + i * period, free))
+            for id, goal in zip(self.ids, row, strict=True):
+                writer.changeParam(id, _u32(goal))
+            result = self._guard(writer.txPacket, "goal positions", where)
+            self._check(result, 0, None, "SYNC_WRITE of goal positions", where)
+            self.last_row = row
+            if readback is not None:
+                readback.poll(where)
+        settled = clock.now() + self.profile.lead
+        while clock.now() < settled:
+            if readback is not None:
+                readback.poll(where)
+            clock.sleep_until(min(settled, clock.now() + period))
 
     def _profile_all(self, values: dict[int, tuple[int, int]], where: str) -> None:
         """Profile Velocity and Acceleration (ms) per servo, one SYNC_WRITE of 108..115."""
@@ -962,8 +1017,10 @@ class ArmDriver:
         sent (from 1, counting ``first`` rows of the program before ``goals``); :attr:`result`
         holds what was measured up to then. See the module docstring."""
         goals = np.asarray(goals, dtype=np.int64)
-        if goals.ndim != 2 or goals.shape[1] != 3 or not len(goals):
-            raise ValueError(f"goals: must be a non-empty (N, 3) array, got shape {goals.shape}")
+        if goals.ndim != 2 or goals.shape[1] != len(self.ids) or not len(goals):
+            raise ValueError(
+                f"goals: must be a non-empty (N, {len(self.ids)}) array, got shape {goals.shape}"
+            )
         assert self.port is not None
         p = self.profile
         period, lead, every = p.period, p.lead, p.readback_every
@@ -1007,6 +1064,7 @@ class ArmDriver:
                     writer.changeParam(id, _u32(goal))
                 result = self._guard(writer.txPacket, "goal positions", where)
                 self._check(result, 0, None, "SYNC_WRITE of goal positions", where)
+                self.last_row = rows[k]
                 scheduler.sent(self.clock.now())
                 out.ticks_sent = k + 1
                 readback.poll(where)
@@ -1079,10 +1137,16 @@ class ArmDriver:
         out.pauses += 1
         held = goals[k - 1] if k else None
         log.info("paused at %s: pen up, holding the pose", where)
-        lifted = held is not None and int(held[2]) != p["pen.up"]
-        if lifted:
-            assert held is not None
-            self._pen_ramp(int(held[2]), p["pen.up"], readback, where)
+        if self.lifter is not None:
+            up = self.lifter.up(held if held is not None else np.array(self.last_row))
+            lifted = len(up) > 0
+            if lifted:
+                self._rows(up, readback, where)
+        else:
+            lifted = held is not None and int(held[2]) != p["pen.up"]
+            if lifted:
+                assert held is not None
+                self._pen_ramp(int(held[2]), p["pen.up"], readback, where)
         interval = p.readback_every * p.period
         next_read = clock.now()
         while control.paused:
@@ -1092,7 +1156,11 @@ class ArmDriver:
                 next_read = now + interval
             readback.poll(where)
             clock.sleep_until(min(next_read, clock.now() + 0.01))
-        if lifted:
+        if lifted and self.lifter is not None:
+            self._rows(
+                np.concatenate([up[::-1][1:], [self.resume_row(held, k, goals)]]), readback, where
+            )
+        elif lifted:
             assert held is not None
             self._pen_ramp(p["pen.up"], int(held[2]), readback, where)
             settled = clock.now() + p.lead  # the last pen goal's own move
@@ -1130,8 +1198,21 @@ class ArmDriver:
         if settle:
             clock.sleep_until(clock.now() + p.lead)
 
-    def lower_pen(self, pen: int, where: str = "resume") -> None:
-        """From up, put the pen to ``pen`` ticks as a pause's resume does (before streaming)."""
+    def resume_row(
+        self, held: NDArray[np.int64] | None, k: int, goals: NDArray[np.int64]
+    ) -> list[int]:
+        """The row a serial arm's lowering ends on: the one held (tick k's predecessor)."""
+        return [int(g) for g in (held if held is not None else goals[k])]
+
+    def lower_pen(self, pen: int | NDArray[np.int64], where: str = "resume") -> None:
+        """From up, put the pen to ``pen`` ticks as a pause's resume does (before streaming);
+        a serial arm lowers itself to the row ``pen`` along the paper's normal."""
+        if self.lifter is not None:
+            row = np.asarray(pen, dtype=np.int64)
+            up = self.lifter.up(row)
+            if len(up):
+                self._rows(np.concatenate([up[::-1][1:], [row]]), None, where)
+            return
         if pen != self.profile["pen.up"]:
             self._pen_ramp(self.profile["pen.up"], pen, None, where, settle=True)
 
@@ -1152,8 +1233,11 @@ class ArmDriver:
         self.stopped = True
         p = self.profile
         self.port.is_using = False  # an interrupted SDK call may have left it set
-        pen = p["pen.id"]
         result = getattr(self, "result", None)
+        if self.lifter is not None:
+            self._lift_by_arm(error, result)
+            return
+        pen = p["pen.id"]
         try:
             if result is not None and result.scheduler is not None and result.scheduler.sends:
                 self.clock.sleep_until(result.scheduler.sends[-1] + p.lead)
@@ -1165,4 +1249,28 @@ class ArmDriver:
                 self.set_torque([p["shoulder.id"], p["elbow.id"]], False, "stop")
             log.info("stopped safely: pen up%s", ", arm torque off" if error else "")
         except (DeviceError, OSError, serial.SerialException) as e:
+            log.error("safe stop failed: %s", e)
+
+    def _lift_by_arm(self, error: bool, result: StreamResult | None) -> None:
+        """A serial arm's safe stop: once the last goal is reached, the arm itself lifts the pen
+        along the paper's normal to the pen-up height and holds; after an error, torque off only
+        if ``servo.torque_off_after_error`` (the arm then falls). Best effort, as
+        :meth:`safe_stop`."""
+        p = self.profile
+        assert self.lifter is not None
+        try:
+            if result is not None and result.scheduler is not None and result.scheduler.sends:
+                self.clock.sleep_until(result.scheduler.sends[-1] + p.lead)
+            if self.last_row is not None:
+                rows = self.lifter.up(np.asarray(self.last_row, dtype=np.int64))
+                if len(rows):
+                    self._rows(rows, None, "stop")
+            self.lifted = True
+            if error and p["servo.torque_off_after_error"]:
+                self.set_torque(list(self.ids), False, "stop")
+            log.info(
+                "stopped safely: pen lifted by the arm%s",
+                ", torque off" if error and p["servo.torque_off_after_error"] else "",
+            )
+        except (DeviceError, OSError, serial.SerialException, ValueError) as e:
             log.error("safe stop failed: %s", e)

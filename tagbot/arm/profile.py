@@ -189,6 +189,16 @@ class ArmProfile(LayeredProfile):
         }
 
     @property
+    def bus_ids(self) -> list[int]:
+        """The servo IDs the driver talks to, in bus order (shoulder, elbow, pen)."""
+        return [self[f"{role}.id"] for role in ("shoulder", "elbow", "pen")]
+
+    @property
+    def pen_servo(self) -> int | None:
+        """The pen-lift servo's ID (a serial arm has none: it lifts the pen itself)."""
+        return int(self["pen.id"])
+
+    @property
     def names(self) -> dict[int, str]:
         """Servo ID → role (``shoulder``, ``elbow``, ``pen``)."""
         return {self[f"{role}.id"]: role for role in ("shoulder", "elbow", "pen")}

@@ -1,0 +1,360 @@
+"""Serial-arm profiles: the keys of a DYNAMIXEL serial arm's TOML profile, and their checks.
+
+:func:`load_serial_profile` layers the packaged ``profiles/default.toml`` (the OpenManipulator-X),
+a packaged profile by name (``openmanipulator-x``) or a user file by path, then overrides such as
+``"paper.pitch=-60"`` (see :mod:`tagbot.config`); every problem is one line naming the file and
+the field. The robot description is loaded with the profile, so a joint the description lacks, a
+park pose outside a joint's range or a tick range beyond the servo's is refused here.
+
+Joint convention: ``angle_rad = sign·(ticks − zero)·2π/4096``, the angle the description's
+joint of the same name takes. Lengths are mm in the profile, m in the description.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from firmware_protocols.dynamixel import TICKS_PER_REV
+from tagbot.arm.profile import BAUDS, MAX_RATE, MODEL_NAMES, Joint
+from tagbot.arm.serial import MODELS
+from tagbot.arm.serial.kinematics import SerialArm
+from tagbot.arm.serial.reach import Paper
+from tagbot.config import (
+    BOOL,
+    FIT_OR_POSITIVE,
+    INT,
+    INTEGER,
+    NON_NEGATIVE,
+    NUMBER,
+    POSITIVE,
+    TEXT,
+    LayeredProfile,
+    load_layered,
+    packaged_names,
+)
+from tagbot.errors import ProfileError
+
+__all__ = [
+    "JOINT_SECTIONS",
+    "SCHEMA",
+    "SerialProfile",
+    "is_serial_profile",
+    "load_serial_profile",
+    "serial_profiles",
+]
+
+PACKAGE = "tagbot.arm.serial"
+
+JOINT_SECTIONS = ("joint1", "joint2", "joint3", "joint4")
+"""The joints a serial profile drives, named as in its robot description, base first."""
+
+_JOINT = {
+    "id": INT,
+    "model": MODEL_NAMES,
+    "zero": INTEGER,
+    "sign": INTEGER,
+    "max_speed": POSITIVE,
+    "max_acceleration": POSITIVE,
+    "park_deg": NUMBER,
+}
+
+SCHEMA: dict[str, dict[str, Any]] = {
+    "robot": {
+        "description": TEXT,
+        "tool_offset": POSITIVE,
+        "max_tilt_deg": NON_NEGATIVE,
+        "pen_up": POSITIVE,
+        "press": NON_NEGATIVE,
+    },
+    **{name: dict(_JOINT) for name in JOINT_SECTIONS},
+    "paper": {
+        "x": NUMBER,
+        "y": NUMBER,
+        "z": NUMBER,
+        "roll": NUMBER,
+        "pitch": NUMBER,
+        "yaw": NUMBER,
+        "width": POSITIVE,
+        "height": POSITIVE,
+    },
+    "area": {
+        "x_min": NUMBER,
+        "x_max": NUMBER,
+        "y_min": NUMBER,
+        "y_max": NUMBER,
+        "margin": NON_NEGATIVE,
+    },
+    "place": {"scale": FIT_OR_POSITIVE, "rotation": NUMBER},
+    "motion": {
+        "rate": POSITIVE,
+        "travel_speed": POSITIVE,
+        "approach_speed": POSITIVE,
+        "max_time_scale": POSITIVE,
+        "trim_mm": NON_NEGATIVE,
+    },
+    "servo": {
+        "profile_ms": INT,
+        "acceleration_fraction": NON_NEGATIVE,
+        "position_p_gain": INTEGER,
+        "position_i_gain": INTEGER,
+        "position_d_gain": INTEGER,
+        "write_limits": BOOL,
+        "torque_off_at_end": BOOL,
+        "torque_off_after_error": BOOL,
+    },
+    "bus": {
+        "baud": INT,
+        "return_delay_us": NON_NEGATIVE,
+        "readback_rate": POSITIVE,
+        "max_corrupt": INTEGER,
+        "max_missed": INT,
+        "silence_timeout": POSITIVE,
+    },
+}
+"""Every section and key a serial profile may hold, with the kind of value it takes."""
+
+
+class SerialProfile(LayeredProfile):
+    """A merged, validated serial-arm profile: ``profile["paper.pitch"]`` and named views.
+
+    It offers the views the servo driver (:class:`tagbot.arm.driver.ArmDriver`) reads from any
+    arm: :attr:`bus_ids`, :attr:`names`, :attr:`joints`, :attr:`period`, :attr:`lead`..."""
+
+    pen_servo: int | None = None
+    """No pen servo: the arm lifts the pen itself."""
+
+    @cached_property
+    def arm(self) -> SerialArm:
+        """The robot description with the pen's point at ``robot.tool_offset``."""
+        return SerialArm.load(self.description, self["robot.tool_offset"] / 1000.0)
+
+    @property
+    def description(self) -> Path:
+        """The robot description's file: a shipped model by name, or a path."""
+        name = self["robot.description"]
+        shipped = MODELS / name
+        return shipped if shipped.is_file() else Path(name)
+
+    def joint(self, name: str) -> Joint:
+        """A joint's servo and limits, radians: the description's range within the servo's
+        0..4095 ticks of position mode."""
+        v = self.values[name]
+        arm = self.arm
+        j = arm.joint_names.index(name)
+        ends = sorted(v["sign"] * (t - v["zero"]) * 2 * math.pi / TICKS_PER_REV for t in (0, 4095))
+        return Joint(
+            name,
+            v["id"],
+            v["model"],
+            v["zero"],
+            v["sign"],
+            max(float(arm.lower[j]), ends[0]),
+            min(float(arm.upper[j]), ends[1]),
+            math.radians(v["max_speed"]),
+            math.radians(v["max_acceleration"]),
+        )
+
+    @property
+    def joints(self) -> tuple[Joint, ...]:
+        return tuple(self.joint(name) for name in JOINT_SECTIONS)
+
+    @property
+    def bus_ids(self) -> list[int]:
+        """The servo IDs the driver talks to, in joint order."""
+        return [self[f"{name}.id"] for name in JOINT_SECTIONS]
+
+    @property
+    def arm_ids(self) -> list[int]:
+        """The servos that hold the arm up (all of them)."""
+        return self.bus_ids
+
+    @property
+    def servos(self) -> dict[int, str]:
+        """Servo ID → model name, in bus order."""
+        return {self[f"{name}.id"]: self[f"{name}.model"] for name in JOINT_SECTIONS}
+
+    @property
+    def names(self) -> dict[int, str]:
+        """Servo ID → joint name."""
+        return {self[f"{name}.id"]: name for name in JOINT_SECTIONS}
+
+    @property
+    def paper(self) -> Paper:
+        """The sheet's pose in the arm's frame (m)."""
+        p = self.values["paper"]
+        rpy = [math.radians(p[k]) for k in ("roll", "pitch", "yaw")]
+        return Paper.from_pose(np.array([p["x"], p["y"], p["z"]]) / 1000.0, rpy)
+
+    @property
+    def area(self) -> tuple[float, float, float, float]:
+        """Where the tag may go ``(x_min, x_max, y_min, y_max)``, mm on the paper."""
+        a = self.values["area"]
+        return a["x_min"], a["x_max"], a["y_min"], a["y_max"]
+
+    @property
+    def park(self) -> np.ndarray:
+        """The rest pose, radians per joint."""
+        return np.radians([self[f"{name}.park_deg"] for name in JOINT_SECTIONS])
+
+    @property
+    def max_tilt(self) -> float:
+        return math.radians(self["robot.max_tilt_deg"])
+
+    @property
+    def period(self) -> float:
+        """Seconds between setpoints."""
+        return 1.0 / self["motion.rate"]
+
+    @property
+    def profile_ms(self) -> int:
+        return int(self["servo.profile_ms"])
+
+    @property
+    def lead(self) -> float:
+        """Seconds between sending a goal and when the servos should be there."""
+        return self.profile_ms / 1000.0
+
+    @property
+    def readback_every(self) -> int:
+        """Present positions are read every this many ticks."""
+        return max(1, math.ceil(self["motion.rate"] / self["bus.readback_rate"] - 1e-9))
+
+    @property
+    def gains(self) -> tuple[int, int, int]:
+        """Position P, I, D gains written to every joint."""
+        return (
+            int(self["servo.position_p_gain"]),
+            int(self["servo.position_i_gain"]),
+            int(self["servo.position_d_gain"]),
+        )
+
+
+def serial_profiles() -> list[str]:
+    """Names of the serial-arm profiles shipped with tagbot (``default``, ``openmanipulator-x``)."""
+    return packaged_names(PACKAGE)
+
+
+def is_serial_profile(profile: str | Path | None) -> bool:
+    """Whether ``profile`` names a shipped serial profile or a TOML file with a ``[robot]``
+    section (a planar arm's profile has none)."""
+    if profile is None:
+        return False
+    text = str(profile)
+    if text in serial_profiles() and text != "default" and not Path(text).exists():
+        return True
+    path = Path(text)
+    if path.suffix != ".toml" or not path.is_file():
+        return False
+    try:
+        head = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return False
+    return any(line.strip() == "[robot]" for line in head.splitlines())
+
+
+def load_serial_profile(
+    profile: str | Path | None = None, overrides: Iterable[str] = ()
+) -> SerialProfile:
+    """Packaged defaults (the OpenManipulator-X), then ``profile`` (a packaged name or a TOML
+    path), then ``overrides``; the robot description loaded. Raises ProfileError naming the
+    file and the field."""
+    return load_layered(SerialProfile, PACKAGE, SCHEMA, profile, overrides, _check)
+
+
+def _check(p: SerialProfile) -> None:
+    """Checks across fields; the error names the source that last set one of them."""
+    need = p.need
+    ids = p.bus_ids
+    for name, id in zip(JOINT_SECTIONS, ids, strict=True):
+        need(id <= 252, (f"{name}.id",), f"must be a DYNAMIXEL ID 0..252, got {id}")
+    need(len(set(ids)) == len(ids), tuple(f"{n}.id" for n in JOINT_SECTIONS), "IDs must differ")
+    try:
+        arm = p.arm
+    except ProfileError as e:
+        raise ProfileError(f"{p.where('robot.description')}: robot.description: {e}") from None
+    for name in JOINT_SECTIONS:
+        need(
+            name in arm.joint_names,
+            (f"{name}.id",),
+            f"the robot description {p.description.name} has no joint {name!r}"
+            f" (it has {', '.join(arm.joint_names)})",
+        )
+    need(
+        len(arm.joint_names) == len(JOINT_SECTIONS),
+        ("robot.description",),
+        f"the description has {len(arm.joint_names)} joints, the profile drives"
+        f" {len(JOINT_SECTIONS)}",
+    )
+    for joint in p.joints:
+        name = joint.name
+        need(joint.sign in (1, -1), (f"{name}.sign",), f"must be 1 or -1, got {joint.sign}")
+        need(
+            joint.upper > joint.lower,
+            (f"{name}.zero",),
+            "the joint's range and the servo's 0..4095 ticks do not overlap",
+        )
+        park = math.radians(p[f"{name}.park_deg"])
+        need(
+            joint.lower <= park <= joint.upper,
+            (f"{name}.park_deg",),
+            f"{p[f'{name}.park_deg']:g}° is outside the joint's range"
+            f" {math.degrees(joint.lower):.1f}..{math.degrees(joint.upper):.1f}°",
+        )
+    need(
+        p["robot.max_tilt_deg"] < 90.0,
+        ("robot.max_tilt_deg",),
+        "must be < 90 (the pen must point into the paper)",
+    )
+    x_min, x_max, y_min, y_max = p.area
+    need(x_max > x_min, ("area.x_min", "area.x_max"), "must be > area.x_min")
+    need(y_max > y_min, ("area.y_min", "area.y_max"), "must be > area.y_min")
+    need(
+        x_min >= 0 and y_min >= 0 and x_max <= p["paper.width"] and y_max <= p["paper.height"],
+        ("area.x_min", "area.x_max", "area.y_min", "area.y_max"),
+        f"the area must lie on the paper (0..{p['paper.width']:g} by 0..{p['paper.height']:g} mm)",
+    )
+    need(
+        2 * p["area.margin"] < min(x_max - x_min, y_max - y_min),
+        ("area.margin",),
+        "leaves no room in the area",
+    )
+    rate = p["motion.rate"]
+    need(rate <= MAX_RATE, ("motion.rate",), f"must be <= {MAX_RATE:g} Hz, got {rate:g}")
+    need(
+        p.profile_ms >= 1000.0 / rate - 1e-9,
+        ("motion.rate", "servo.profile_ms"),
+        f"must be >= the period ({1000.0 / rate:g} ms at {rate:g} Hz), or the servos stop"
+        " between goals",
+    )
+    need(p.profile_ms <= 32737, ("servo.profile_ms",), "must be <= 32737 ms")
+    need(
+        p["servo.acceleration_fraction"] <= 0.5,
+        ("servo.acceleration_fraction",),
+        "must be <= 0.5 (the ramps take at most half the move)",
+    )
+    for key in ("position_p_gain", "position_i_gain", "position_d_gain"):
+        need(0 <= p[f"servo.{key}"] <= 16383, (f"servo.{key}",), "must be 0..16383")
+    need(p["motion.max_time_scale"] >= 1.0, ("motion.max_time_scale",), "must be >= 1")
+    need(
+        p["bus.baud"] in BAUDS,
+        ("bus.baud",),
+        f"must be one of {', '.join(str(b) for b in BAUDS)}, got {p['bus.baud']}",
+    )
+    delay = p["bus.return_delay_us"]
+    need(
+        delay <= 508 and float(delay).is_integer() and int(delay) % 2 == 0,
+        ("bus.return_delay_us",),
+        f"must be an even number of µs 0..508, got {delay:g}",
+    )
+    need(
+        p["bus.readback_rate"] <= rate,
+        ("motion.rate", "bus.readback_rate"),
+        "must be <= motion.rate",
+    )
+    need(p["bus.max_corrupt"] >= 0, ("bus.max_corrupt",), "must be >= 0")
