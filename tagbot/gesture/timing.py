@@ -862,9 +862,12 @@ MARGIN_HEADROOM = 0.9
 """The fit holds each trace to this fraction of the margins (see :data:`SHAPE_MARGIN_MAX`)."""
 
 TimingKind = Literal["matched", "restrained", "mapped", "scaled", "geometric"]
-RESTRAINT = 8.0
-"""Where the timed fit would miss the shape, it is tried again with the positions weighing this
-many times more (:attr:`TimingOptions.position_weight`)."""
+RESTRAINTS = (8.0, 100.0, 1000.0)
+"""Where the timed fit would miss the shape, it is tried again with the positions weighing each
+of these many times more in turn (:attr:`TimingOptions.position_weight`), until one keeps the
+shape: the more the positions weigh, the closer the plan keeps to the recorded path, and the
+less of the recorded speed it follows (the velocities then mostly come from the positions'
+timing)."""
 
 
 @dataclass(frozen=True)
@@ -1154,14 +1157,16 @@ def _shape_first(
     options: TimingOptions,
 ) -> Iterator[tuple[Plan, TimingKind, float]]:
     """The plans a trace may be drawn with, the most timing first: the timed fit (if it has
-    one), the timed fit again with positions weighing :data:`RESTRAINT` times more, then the
-    geometric plan moved onto the recording's clock by arc length (:func:`initial_timing`)."""
+    one), the timed fit again with positions weighing more and more (:data:`RESTRAINTS`),
+    then the geometric plan moved onto the recording's clock by arc length
+    (:func:`initial_timing`). Each is fitted only when the one before missed the shape."""
     if timed is not None:
         yield timed, "matched", t0
-        stronger = replace(options, position_weight=options.position_weight * RESTRAINT)
-        restrained, t0_restrained, _ = _match_trace(geometric, trace, size, model, stronger)
-        if restrained.n_strokes <= timed.n_strokes:  # within the tag's stroke budget
-            yield restrained, "restrained", t0_restrained
+        for restraint in RESTRAINTS:
+            stronger = replace(options, position_weight=options.position_weight * restraint)
+            restrained, t0_restrained, _ = _match_trace(geometric, trace, size, model, stronger)
+            if restrained.n_strokes <= timed.n_strokes:  # within the tag's stroke budget
+                yield restrained, "restrained", t0_restrained
     xy = np.asarray(trace.xy, dtype=float)
     t, _ = sample_instants(trace.t, xy)
     rec = resample(t - t[0], xy, options)

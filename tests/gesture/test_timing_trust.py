@@ -208,6 +208,40 @@ def test_a_timed_plan_that_would_break_the_shape_keeps_the_geometric_plan(monkey
     assert up == pytest.approx(trace.t[-1], abs=0.01 * span)
 
 
+@pytest.mark.parametrize(
+    ("kept_from", "tried"), [(8.0, [1.0, 8.0]), (1000.0, [1.0, 8.0, 100.0, 1000.0])]
+)
+def test_a_broken_shape_is_refitted_with_the_positions_weighing_more_and_more(
+    monkeypatch, kept_from: float, tried: list[float]
+) -> None:
+    """Where the timed fit breaks the shape, the trace is refitted with the positions weighing
+    8, then 100, then 1000 times more, each only if the one before broke it too, and keeps the
+    first that holds the shape (with its timing, not the geometric plan's)."""
+    import tagbot.gesture.timing as timing
+
+    real, weights = timing._match_trace, []
+    base = timing.TimingOptions().position_weight
+
+    def restrained_only_from(plan, trace, size, model, options):
+        weights.append(options.position_weight / base)
+        rest, t0, air = real(plan, trace, size, model, options)
+        if weights[-1] >= kept_from:
+            return rest, t0, air
+        noise = np.random.default_rng(0).normal(0, 0.05 * size, rest.targets.shape)
+        bad = Plan(
+            rest.targets + noise, rest.dt, rest.mu, rest.sigma, rest.phi1, rest.phi2, rest.start
+        )
+        return bad, t0, None
+
+    monkeypatch.setattr(timing, "_match_trace", restrained_only_from)
+    rng = np.random.default_rng(12)
+    trace = capture(random_timed_plan(rng), rng)
+    fitted = assert_within_margin([trace], "match")
+    assert weights == tried
+    assert fitted.timings[0].kind == "restrained"
+    assert fitted.timings[0].reason.startswith("the timed fit missed the shape: mean ")
+
+
 def test_runs_touch_down_and_lift_off_on_the_recorded_clock() -> None:
     """A capture with several pen lifts of 80-300 ms: every plan inks from its trace's first
     sample to its last (within one 10 ms grid step and the machines' easing), and no lift
