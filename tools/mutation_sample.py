@@ -137,7 +137,9 @@ def main(argv: list[str] | None = None) -> int:
             print("\n".join(names))
         return 0
     names = [n for picked in sample.values() for n in picked]
-    command = ["mutmut", "run", "--max-children", str(args.max_children), *names]
+    # this interpreter's mutmut: the one installed beside tagbot, whether or not its venv is active
+    command = [sys.executable, "-m", "mutmut", "run", "--max-children", str(args.max_children)]
+    command += names
     subprocess.run(command, check=False)
 
     from mutmut.stats import status_by_exit_code
