@@ -1,0 +1,306 @@
+"""The AxiDraw job as a user sees it: travel times against the trapezoid, the refusal of a move
+past one step per tick at its exact boundary, pen lines, parking, the job's clock and errors."""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import tagbot
+from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, Move, axis_final, execute
+from tagbot.axidraw.moves import (
+    CRAWL,
+    SETTLE,
+    _axis,
+    _check_rates,
+    _travel_moves,
+    build_job,
+    run_reference,
+    steps_to_xy,
+)
+from tagbot.axidraw.profile import load_profile
+from tagbot.errors import PlacementError
+from tagbot.io.planfile import load_plan
+from tagbot.plotter.place import place
+
+MAX_RATE = 2**31 - 1  # one step per tick
+CAE = Path(tagbot.__file__).parent / "examples" / "cae.json"
+
+
+def run_moves(moves, accumulators=(0, 0)):
+    """Each move executed in turn: per move its ticks (relative to where it starts)."""
+    out, here = [], np.zeros(2, dtype=np.int64)
+    for move in moves:
+        relative, accumulators = execute(move, accumulators)
+        out.append(relative + here)
+        here = out[-1][-1]
+    return out, accumulators
+
+
+def trapezoid(steps: float, vmax: float, amax: float, v0: float) -> float:
+    """s to cover ``steps`` from and to ``v0`` at most ``vmax`` steps/s, ``amax`` steps/s²."""
+    ramp = (vmax * vmax - v0 * v0) / (2 * amax)
+    if steps >= 2 * ramp:
+        return 2 * (vmax - v0) / amax + (steps - 2 * ramp) / vmax
+    return 2 * (math.sqrt(steps * amax + v0 * v0) - v0) / amax
+
+
+@pytest.mark.parametrize(
+    "delta",
+    [(20, 7), (12, 12), (200, -50), (1000, 1), (-5000, 3000), (3, -6000), (40000, -40000)],
+)
+def test_travel_ends_exactly_and_takes_the_trapezoids_time(delta):
+    profile = load_profile()
+    k = profile.steps_per_mm
+    vmax = profile["limits.travel_speed"] * k
+    amax = profile["limits.travel_acceleration"] * k
+    moves = _travel_moves(delta, profile)
+    assert all(m.command == "LM" and m.clear == 0 for m in moves)
+    ticks, _ = run_moves(moves)
+    assert tuple(ticks[-1][-1]) == delta  # step-exact on both motors
+    longest = max(abs(d) for d in delta)
+    expected = trapezoid(longest, vmax, amax, amax * CRAWL)
+    took = sum(len(t) for t in ticks) / TICK_HZ
+    assert took == pytest.approx(expected, rel=0.015, abs=3 / TICK_HZ)
+    # Accelerate, (cruise,) decelerate; each phase's motors finish within 2 % of each other.
+    assert len(moves) == (3 if longest >= 2 * (vmax**2 - (amax * CRAWL) ** 2) / (2 * amax) else 2)
+    for move, moved in zip(moves, ticks, strict=True):
+        finished = [
+            int(np.flatnonzero(moved[:, i] != moved[-1, i]).max(initial=-1)) + 2
+            for i in (0, 1)
+            if move.steps[i]
+        ]
+        assert max(finished) - min(finished) <= 0.02 * len(moved) + 2, move
+    # Never faster than the travel speed along the longer motor axis (10 ms windows).
+    path = np.concatenate(ticks)[:, int(np.argmax(np.abs(delta)))]
+    window = TICK_HZ // 100
+    if len(path) > window:
+        fastest = np.abs(path[window:] - path[:-window]).max() / (window / TICK_HZ)
+        assert fastest <= vmax * 1.01
+
+
+@pytest.mark.parametrize("delta", [(1, 0), (0, 1), (1, 1), (-1, 1)])
+def test_a_travel_of_a_step_or_two_is_one_move_at_the_crawl(delta):
+    profile = load_profile()
+    k = profile.steps_per_mm
+    crawl = profile["limits.travel_acceleration"] * k * CRAWL  # steps/s
+    moves = _travel_moves(delta, profile)
+    assert len(moves) == 1
+    (move,) = moves
+    unit = ACCUMULATOR_STEP / TICK_HZ
+    assert move.accel == (0, 0)
+    assert move.steps == delta
+    for steps, rate in zip(move.steps, move.rate, strict=True):
+        assert rate == (round(crawl * unit) if steps else 0)
+    ticks, _ = run_moves(moves)
+    assert tuple(ticks[-1][-1]) == delta
+
+
+def test_no_travel_when_already_there():
+    assert _travel_moves((0, 0), load_profile()) == []
+
+
+def test_a_travel_is_slower_on_a_slower_machine():
+    fast, slow = load_profile(), load_profile(overrides=["limits.travel_speed=50"])
+    calm = load_profile(overrides=["limits.travel_acceleration=300"])
+
+    def took(profile):
+        return sum(len(t) for t in run_moves(_travel_moves((-8000, 2000), profile))[0]) / TICK_HZ
+
+    k = fast.steps_per_mm
+    for profile in (fast, slow, calm):
+        vmax = profile["limits.travel_speed"] * k
+        amax = profile["limits.travel_acceleration"] * k
+        assert took(profile) == pytest.approx(trapezoid(8000, vmax, amax, amax * CRAWL), rel=0.015)
+
+
+def lt(rate: int, accel: int = 0, ticks: int = 10, jerk: int = 0) -> Move:
+    command = "T3" if jerk else "LT"
+    return Move(command, (rate, 0), (accel, 0), (jerk, 0), ticks=ticks)  # type: ignore[arg-type]
+
+
+def refused(move: Move) -> str | None:
+    try:
+        _check_rates(move)
+    except PlacementError as e:
+        return str(e)
+    return None
+
+
+def test_a_move_at_one_step_per_tick_is_kept_and_one_unit_more_refused():
+    # LT: the loaded rate is Rate - Accel/2; tick k adds r + a·k. Accel 2 over 10 ticks: the
+    # last tick adds Rate - 1 + 20.
+    assert refused(lt(MAX_RATE - 19, 2)) is None
+    assert refused(lt(MAX_RATE - 18, 2)) == (
+        "motion: a drawing move needs 25000 steps/s on a motor, beyond the EBB's 25000"
+        " (lower limits.draw_speed)"
+    )
+    # The first tick decides when the rate falls: Rate - 1 + 2 at tick 1 with Accel 2.
+    assert refused(lt(MAX_RATE - 1, 2, ticks=1)) is None
+    assert refused(lt(MAX_RATE, 2, ticks=1)) is not None
+    assert refused(lt(MAX_RATE, -2)) is None  # falling from one step per tick
+    # Backwards alike.
+    assert refused(lt(-MAX_RATE + 19, -2)) is None and refused(lt(-MAX_RATE + 18, -2)) is not None
+    # A parameter itself beyond 32 bits is refused even where the rates stay in range.
+    assert refused(lt(-(2**30), MAX_RATE, ticks=1)) is None
+    assert refused(lt(-(2**30), MAX_RATE + 1, ticks=1)) is not None
+
+
+def test_a_t3_whose_rate_peaks_mid_move_is_judged_at_its_peak():
+    # T3 with Accel 98 and Jerk -2 over 100 ticks: the loaded accel is 100, the rate
+    # r + 100k - k(k+1) peaks at ticks 49 and 50 (r + 2450), above both ends (r + 98, r - 100).
+    # Rate = r + 98/2 - 0 (Jerk/6 truncates to 0).
+    peak_ok = MAX_RATE - 2450 + 49
+    assert refused(lt(peak_ok, 98, ticks=100, jerk=-2)) is None
+    message = refused(lt(peak_ok + 1, 98, ticks=100, jerk=-2))
+    assert message is not None and "25000 steps/s" in message
+    # The same from below (a rate most negative mid-move).
+    assert refused(lt(-peak_ok, -98, ticks=100, jerk=2)) is None
+    assert refused(lt(-peak_ok - 1, -98, ticks=100, jerk=2)) is not None
+    # A peak outside the move (after its last tick) is not looked for: the last tick decides.
+    assert refused(lt(MAX_RATE - 2450 + 49, 98, ticks=40, jerk=-2)) is None
+
+
+def test_a_refused_move_names_the_speed_it_needs():
+    # 1.5 steps per tick: 37500 steps/s.
+    message = refused(lt(3 * 2**30, 0, ticks=5))
+    assert message is not None and message.startswith("motion: a drawing move needs 37500 ")
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_the_shortest_moves_end_on_their_goal(n):
+    # Under one step per tick, as the profile's limits keep every move.
+    for accumulator, distance in [(0, 0.6), (2**30, -0.4), (123, 0.5), (2**31 - 1, -0.7)]:
+        aim = accumulator + round(distance * n * ACCUMULATOR_STEP)
+        goal = math.floor(aim / ACCUMULATOR_STEP)
+        rates = (distance * ACCUMULATOR_STEP, distance * ACCUMULATOR_STEP)
+        for jerk in (False, True):
+            rate, accel, j = _axis(n, accumulator, aim, rates, goal, jerk)
+            assert axis_final(n, rate, accel, j, accumulator)[0] == goal
+            if n <= 2 or not jerk:
+                assert j == 0
+
+
+@pytest.fixture(scope="module")
+def small():
+    """cae.json at 30 mm, parked elsewhere, from a home that is not (0, 0)."""
+    tag = load_plan(CAE)
+    profile = load_profile(overrides=["place.scale=0.3", "motion.park_x=20", "motion.park_y=15"])
+    setpoints = place(tag, profile.placement())
+    return tag, profile, setpoints, build_job(tag, setpoints, profile, start=(800, -160))
+
+
+def test_the_job_starts_where_the_motors_are_and_parks_where_asked(small):
+    _tag, profile, setpoints, job = small
+    k = profile.steps_per_mm
+    first = job.entries[0]
+    assert first.kind == "travel" and first.start == 0.0
+    # Replayed from (800, -160), every entry ends where it says.
+    here, accumulators = np.array([800, -160]), (0, 0)
+    for entry in job.entries:
+        if entry.move is not None:
+            relative, accumulators = execute(entry.move, accumulators)
+            here = relative[-1] + here
+        assert tuple(here) == entry.steps
+    park = np.floor(np.array([20 + 15, 20 - 15]) * k + 0.5)
+    assert job.entries[-1].steps == tuple(park) and job.entries[-1].kind == "travel"
+    assert job.xy(job.entries[-1].steps) == pytest.approx([20.0, 15.0])
+    assert np.abs(job.ticks[0] - np.array([800, -160])).max() <= 1  # one tick from home
+    # Without parking the job ends as the last run's pen goes up.
+    unparked = load_profile(overrides=["place.scale=0.3", "motion.park=false"])
+    job2 = build_job(_tag, setpoints, unparked)
+    assert job2.entries[-1].kind == "pen" and not job2.entries[-1].pen
+    assert job2.duration == job2.entries[-1].end
+
+
+def test_each_entry_has_its_run_its_pen_and_its_place_on_the_clock(small):
+    _tag, _profile, setpoints, job = small
+    kinds = "".join({"travel": "T", "pen": "P", "draw": "D"}[e.kind] for e in job.entries)
+    assert re.fullmatch(rf"(T+PD+P){{{len(setpoints.runs)}}}T+", kinds)
+    run, down = -1, False
+    for before, entry in zip(job.entries, job.entries[1:], strict=False):
+        assert entry.start == pytest.approx(before.end, abs=1e-12)
+    for entry in job.entries:
+        assert entry.end == entry.start + entry.duration
+        if entry.kind == "pen":
+            down = entry.pen
+            run = run + 1 if down else run
+            assert entry.run == run
+        elif entry.kind == "draw":
+            assert entry.pen and entry.run == run
+        else:
+            assert not entry.pen and entry.run == -1
+    assert job.pen_at == [(e.start, e.pen) for e in job.entries if e.kind == "pen"]
+    assert job.duration == job.entries[-1].end
+    firsts = [e.start for e in job.entries if e.kind == "draw"]
+    assert job.run_start[0] == firsts[0]
+    assert job.run_start == [
+        next(e.start for e in job.entries if e.kind == "draw" and e.run == r)
+        for r in range(len(setpoints.runs))
+    ]
+
+
+def test_every_tick_is_on_the_jobs_clock_and_every_move_states_its_own_error(small):
+    tag, profile, setpoints, job = small
+    k = profile.steps_per_mm
+    i = 0
+    for index, entry in enumerate(job.entries):
+        if entry.move is None:
+            assert job.move_error[index] == 0.0
+            continue
+        n = round(entry.duration * TICK_HZ)
+        times = job.tick_time[i : i + n]
+        np.testing.assert_allclose(times, entry.start + np.arange(1, n + 1) / TICK_HZ, atol=1e-9)
+        assert tuple(job.ticks[i + n - 1]) == entry.steps
+        if entry.kind == "travel":
+            assert job.move_error[index] == 0.0
+        else:
+            run = setpoints.runs[entry.run]
+            at = run_reference(tag, run, setpoints.matrix, setpoints.offset)
+            planned = at(times - job.run_start[entry.run])
+            gap = np.hypot(*(steps_to_xy(job.ticks[i : i + n], k) - planned).T)
+            assert job.move_error[index] == pytest.approx(gap.max(), abs=1e-9)
+        i += n
+    assert i == len(job.ticks) == len(job.tick_time)
+    for index, (times, xy) in enumerate(job.planned_runs()):
+        run = setpoints.runs[index]
+        np.testing.assert_array_equal(times, job.run_start[index] + run.t)
+        np.testing.assert_array_equal(xy, run.xy)
+
+
+def test_no_runs_and_no_travel_is_an_empty_job():
+    profile = load_profile(overrides=["motion.park=false"])
+    tag = load_plan(CAE)
+    setpoints = replace(place(tag, load_profile().placement()), runs=())
+    job = build_job(tag, setpoints, profile)
+    assert job.entries == [] and job.duration == 0.0
+    assert job.ticks.shape == (0, 2) and job.tick_time.shape == (0,)
+    home = build_job(tag, setpoints, load_profile(), start=(160, 0))
+    assert {e.kind for e in home.entries} == {"travel"} and home.entries[-1].steps == (0, 0)
+
+
+def test_machine_mm_of_motor_steps():
+    k = 80.0
+    assert steps_to_xy([80, 80], k) == pytest.approx([1.0, 0.0])
+    assert steps_to_xy([80, -80], k) == pytest.approx([0.0, 1.0])
+    np.testing.assert_allclose(steps_to_xy(np.array([[160, 0], [0, 160]]), k), [[1, 1], [1, -1]])
+
+
+def test_pen_lines_carry_the_servo_time_and_pin():
+    assert SETTLE == 0.002
+    tag = load_plan(CAE)
+    still = load_profile(overrides=["pen.up=30", "pen.down=30", "pen.pin=2"])
+    job = build_job(tag, place(tag, still.placement()), still)
+    pens = [e for e in job.entries if e.kind == "pen"]
+    # The same height: no travel time, but SP still waits its shortest, 1 ms.
+    assert {e.line for e in pens} == {b"SP,0,1,2\r", b"SP,1,1,2\r"}
+    assert {e.duration for e in pens} == {0.001}
+    slow = load_profile(overrides=["pen.delay_down=0.25"])
+    job = build_job(tag, place(tag, slow.placement()), slow)
+    down = [e for e in job.entries if e.kind == "pen" and e.pen]
+    assert down[0].line == b"SP,0,396,1\r" and down[0].duration == 0.396
