@@ -148,7 +148,7 @@ def executed_from_reads(reads: Array, profile: ArmProfile) -> Array:
 
 def tracking_error(reads: Array, program: ArmProgram, profile: ArmProfile) -> dict[str, float]:
     """Max and mean |present − planned| joint angle over the read-backs, degrees."""
-    reads = np.asarray(reads, dtype=float).reshape(-1, 4)
+    reads = np.asarray(reads, dtype=float).reshape(-1, 1 + len(profile.bus_ids))
     t = program.joints[:, 0]
     inside = (reads[:, 0] >= t[0]) & (reads[:, 0] <= t[-1])
     if not inside.any():
@@ -564,6 +564,14 @@ def prepare(
     """The ``dynamixel`` back end of :func:`tagbot.draw.prepare`: load the profile, place,
     retime and check the program (PlacementError), check the port's name (PortError), all before
     anything is written or sent. ``sysfs`` is where to look for USB adapters' latency timers."""
+    from tagbot.arm.serial.profile import is_serial_profile
+
+    if is_serial_profile(profile):  # a serial arm (OpenManipulator-X...): its own program
+        from tagbot.arm.serial.machine import prepare as prepare_serial
+
+        return prepare_serial(  # type: ignore[return-value]
+            tag, profile=profile, overrides=overrides, port=port, **options
+        )
     resume_from = options.pop("resume_from", None)
     if options:
         raise InputError(f"{', '.join(sorted(options))}: not an option of the arm")
@@ -610,7 +618,7 @@ def arm_figures(outcome: _Outcome, profile: ArmProfile, port: str | None) -> dic
         gaps = np.diff(sends)[~across]
         if len(gaps):
             jitter99 = float(np.percentile(np.abs(gaps - s.period), 99) * 1e3)
-    reads = np.array(result.reads, dtype=float).reshape(-1, 4)
+    reads = np.array(result.reads, dtype=float).reshape(-1, 1 + len(profile.bus_ids))
     figures.update(
         {
             "ticks_sent": result.ticks_sent,

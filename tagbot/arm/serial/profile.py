@@ -71,6 +71,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "max_tilt_deg": NON_NEGATIVE,
         "pen_up": POSITIVE,
         "press": NON_NEGATIVE,
+        "pen_force": NON_NEGATIVE,
+        "pen_friction": NON_NEGATIVE,
     },
     **{name: dict(_JOINT) for name in JOINT_SECTIONS},
     "paper": {
@@ -104,6 +106,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "position_p_gain": INTEGER,
         "position_i_gain": INTEGER,
         "position_d_gain": INTEGER,
+        "feedforward": BOOL,
+        "stall_torque": POSITIVE,
+        "no_load_speed": POSITIVE,
         "write_limits": BOOL,
         "torque_off_at_end": BOOL,
         "torque_off_after_error": BOOL,
@@ -234,6 +239,18 @@ class SerialProfile(LayeredProfile):
             int(self["servo.position_d_gain"]),
         )
 
+    @property
+    def stiffness(self) -> float:
+        """N·m/rad of the position loop's P term: ``P/128`` PWM units per tick, each
+        ``stall_torque/885`` N·m (at 12 V)."""
+        per_pwm = self["servo.stall_torque"] / 885.0
+        return per_pwm * self["servo.position_p_gain"] / 128.0 * TICKS_PER_REV / (2 * math.pi)
+
+    @property
+    def back_emf(self) -> float:
+        """N·m·s/rad the motor loses per rad/s of speed (stall torque ÷ no-load speed)."""
+        return self["servo.stall_torque"] / (self["servo.no_load_speed"] * 2 * math.pi / 60)
+
 
 def serial_profiles() -> list[str]:
     """Names of the serial-arm profiles shipped with tagbot (``default``, ``openmanipulator-x``)."""
@@ -340,6 +357,11 @@ def _check(p: SerialProfile) -> None:
     )
     for key in ("position_p_gain", "position_i_gain", "position_d_gain"):
         need(0 <= p[f"servo.{key}"] <= 16383, (f"servo.{key}",), "must be 0..16383")
+    need(
+        not p["servo.feedforward"] or p["servo.position_p_gain"] > 0,
+        ("servo.feedforward", "servo.position_p_gain"),
+        "the feedforward needs a position P gain > 0",
+    )
     need(p["motion.max_time_scale"] >= 1.0, ("motion.max_time_scale",), "must be >= 1")
     need(
         p["bus.baud"] in BAUDS,

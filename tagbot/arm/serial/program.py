@@ -31,11 +31,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
 from tagbot.arm.kinematics import angles_to_ticks
 from tagbot.arm.place import ArmProgram, Placement, Setpoints
+from tagbot.arm.serial.kinematics import PEN_SITE
 from tagbot.arm.serial.profile import SerialProfile
 from tagbot.arm.serial.reach import Paper
 from tagbot.errors import PlacementError, ReachError
@@ -51,6 +53,9 @@ FINE_STEP = 0.001
 """Seconds (tag clock) between the samples used for the ink's extent and the trimming."""
 MIN_JERK_PEAK_RATE = 1.875
 MIN_JERK_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
+FRICTION_SPEED = 0.005
+"""m/s: below this the feedforward's drag of the nib on the paper falls off in proportion (a
+nib barely moving sticks, with whatever friction holds it, up to the drag)."""
 ROUNDS = 12
 """Most solve-and-retime rounds before giving up."""
 
@@ -227,12 +232,14 @@ def build_serial_program(
     rows.append(_pen_up_rows(arm.fk(to_park)[0].reshape(-1, 3), paper))
     N = len(angles)
     t = np.arange(N) * T
-    goals = np.column_stack([angles_to_ticks(angles[:, i], j) for i, j in enumerate(joints)])
+    pen = np.concatenate([r[2] for r in rows])
+    aimed = angles + feedforward(angles, pen, profile) if profile["servo.feedforward"] else angles
+    goals = np.column_stack([angles_to_ticks(aimed[:, i], j) for i, j in enumerate(joints)])
     setpoints = Setpoints(
         t=t,
         xy=np.concatenate([r[0] for r in rows]),
         v=np.concatenate([r[1] for r in rows]),
-        pen=np.concatenate([r[2] for r in rows]),
+        pen=pen,
         plan=np.concatenate([r[3] for r in rows]).astype(np.intp),
         period=T,
         mm_per_unit=placement.mm_per_unit,
@@ -252,6 +259,53 @@ def build_serial_program(
 
 def _travel(profile: SerialProfile) -> float:
     return float(profile["motion.travel_speed"])
+
+
+def feedforward(angles: Array, pen: NDArray[np.bool_], profile: SerialProfile) -> Array:
+    """Radians to add to each planned angle so that the position loop's P term gives the
+    torque the joint needs there: inverse dynamics of the description (gravity, inertia,
+    Coriolis, its joint damping) at the planned angles, rates and accelerations (differences at
+    the loop period), plus the motor's back-EMF at the planned rate, less the paper's force on
+    the pen's point, all divided by the loop's stiffness (:attr:`SerialProfile.stiffness`).
+
+    The paper's force: ``robot.pen_force`` along its normal where the point is aimed
+    ``robot.press`` into it (in proportion above that, none above the paper), and the drag
+    ``robot.pen_friction`` times that against the point's motion along the paper (eased in
+    below :data:`FRICTION_SPEED`). ``pen`` is
+    unused beyond its length: the force follows the planned height."""
+    arm, T = profile.arm, profile.period
+    model = arm.model
+    data = mujoco.MjData(model)
+    rate = np.gradient(angles, T, axis=0)
+    acc = np.gradient(rate, T, axis=0)
+    site = model.site(PEN_SITE).id
+    jac = np.zeros((3, model.nv))
+    paper = profile.paper
+    normal, origin = paper.normal, np.asarray(paper.origin)
+    press = max(profile["robot.press"], 1e-3) / 1000.0
+    force, mu = profile["robot.pen_force"], profile["robot.pen_friction"]
+    tips, _ = arm.fk(angles)
+    velocity = np.gradient(tips, T, axis=0)
+    torque = np.empty_like(angles)
+    for i in range(len(angles)):
+        data.qpos[:] = angles[i]
+        data.qvel[:] = rate[i]
+        data.qacc[:] = acc[i]
+        mujoco.mj_inverse(model, data)
+        torque[i] = data.qfrc_inverse
+        depth = -float(normal @ (tips[i] - origin))
+        if depth > 0.0 and force > 0.0:
+            push = force * min(1.0, depth / press) * normal
+            slide = velocity[i] - (velocity[i] @ normal) * normal
+            speed = float(np.linalg.norm(slide))
+            if speed > 0.0:  # Coulomb's drag, eased in below FRICTION_SPEED (sticking)
+                drag = mu * float(np.linalg.norm(push)) * min(1.0, speed / FRICTION_SPEED)
+                push = push - drag * slide / speed
+            mujoco.mj_jacSite(model, data, jac, None, site)
+            torque[i] -= jac.T @ push
+    torque += profile.back_emf * rate
+    del pen
+    return torque / profile.stiffness
 
 
 def _pen_up_rows(
