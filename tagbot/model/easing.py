@@ -11,10 +11,16 @@ run's time scale ``s``: machine time is ``s·u``) maps to the tag's clock by
 with ``S(x) = x³ − x⁴/2`` and ``U = off − on + (R₁ + R₂)/2``. The speed factor ``τ'(u) =
 3x² − 2x³`` (smoothstep) rises from 0 to 1 with zero slope at both ends: the machine starts at
 rest with no step in acceleration, follows the plan's path exactly, and after ``R₁`` moves at the
-plan's own speed. ``R₁ = R₂ = 0`` (a plan drawn from rest to rest, as the paper's are) is the
-identity ``τ = on + u``. A run eases in where its plan touches down moving and out where it lifts
-off moving, over :data:`EASE` seconds (less in a shorter run), and moves at the plan's speed in
-between: its middle keeps the writer's rhythm.
+plan's own speed. That jerk-limited start suits machines whose servos follow goals (the arms).
+Stepper machines start every move at a constant acceleration (Grbl's planner, the EBB's moves):
+for them a run starts steadily, ``S(x) = x² − x³/3``, ``τ'(u) = 2x − x²`` (a constant
+acceleration from rest that fades to none where it joins the plan's speed) and ``U = off − on +
+(R₁ + R₂)/3``: the pen leaves its touch-down point about ``(R·d/v)^(1/2)`` rather than
+``R^(2/3)·(d/v)^(1/3)`` after touching down (``d`` a motor step, ``v`` the plan's speed there),
+so it rests on the paper less. ``R₁ = R₂ = 0`` (a plan drawn from rest to rest, as the paper's
+are) is the identity ``τ = on + u``. A run eases in where its plan touches down moving and out
+where it lifts off moving, over :data:`EASE` seconds (less in a shorter run), and moves at the
+plan's speed in between: its middle keeps the writer's rhythm.
 """
 
 from __future__ import annotations
@@ -48,17 +54,31 @@ class RunClock:
     """``R₁``, s of the run's clock (0: the plan is at rest there)."""
     ease_out: float = 0.0
     """``R₂``."""
+    jerk_limited: bool = True
+    """True: ramps by smoothstep (no step in acceleration anywhere); False: from a constant
+    acceleration at rest (module docstring)."""
+
+    @property
+    def _kept(self) -> float:
+        """``S(1)``: the share of a ramp's length the plan's clock advances over it."""
+        return 0.5 if self.jerk_limited else 2.0 / 3.0
+
+    def _ramp(self, x: Array) -> tuple[Array, Array]:
+        """``S(x)`` and ``S'(x)``."""
+        if self.jerk_limited:
+            return x**3 - 0.5 * x**4, 3 * x**2 - 2 * x**3
+        return x**2 - x**3 / 3, 2 * x - x**2
 
     @property
     def duration(self) -> float:
         """``U``: the run's length on its clock, s before the time scale."""
-        return max(self.off - self.on, 0.0) + 0.5 * (self.ease_in + self.ease_out)
+        return max(self.off - self.on, 0.0) + (1.0 - self._kept) * (self.ease_in + self.ease_out)
 
     @property
     def tag_start(self) -> float:
         """The tag-clock instant the run's clock would start at without easing in: between the
         ramps, ``τ = tag_start + u`` (the run's clock as reports describe it)."""
-        return self.on - 0.5 * self.ease_in
+        return self.on - (1.0 - self._kept) * self.ease_in
 
     def tag_time(self, u: ArrayLike) -> Array:
         """``τ(u)``; beyond an eased end it stays at that end, beyond the others it goes on at
@@ -68,12 +88,10 @@ class RunClock:
         r1, r2, total = self.ease_in, self.ease_out, self.duration
         if r1 > 0.0:
             head = u < r1
-            x = np.maximum(u[head], 0.0) / r1
-            tau[head] = self.on + r1 * (x**3 - 0.5 * x**4)
+            tau[head] = self.on + r1 * self._ramp(np.maximum(u[head], 0.0) / r1)[0]
         if r2 > 0.0:
             tail = u > total - r2
-            x = np.maximum(total - u[tail], 0.0) / r2
-            tau[tail] = self.off - r2 * (x**3 - 0.5 * x**4)
+            tau[tail] = self.off - r2 * self._ramp(np.maximum(total - u[tail], 0.0) / r2)[0]
         return tau
 
     def rate(self, u: ArrayLike) -> Array:
@@ -83,24 +101,25 @@ class RunClock:
         r1, r2, total = self.ease_in, self.ease_out, self.duration
         if r1 > 0.0:
             head = u < r1
-            x = np.maximum(u[head], 0.0) / r1
-            rate[head] = 3 * x**2 - 2 * x**3
+            rate[head] = self._ramp(np.maximum(u[head], 0.0) / r1)[1]
         if r2 > 0.0:
             tail = u > total - r2
-            x = np.maximum(total - u[tail], 0.0) / r2
-            rate[tail] = 3 * x**2 - 2 * x**3
+            rate[tail] = self._ramp(np.maximum(total - u[tail], 0.0) / r2)[1]
         return rate
 
 
-def run_clock(plan: Plan, on: float, off: float, size: float) -> RunClock:
+def run_clock(
+    plan: Plan, on: float, off: float, size: float, jerk_limited: bool = True
+) -> RunClock:
     """The clock of a run drawing ``plan`` from ``on`` to ``off`` (tag clock, within its ink
     window): easing in if it starts where the plan touches down moving, out if it ends where
-    the plan lifts off moving (:data:`EASE`, at most the run's own length each)."""
+    the plan lifts off moving (:data:`EASE`, at most the run's own length each), by
+    smoothstep or, not ``jerk_limited``, from a constant acceleration (module docstring)."""
     if plan.ink is None or off <= on:
-        return RunClock(on, max(on, off))
+        return RunClock(on, max(on, off), jerk_limited=jerk_limited)
     down, up = plan.ink_window(size)
     touches, lifts = plan.moving_ends(size)
     ramp = min(EASE, off - on)
     ease_in = ramp if touches and on <= down + _EDGE else 0.0
     ease_out = ramp if lifts and off >= up - _EDGE else 0.0
-    return RunClock(on, off, ease_in, ease_out)
+    return RunClock(on, off, ease_in, ease_out, jerk_limited)

@@ -16,9 +16,10 @@ moves less than one step on every axis, which the machine could not draw anyway.
 **Touch-down in motion.** A plan with an ``ink`` window (a writer who touched down or lifted off
 while moving) is drawn over its window only: the pen goes down at rest where the ink starts and
 the run eases from rest to the plan's own speed over :data:`~tagbot.model.easing.EASE` seconds
-of its clock (and back to rest where the ink ends, if it lifts off moving), along the same path
-(:mod:`tagbot.model.easing`); a pen command stops Grbl's motion, so a plotter cannot touch down
-moving.
+of its clock (and back to rest where the ink ends, if it lifts off moving), along the same path,
+starting at a constant acceleration as the machine's own moves do (:mod:`tagbot.model.easing`,
+``jerk_limited=False``: the pen leaves its touch-down point sooner); a pen command stops
+Grbl's motion, so a plotter cannot touch down moving.
 
 **Time scale** ``s ≥ 1``: the retimed motion is ``q(τ) = p(τ / s)``, so speeds divide by ``s``
 and accelerations by ``s²`` while the path and the lognormal shape of the speed profile are
@@ -330,7 +331,7 @@ def _setpoints(
     plan = tag.plans[k]
     on, off = span
     dt = profile.dt
-    clock = run_clock(plan, on, off, tag.size)
+    clock = run_clock(plan, on, off, tag.size, jerk_limited=False)  # steppers: see easing
     if off <= on:
         u = np.zeros(1)
     elif profile["motion.setpoints"] == "fixed":

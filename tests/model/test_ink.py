@@ -91,6 +91,38 @@ def test_a_run_clock_eases_from_and_to_rest_on_the_same_path() -> None:
     assert np.allclose(tau[middle], clock.tag_start + u[middle]) and np.all(rate[middle] == 1.0)
 
 
+def test_a_steady_run_clock_starts_at_a_constant_acceleration_and_joins_smoothly() -> None:
+    """Not jerk-limited (stepper machines): the speed factor rises as ``2x - x²`` from rest, so
+    a run leaves its touch-down point sooner, and still joins the plan's speed with no step in
+    speed or acceleration; the path and the middle's rhythm are the same."""
+    plan = lifted()
+    size = Tag((plan,)).size
+    clock = run_clock(plan, 0.65, 0.95, size, jerk_limited=False)
+    smooth = run_clock(plan, 0.65, 0.95, size)
+    assert (clock.ease_in, clock.ease_out, clock.jerk_limited) == (EASE, EASE, False)
+    assert clock.duration == pytest.approx(0.3 + 2 * EASE / 3)
+    assert clock.tag_start == pytest.approx(0.65 - EASE / 3)
+    u = np.linspace(0.0, clock.duration, 40001)
+    tau, rate = clock.tag_time(u), clock.rate(u)
+    assert tau[0] == pytest.approx(0.65) and tau[-1] == pytest.approx(0.95)
+    assert np.all(np.diff(tau) >= 0) and rate[0] == 0.0 and rate[-1] == 0.0
+    assert np.max(np.abs(np.gradient(tau, u) - rate)) < 1e-3
+    slope = np.diff(rate) / np.diff(u)
+    assert slope[0] == pytest.approx(2 / EASE, rel=1e-3)  # a constant acceleration from rest
+    assert np.max(np.abs(np.diff(rate))) < 1e-3 and np.max(np.abs(np.diff(slope))) < 0.1
+    middle = (u > EASE) & (u < clock.duration - EASE)
+    assert np.allclose(tau[middle], clock.tag_start + u[middle]) and np.all(rate[middle] == 1.0)
+    # A hundredth of the ramp's advance is reached after 10 % of the ramp (x² ≈ 0.01), where
+    # smoothstep takes 22 % (x³ ≈ 0.01).
+    early = 0.65 + 0.01 * EASE
+    assert np.interp(early, tau, u) == pytest.approx(0.1 * EASE, rel=0.05)
+    u_smooth = np.linspace(0.0, smooth.duration, 40001)
+    assert np.interp(early, smooth.tag_time(u_smooth), u_smooth) > 0.2 * EASE
+    # Runs at rest keep the identity whatever the ramp.
+    rest = run_clock(lifted(None), 0.6, 1.2, size, jerk_limited=False)
+    assert rest.tag_start == 0.6 and rest.duration == pytest.approx(0.6)
+
+
 def test_runs_at_rest_keep_the_identity_clock() -> None:
     plan = lifted(None)
     size = Tag((plan,)).size
