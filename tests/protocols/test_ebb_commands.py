@@ -440,3 +440,30 @@ def test_line_reader_cuts_like_the_firmware() -> None:
     assert reader.feed(b"QU,") == []
     assert reader.feed(b"2\r") == [b"QU,2"]
     assert reader.feed(b"\n\r\r") == []
+
+
+# -- edges (issue 34: what a changed line would break) ---------------------------------------
+
+
+def test_refusals_name_their_reason() -> None:
+    cases = {
+        b"SM,0,10": "!6 Err: Invalid parameter value (Duration 0)",
+        b"S2,1000,25": "!6 Err: Invalid parameter value (S2 pin above 24)",
+        b"SM,10,10,10,4": "!6 Err: Invalid parameter value (Clear above 3)",
+        b"QU,7": "!6 Err: Invalid parameter value (QU,7)",
+        b"CU,7,0": "!6 Err: Invalid parameter value (CU,7,0)",
+    }
+    for line, message in cases.items():
+        with pytest.raises(EBBCommandError) as caught:
+            parse_command(line)
+        assert str(caught.value) == message
+
+
+def test_xm_sums_its_axes_in_the_firmwares_32_bit_ints() -> None:
+    # Motor 2 gets A - B = -2**31 - 1, which wraps to 2**31 - 1 steps: about 1.0 step per tick
+    # over 10**8 ms, within the rate. Unwrapped, 3 * 2**31 - 1 steps would be too fast.
+    assert parse_command(b"XM,100000000,-2147483648,1").params == (100000000, -(2**31), 1)
+    # A + B = 2**31 wraps to -2**31: the same magnitude, checked as such.
+    assert parse_command(b"XM,100000000,2147483647,1").params == (100000000, 2**31 - 1, 1)
+    with pytest.raises(EBBCommandError, match="step rate too high"):
+        parse_command(b"XM,80000000,2147483647,1")

@@ -329,3 +329,46 @@ def test_zero_interval_move_without_limit_checks_only_clears():
     )
     assert positions.shape == (0, 2)
     assert accumulators == (7, 0)
+
+
+# -- edges (issue 34: what a changed line would break) ---------------------------------------
+
+
+def test_a_long_move_at_the_top_rate_has_its_closed_form():
+    """A rate of exactly 2**31 - 1 stays in int32: the closed form holds beyond MAX_TICKS."""
+    ticks = 2**24 + 10
+    total = (2**31 - 1) * ticks
+    assert axis_final(ticks, 2**31 - 1, 0) == (total >> 31, total % 2**31)
+    assert axis_final(ticks, -(2**31), 0) == (-ticks, 0)
+    with pytest.raises(MoveTooLong, match=r"^16777226 ticks: longer than the 16777216-tick"):
+        axis_positions(ticks, 2**31 - 1, 0)
+
+
+@pytest.mark.parametrize("accumulator", [-1, 2**31])
+def test_an_accumulator_out_of_range_is_refused_by_name(accumulator):
+    message = rf"^accumulator: must be in \[0, 2\*\*31\), got {accumulator}$"
+    with pytest.raises(ValueError, match=message):
+        axis_final(10, 1000, 0, 0, accumulator)
+    with pytest.raises(ValueError, match=message):
+        axis_positions(10, 1000, 0, 0, accumulator)
+    with pytest.raises(ValueError, match=message):
+        lm_axis(10, 1000, 0, accumulator)
+    assert axis_final(1, 0, 0, 0, 2**31 - 1) == (0, 2**31 - 1)
+
+
+def test_negative_steps_with_a_zero_rate_run_backwards_on_the_accel():
+    """Rate 0 is not negative: the legacy rule negates it (and the accel) without ``!6``."""
+    backward, _ = lm_axis(-10, 0, 4_000_000, clear=True)
+    forward, _ = lm_axis(10, 0, 4_000_000, clear=True)
+    assert forward[-1] == 10 and backward.tolist() == (-forward).tolist()
+    Move("LM", (0, 0), (4_000_000, 0), steps=(-10, 0)).validate()
+    with pytest.raises(EBBCommandError, match=r"negative Steps with a negative Rate"):
+        Move("LM", (-1, 0), (4_000_000, 0), steps=(-10, 0)).validate()
+
+
+@pytest.mark.parametrize(
+    ("value", "held"),
+    [(2**31, -(2**31)), (2**31 - 1, 2**31 - 1), (-(2**31) - 1, 2**31 - 1), (2**32 + 5, 5)],
+)
+def test_wrap32_is_the_firmwares_signed_32_bit_variable(value, held):
+    assert wrap32(value) == held == i32(value)
