@@ -152,18 +152,19 @@ def test_a_move_at_one_step_per_tick_is_kept_and_one_unit_more_refused():
 
 
 def test_a_t3_whose_rate_peaks_mid_move_is_judged_at_its_peak():
-    # T3 with Accel 98 and Jerk -2 over 100 ticks: the loaded accel is 100, the rate
-    # r + 100k - k(k+1) peaks at ticks 49 and 50 (r + 2450), above both ends (r + 98, r - 100).
-    # Rate = r + 98/2 - 0 (Jerk/6 truncates to 0).
-    peak_ok = MAX_RATE - 2450 + 49
-    assert refused(lt(peak_ok, 98, ticks=100, jerk=-2)) is None
-    message = refused(lt(peak_ok + 1, 98, ticks=100, jerk=-2))
+    # T3 with Accel 99 and Jerk -2 over 100 ticks: the loaded accel is 101, the rate
+    # r + 100k - k² peaks at tick 50 only (r + 2500; r + 2499 at ticks 49 and 51), above both
+    # ends (r + 99, r). Rate = r + int(99/2) - int(-2/6) = r + 49.
+    peak_ok = MAX_RATE - 2500 + 49
+    assert refused(lt(peak_ok, 99, ticks=100, jerk=-2)) is None
+    message = refused(lt(peak_ok + 1, 99, ticks=100, jerk=-2))
     assert message is not None and "25000 steps/s" in message
     # The same from below (a rate most negative mid-move).
-    assert refused(lt(-peak_ok, -98, ticks=100, jerk=2)) is None
-    assert refused(lt(-peak_ok - 1, -98, ticks=100, jerk=2)) is not None
-    # A peak outside the move (after its last tick) is not looked for: the last tick decides.
-    assert refused(lt(MAX_RATE - 2450 + 49, 98, ticks=40, jerk=-2)) is None
+    assert refused(lt(-peak_ok, -99, ticks=100, jerk=2)) is None
+    assert refused(lt(-peak_ok - 1, -99, ticks=100, jerk=2)) is not None
+    # A peak after the move's last tick is not reached: the last tick decides (r + 2400).
+    assert refused(lt(peak_ok + 100, 99, ticks=40, jerk=-2)) is None
+    assert refused(lt(peak_ok + 101, 99, ticks=40, jerk=-2)) is not None
 
 
 def test_a_refused_move_names_the_speed_it_needs():
