@@ -305,3 +305,19 @@ def test_pen_lines_carry_the_servo_time_and_pin():
     job = build_job(tag, place(tag, slow.placement()), slow)
     down = [e for e in job.entries if e.kind == "pen" and e.pen]
     assert down[0].line == b"SP,0,396,1\r" and down[0].duration == 0.396
+
+
+def test_the_jobs_ticks_are_the_boards_from_the_accumulators_em_clears():
+    # A crawl of exactly (2**32 - 1) / 3 units a tick (16 667 steps/s, one phase): three ticks
+    # end one unit short of two steps, so where the accumulator starts decides tick 3.
+    fast = ["limits.travel_acceleration=208333.3333", "limits.travel_speed=208.3333333"]
+    profile = load_profile(overrides=fast)
+    tag = load_plan(CAE)
+    setpoints = replace(place(tag, load_profile().placement()), runs=())
+    job = build_job(tag, setpoints, profile, start=(0, -40))
+    (entry,) = job.entries
+    assert entry.line == b"LM,0,0,0,1431655765,40,0\r"
+    rate = 1431655765
+    expected = [min(k * rate // ACCUMULATOR_STEP, 40) for k in range(1, len(job.ticks) + 1)]
+    assert (job.ticks[:, 1] + 40).tolist() == expected
+    assert expected[:4] == [0, 1, 1, 2] and job.ticks[-1].tolist() == [0, 0]
