@@ -707,17 +707,20 @@ def planned_until(
     planned: Sequence[tuple[ArrayLike, ArrayLike]], plans: Sequence[int], until: float
 ) -> tuple[list[tuple[Array, Array]], list[int]]:
     """The planned runs cut at planned time ``until`` (a segment it falls in ends there, at the
-    planned position then; runs with fewer than two samples before it left out), and their
-    plans."""
+    planned position then; runs with fewer than two samples before it left out, and a run cut
+    before it has moved :data:`MOVED` from its first point: not begun), and their plans."""
     kept: list[tuple[Array, Array]] = []
     kept_plans: list[int] = []
     for (t, xy), plan in zip(planned, plans, strict=True):
         t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
         inside = t <= until + 1e-9
+        cut_short = until + 1e-9 < t[-1]
         if inside.any() and t[inside][-1] + 1e-9 < until < t[-1]:  # inside a segment: cut
             cut = np.array([np.interp(until, t, xy[:, i]) for i in (0, 1)])
             t, xy = np.append(t[inside], until), np.vstack([xy[inside], cut])
             inside = np.ones(len(t), dtype=bool)
+        if cut_short and inside.any() and np.hypot(*(xy[inside] - xy[0]).T).max() <= MOVED:
+            continue  # stopped before it began
         if inside.sum() >= 2:
             kept.append((t[inside], xy[inside]))
             kept_plans.append(int(plan))

@@ -89,3 +89,25 @@ def test_fit_summary_counts(traces: int, points: int, strokes: int, words: str) 
     assert report.summary() == (
         f"{words} shape error mean 1.00% max 2.00% of 50, velocity SNR 12.3 dB"
     )
+
+
+def test_a_run_stopped_before_it_began_is_not_compared() -> None:
+    """A stop 2 ms into the second run (a slow one: 0.0002 mm drawn, under the 0.02 mm a run
+    needs to start) or on its second sample (0.01 mm): only the first run is compared, and its
+    figures are the first run's alone."""
+    first, second = _run(0.0), _run(2.0, length=1.0)
+    executed = np.vstack(
+        [
+            np.column_stack([first[0], first[1], np.ones(101)]),
+            [[1.5, 10.0, 0.0, 0.0], [1.9, 0.0, 0.0, 0.0]],
+            # The pen went down at the second run's start and stayed there 0.1 s.
+            np.column_stack([np.linspace(2.0, 2.1, 11), np.zeros((11, 2)), np.ones(11)]),
+        ]
+    )
+    for until in (2.002, 2.01):
+        report = compare_execution([first, second], executed, until=until)
+        assert report.planned_runs == 1 and len(report.runs) == 1
+        assert report.speed_snr_db is not None and report.speed_snr_db > 40.0
+    # Cut 0.3 s in (0.3 mm drawn), the second run is compared.
+    later = compare_execution([first, second], executed, until=2.3)
+    assert later.planned_runs == 2 and len(later.runs) == 2

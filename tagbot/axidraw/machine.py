@@ -59,6 +59,11 @@ PLAN_STEP = 0.001
 """s between the samples of each run's plan in the comparison."""
 TRACE_STEP = 25
 """Ticks between the executed trace's samples (1 ms)."""
+PAUSE_EDGE = 0.005
+"""s either side of a pause the host cannot place exactly: it sees the motors stop at its
+polls, and the board starts the next move once it has read it (4 ms for a ``T3``, the
+firmware's command time). The comparison leaves that out after each pause and aligns each side
+on its own (:attr:`MachineRun.ramp`)."""
 
 
 def find_port() -> str:
@@ -156,8 +161,10 @@ class AxiDrawJob:
         streamer = EBBStreamer(link, profile, pens)
         first = 0 if self.resume_from is None else self.resume_from - 1
         error: BaseException | None = None
+        connected = False
         try:
             streamer.connect(keep_position=first > 0)
+            connected = True
             preamble = self._preamble(streamer, first)
             streamer.stream(
                 [e.line for e in job.entries],
@@ -172,12 +179,12 @@ class AxiDrawJob:
             error = e
         except KeyboardInterrupt as e:
             error = Interrupted(f"interrupted ({label(signal_of(e))})")
-        if error is not None:
+        if error is not None and connected:
             try:
                 streamer.stop()
             finally:
                 link.close()
-        else:
+        else:  # ended, or refused at connect (an old firmware): nothing was sent to stop
             link.close()
         report = streamer.report
         done, partial = self._executed_moves(report)
@@ -217,6 +224,7 @@ class AxiDrawJob:
             pauses=[(a - report.started, n) for a, n in report.pauses],
             stalls=[(a - report.started, n) for a, n in report.stalls],
             until=None if error is None else _until(job, done),
+            ramp=PAUSE_EDGE if report.pauses else 0.0,
         )
 
     def _planned_runs(self) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -268,8 +268,7 @@ class EBBStreamer:
                 button = self._button()
                 if button or (control is not None and control.paused):
                     down = bool(pen_down[sent - 1]) if pen_down and sent > first else False
-                    until = finish[-1] if finish else now
-                    self._pause(down, None if button else control, sent, until, poll)
+                    self._pause(down, None if button else control, sent, poll)
                     finish.clear()
                     last = None
             else:  # full: ask again when the oldest line should be done
@@ -315,26 +314,27 @@ class EBBStreamer:
         self.report.button_presses += pressed
         return pressed
 
-    def _pause(
-        self, down: bool, control: RunControl | None, sent_to: int, until: float, poll: float
-    ) -> None:
-        """Drain (the last move should end at ``until``), lift, wait for the resume
-        (``control``, or without it the button pressed again), lower: the pause is from the
-        motors' stop to the pen's return, and the stream goes on at once."""
-        self._drain(until)
+    def _pause(self, down: bool, control: RunControl | None, sent_to: int, poll: float) -> None:
+        """Drain (asking every ms, so the pause starts as the motors stop), lift, wait for the
+        resume (``control``, or without it the button pressed again), lower: the pause is from
+        the motors' stop to the pen's return, and the stream goes on at once. A stop while
+        paused ends the pause there."""
+        self._drain(self.clock.now())
         self._count(sent_to)
         start = self.clock.now()
-        if down:
-            self.ask(self.pen_line(False))
-        while True:
-            self.clock.sleep_until(self.clock.now() + poll)
-            pressed = self._button()
-            if (control is None and pressed) or (control is not None and not control.paused):
-                break
-        if down:
-            self.ask(self.pen_line(True))
-            self._drain(self.clock.now() + self.pens[True][1])
-        self.report.pauses.append((start, self.clock.now() - start))
+        try:
+            if down:
+                self.ask(self.pen_line(False))
+            while True:
+                self.clock.sleep_until(self.clock.now() + poll)
+                pressed = self._button()
+                if (control is None and pressed) or (control is not None and not control.paused):
+                    break
+            if down:
+                self.ask(self.pen_line(True))
+                self._drain(self.clock.now() + self.pens[True][1])
+        finally:
+            self.report.pauses.append((start, self.clock.now() - start))
 
     def stop(self) -> tuple[int, int] | None:
         """``ES``, ``QS``, pen up (waited for); the stopped position (None if the board did

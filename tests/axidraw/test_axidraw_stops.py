@@ -1,0 +1,188 @@
+"""The AxiDraw's pauses and stops as a user meets them: a keyboard pause costs no fidelity
+figure, a stop while paused keeps the pause and stops safely, refusals send no byte (bad
+firmware: only ``V``), and SIGTERM to ``tagbot draw`` on a pseudo-terminal stops the board."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from itertools import count
+
+import numpy as np
+import pytest
+
+from sim.ebb.device import SimulatedEBB
+from sim.ebb.transport import attach_device, serve_pty
+from tagbot.axidraw.machine import prepare
+from tagbot.control import RunControl
+from tagbot.draw import draw
+from tagbot.errors import DeviceError, Interrupted, PlacementError
+from tagbot.io.planfile import load_plan
+
+from .conftest import LETTER_B
+
+_names = count()
+
+
+def _url(device: SimulatedEBB) -> str:
+    return attach_device(device, f"a3stop{os.getpid()}_{next(_names)}")
+
+
+def _spy(device: SimulatedEBB) -> list[bytes]:
+    """Every byte string the host writes to ``device``, in order."""
+    written: list[bytes] = []
+    write = device.write
+
+    def spy(data: bytes) -> int:
+        written.append(bytes(data))
+        return write(data)
+
+    device.write = spy  # type: ignore[method-assign]
+    return written
+
+
+class ClockedControl(RunControl):
+    """Space pressed at the simulated board's second ``at`` and again ``length`` s later; with
+    ``stop_after``, Ctrl-C that long into the pause instead of the second press."""
+
+    def __init__(self, at: float, length: float, stop_after: float = -1) -> None:
+        super().__init__()
+        self.at, self.length, self.stop_after = at, length, stop_after
+        self.device: SimulatedEBB | None = None
+
+    @property
+    def paused(self) -> bool:
+        now = self.device.now if self.device is not None else 0.0
+        if self.stop_after >= 0 and now >= self.at + self.stop_after:
+            raise KeyboardInterrupt
+        return self.at <= now < self.at + self.length
+
+
+def _simulated(monkeypatch, keys: ClockedControl) -> None:
+    """The job's own simulated board (no ``--port``: its 1 ms recorder) seen by ``keys``."""
+    import sim.ebb.transport as transport
+
+    attach = transport.attach_device
+
+    def keep(device: SimulatedEBB, name: str) -> str:
+        keys.device = device
+        return attach(device, name)
+
+    monkeypatch.setattr(transport, "attach_device", keep)
+
+
+@pytest.fixture(scope="module")
+def tag():
+    return load_plan(LETTER_B)
+
+
+@pytest.fixture(scope="module")
+def job(tag):
+    return prepare(tag)
+
+
+@pytest.fixture(scope="module")
+def plain(job, tag, tmp_path_factory):
+    """letter-b drawn through, no pause."""
+    return draw(tag, tmp_path_factory.mktemp("plain"), prepared=job, pictures=False).report
+
+
+def _on(job, device: SimulatedEBB):
+    from dataclasses import replace
+
+    return replace(job, port=_url(device))
+
+
+def test_a_5_s_keyboard_pause_changes_no_fidelity_figure(job, tag, tmp_path, plain, monkeypatch):
+    middle = job.job.run_start[0] + 0.5 * job.setpoints.runs[0].duration
+    keys = ClockedControl(middle, 5.0)
+    _simulated(monkeypatch, keys)
+    held = draw(tag, tmp_path / "held", prepared=job, pictures=False, control=keys).report
+    assert held["completed"] and held["executed"] == held["total"]
+    # From the motors' stop (the board drains the moves it holds) to the pen's return.
+    holds = (held["details"]["fifo"] + 1) * max(e.duration for e in job.job.entries)
+    lowering = job.profile.pen_time(True)
+    assert held["pauses"] == 1 and 5.0 - holds <= held["paused_s"] <= 5.0 + lowering + 0.06
+    assert held["executed_duration_s"] >= plain["executed_duration_s"] + 5.0 - holds
+    assert abs(held["speed_snr_db"] - plain["speed_snr_db"]) <= 1.0
+    assert abs(held["path_deviation_max_mm"] - plain["path_deviation_max_mm"]) <= 0.01
+    assert abs(held["drawing_duration_ratio"] - plain["drawing_duration_ratio"]) <= 0.01
+    assert held["warnings"] == []
+
+
+def test_ctrl_c_while_paused_keeps_the_pause_and_stops_safely(
+    job, tag, tmp_path, plain, monkeypatch
+):
+    middle = job.job.run_start[0] + 0.5 * job.setpoints.runs[0].duration
+    keys = ClockedControl(middle, 5.0, stop_after=2.0)
+    _simulated(monkeypatch, keys)
+    with pytest.raises(Interrupted, match=r"^after move \d+ of \d+ \(moves.txt\): interrupted"):
+        draw(tag, tmp_path / "s", prepared=job, pictures=False, control=keys)
+    device = keys.device
+    assert device is not None
+    report = json.loads((tmp_path / "s" / "report.json").read_text())
+    assert not report["completed"] and 0 < report["executed"] < report["total"]
+    # The pause up to the stop is a pause: taken out of the comparison, which holds the drawn
+    # half to the plan as well as the whole run was.
+    assert report["pauses"] == 1 and report["paused_s"] >= 1.5
+    assert report["speed_snr_db"] >= plain["speed_snr_db"] - 3.0
+    assert report["path_deviation_max_mm"] <= 0.02
+    # Nothing moved after the pause began: the pen up where the drawing stopped.
+    assert device.pen_up
+    rows = np.loadtxt(tmp_path / "s" / "executed.csv", delimiter=",", skiprows=1)
+    assert rows[-1, 3] == 0
+    stopped = report["details"]["stopped_at_steps"]
+    assert tuple(stopped) == job.job.entries[report["executed"] - 1].steps
+
+
+def test_refusals_send_no_byte(tag):
+    device = SimulatedEBB()
+    written = _spy(device)
+    url = _url(device)
+    with pytest.raises(PlacementError):
+        prepare(tag, port=url, overrides=("place.scale=5",))  # off the paper
+    with pytest.raises(PlacementError, match="steps/s"):  # a move beyond the EBB's step rate
+        prepare(tag, port=url, overrides=("place.scale=fit", "motion.time_scale=uniform",
+                                          "limits.draw_speed=312", "limits.draw_acceleration=1e6",
+                                          "motion.dt=0.1", "motion.jerk=false"))  # fmt: skip
+    assert written == []
+
+
+def test_bad_firmware_hears_only_v(job, tag, tmp_path):
+    device = SimulatedEBB(version="2.8.1")
+    written = _spy(device)
+    with pytest.raises(DeviceError, match=r"firmware 2\.8\.1 is not supported"):
+        draw(tag, tmp_path / "old", prepared=_on(job, device), pictures=False)
+    assert b"".join(written) == b"V\r"
+
+
+def test_sigterm_stops_an_axidraw_draw_safely(tmp_path):
+    device = SimulatedEBB(clock="real")
+    path, stop = serve_pty(device)
+    out = tmp_path / "run"
+    try:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "tagbot", "draw", str(LETTER_B), "--device", "axidraw",
+             "--port", path, "--out", str(out), "--no-pictures"],
+            stderr=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        assert process.stderr.readline().startswith("drawing ")
+        deadline = time.monotonic() + 30
+        while len(device.recorder.moves()) < 30 and time.monotonic() < deadline:
+            time.sleep(0.05)  # well into the drawing
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=30)
+    finally:
+        stop()
+    assert process.returncode == 143 and "Traceback" not in err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("tagbot: error: after move ") and last.endswith("(SIGTERM)")
+    report = json.loads((out / "report.json").read_text())
+    assert not report["completed"] and report["executed"] >= 1
+    assert f"after move {report['executed']} " in report["error"]
+    assert device.pen_up and report["details"]["stopped_at_steps"] is not None
