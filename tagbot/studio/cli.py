@@ -60,7 +60,7 @@ def studio_command(
 ) -> None:
     """Design tags in the browser: draw a gesture and get its plan at once, or click targets;
     drag targets, φ and Δt handles; see the trajectory, speed, brush and variations; save,
-    export and draw on the plotter or arm (simulated unless --machine-port is given).
+    export and draw on the plotter, arm or AxiDraw (simulated unless --machine-port is given).
 
     Serves 127.0.0.1 only; the URL printed holds the session's token, which every request needs.
     Without PLAN|INPUT the last design (autosaved) comes back. Ctrl-C stops the studio.

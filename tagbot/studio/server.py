@@ -37,8 +37,8 @@ errors ``4xx`` with ``{"error": "<field>: <problem>"}``):
   (:func:`tagbot.render.render_array`).
 - ``GET /api/export?format=png|svg|gif|gcode|json``: the file ``tagbot render``, ``tagbot
   gcode`` or ``tagbot fit`` writes (``&drips=1&seed=N`` for pictures).
-- ``POST /api/draw`` ``{"device": "grbl"|"dynamixel"}``: draw on the simulator, or on the port
-  named with ``tagbot studio --port-device``; the run folder is ``tagbot draw``'s.
+- ``POST /api/draw`` ``{"device": "grbl"|"dynamixel"|"axidraw"}``: draw on the simulator, or on
+  the port named with ``tagbot studio --machine-port``; the run folder is ``tagbot draw``'s.
   ``POST /api/draw/pause``, ``/resume``, ``/stop``; ``GET /api/draw``: its status.
 - ``GET /ws``: a WebSocket. The server sends events: ``{"type": "draw", "state", "done",
   "total", "points": [[x, y, pen], ...]}`` while a draw runs (points in tag units, as
@@ -114,6 +114,8 @@ MAX_PICTURE = 4000
 """Largest brush preview side, pixels."""
 EVENT_INTERVAL = 0.04
 """Seconds between draw progress events at most (25 a second)."""
+DEVICES = ("grbl", "dynamixel", "axidraw")
+"""The machines the Draw button offers (``tagbot draw --device``)."""
 STATIC = Path(__file__).with_name("static")
 AUTOSAVE_FORMAT = "tagbot-studio"
 
@@ -500,8 +502,8 @@ def create_app(studio: Studio, port: int) -> Starlette:
     async def draw_start(request: Request) -> Response:
         data = await _object(request)
         device = data.get("device", "grbl")
-        if device not in ("grbl", "dynamixel"):
-            raise StudioError(f"device: unknown {device!r} (grbl or dynamixel)")
+        if device not in DEVICES:
+            raise StudioError(f"device: unknown {device!r} (grbl, dynamixel or axidraw)")
         if studio.draw.state in ("running", "paused", "preparing", "stopping"):
             raise HTTPError(409, "draw: a run is already going (stop it first)")
         tag = _tag(studio)
@@ -865,8 +867,13 @@ def _prepare(tag: Tag, device: str, port: str | None) -> Any:
 
 
 def _machine_frame(job: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per executed step (line or tick): machine position and pen, and the placement
+    """Per executed step (line, tick or move): machine position and pen, and the placement
     ``machine = matrix @ tag + offset``."""
+    if getattr(job, "device", None) == "axidraw":  # one position per EBB command (moves.txt)
+        entries = job.job.entries
+        steps = np.array([e.steps for e in entries], dtype=np.int64).reshape(-1, 2)
+        pens = np.array([e.pen for e in entries], dtype=bool)
+        return job.job.xy(steps), pens, job.setpoints.matrix, job.setpoints.offset
     program = job.program
     if hasattr(program, "line_xy"):  # the plotter: one position per G-code line
         sp = job.setpoints

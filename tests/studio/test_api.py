@@ -356,6 +356,48 @@ def test_draw_on_the_port_named_on_the_command_line(running: Running) -> None:
     assert device.lines_received > 0
 
 
+def test_draw_on_an_axidraw_named_on_the_command_line(running: Running) -> None:
+    from sim.ebb.device import SimulatedEBB
+    from sim.ebb.transport import attach_device
+
+    device = SimulatedEBB()
+    url = attach_device(device, "studio_axidraw")
+    running.load(PLAN)
+    running.studio.machine_port = url  # as `tagbot studio --machine-port URL` sets it
+    try:
+        assert running.client.post("/api/draw", json={"device": "axidraw"}).status_code == 202
+        status = wait_for(running, ("done", "stopped", "failed"))
+    finally:
+        running.studio.machine_port = None
+    assert status["state"] == "done", status
+    report = json.loads((Path(status["folder"]) / "report.json").read_text())
+    assert report["device"] == "axidraw" and report["port"] == url
+    assert report["simulated"] is False and report["completed"]
+    moves = (Path(status["folder"]) / "moves.txt").read_bytes().splitlines()
+    assert len(moves) == report["total"]
+    assert device.recorder.moves()  # the board behind the URL drew it
+
+
+def test_axidraw_pause_holds_and_stop_is_safe(running: Running) -> None:
+    rng = np.random.default_rng(5)
+    tag = sequence([random_plan(rng, targets=(11, 11)) for _ in range(3)], 0.3)
+    running.load(tag_to_dict(tag))
+    assert running.client.post("/api/draw", json={"device": "axidraw"}).status_code == 202
+    wait_for(running, ("running",))
+    assert running.client.post("/api/draw/pause").json()["state"] == "paused"
+    time.sleep(0.5)  # the board drains its FIFO (a few moves) and the pen lifts
+    held = running.client.get("/api/draw").json()["done"]
+    time.sleep(0.5)
+    assert running.client.get("/api/draw").json()["done"] == held  # nothing more executes
+    assert running.client.post("/api/draw/resume").json()["state"] == "running"
+    assert running.client.post("/api/draw/stop").json()["state"] == "stopping"
+    status = wait_for(running, ("stopped", "done", "failed"))
+    assert status["state"] == "stopped", status
+    report = json.loads((Path(status["folder"]) / "report.json").read_text())
+    assert report["completed"] is False and "interrupted" in report["error"]
+    assert report["unit"] == "move" and report["resume_from"] is not None
+
+
 def test_gif_export_is_an_animation(running: Running) -> None:
     running.load(PLAN)
     gif = running.client.get("/api/export?format=gif")

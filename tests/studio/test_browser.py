@@ -243,6 +243,28 @@ def test_draw_on_the_simulated_plotter(page: Any, running: Running) -> None:
     assert page.evaluate("window.studio.stats.livePoints") > 0  # the trace came in as it ran
 
 
+def test_draw_on_the_simulated_axidraw(page: Any, running: Running) -> None:
+    assert "AxiDraw" in page.locator("#device option[value=axidraw]").inner_text()
+    page.select_option("#device", "axidraw")
+    page.click("#draw")
+    page.wait_for_function(
+        "document.getElementById('draw-status').textContent.startsWith('done')", timeout=180_000
+    )
+    status = running.client.get("/api/draw").json()
+    assert status["state"] == "done" and status["device"] == "axidraw"
+    assert status["done"] == status["total"] > 0
+    folder = Path(status["folder"])
+    assert folder.parent == running.runs and "-axidraw-" in folder.name
+    for name in ("plan.json", "motion.csv", "moves.txt", "executed.csv", "report.json"):
+        assert (folder / name).is_file(), name
+    report = json.loads((folder / "report.json").read_text())
+    assert report["completed"] and report["device"] == "axidraw" and report["simulated"]
+    assert report["unit"] == "move" and report["executed"] == report["total"]
+    assert tag_to_dict(load_plan(folder / "plan.json")) == running.plan()
+    assert page.evaluate("window.studio.stats.drawn.executed") >= 1
+    assert page.evaluate("window.studio.stats.livePoints") > 0  # the trace came in as it ran
+
+
 def test_another_origin_cannot_drive_the_studio(browser: Any, running: Running) -> None:
     running.load(PLAN)
     version = running.state()["version"]
