@@ -87,6 +87,9 @@ SPECS: dict[str, tuple[tuple[Kind, bool], ...]] = {
     "SM": ((_U32, _REQ), (_I32, _REQ), (_I32, _OPT), (_U32, _OPT)),
     "XM": ((_U32, _REQ), (_I32, _REQ), (_I32, _REQ), (_U32, _OPT)),
     "HM": ((_U32, _REQ), (_I32, _OPT), (_I32, _OPT)),
+    "QT": (),
+    "QR": (),
+    "ST": (),  # its one parameter is a string (:data:`NAME_LENGTH`), read by parse_command
 }
 """The commands modelled here: each parameter's type and whether it is required."""
 
@@ -105,7 +108,10 @@ CU_SETTINGS = {1: "ack", 2: "limit checks", 3: "empty-FIFO LED", 4: "FIFO depth"
 _CU_BOOLEAN = {1, 2, 3, 10}
 QU_VALUES = {1: 2, 2: 0, 3: 0, 4: 3, 5: 3, 6: 0, 60: 0, 61: 0, 200: 0}
 """``QU`` parameter numbers and their reply's hex width (0: decimal)."""
-_QUERY_OK = ("QS", "QB", "QP", "QE", "ES", "QU")
+_QUERY_OK = ("QS", "QB", "QP", "QE", "ES", "QU", "QR")
+NAME_LENGTH = 16
+"""Bytes of the nickname ``ST`` stores in flash (``FLASH_NAME_LENGTH``); more is an extra
+parameter."""
 
 
 class UnsupportedCommand(ValueError):
@@ -121,12 +127,14 @@ class Command:
     """One parsed command: upper-case ``name`` and the parameters present, in wire order.
 
     ``extra``: characters followed the last parameter; the firmware runs the command and then
-    answers ``!7 Err: Extra parameter`` as well (:func:`format_reply` appends it).
+    answers ``!7 Err: Extra parameter`` as well (:func:`format_reply` appends it). ``text``:
+    ``ST``'s nickname, as sent (up to :data:`NAME_LENGTH` bytes).
     """
 
     name: str
     params: tuple[int, ...] = ()
     extra: bool = False
+    text: bytes = b""
 
     def move(self) -> Move:
         """The ``LM``/``LT``/``T3`` move this command queues (Clear as sent; absent is 0)."""
@@ -230,6 +238,8 @@ def parse_command(line: bytes, *, limit_checks: bool = True) -> Command:
         raise EBBCommandError(unknown_command(name))
     if text not in SPECS:
         raise UnsupportedCommand(f"{text}: not modelled")
+    if text == "ST":
+        return _parse_st(body, len(name))
     i, params = len(name), []
     for kind, required in SPECS[text]:
         if i == len(body) or body[i] != ord(","):
@@ -249,6 +259,23 @@ def parse_command(line: bytes, *, limit_checks: bool = True) -> Command:
     cmd = Command(text, tuple(params), extra=i < len(body) and text != "R")
     _check(cmd, limit_checks)
     return cmd
+
+
+def _parse_st(body: bytes, i: int) -> Command:
+    """``ST,<name>``: the bytes up to a comma, the end or :data:`NAME_LENGTH` of them (the
+    firmware's ``extract_string``); anything after them is an extra parameter."""
+    if i == len(body) or body[i] != ord(","):
+        # The firmware clears the stored name even then and answers OK and an error line.
+        raise UnsupportedCommand("ST without ',<name>': not modelled")
+    rest = body[i + 1 :]
+    name = rest.split(b",", 1)[0][:NAME_LENGTH]
+    return Command("ST", (), extra=len(name) < len(rest), text=name)
+
+
+def nickname_shown(name: bytes) -> bytes:
+    """What ``QT`` prints of a stored nickname: all of it when its first byte is printable
+    ASCII other than a space (33-127), else nothing (``parse_QT_packet``)."""
+    return name if name[:1] and 32 < name[0] < 128 else b""
 
 
 def format_command(name: str, *params: int) -> bytes:
@@ -276,8 +303,9 @@ def _qu_value(param: int, values: tuple[int, ...]) -> bytes:
 def format_reply(cmd: Command, *values: int | str, ack: bool = True) -> bytes:
     """The bytes the firmware answers ``cmd`` with in legacy mode, given its query ``values``.
 
-    ``V``: the version text; ``QS``: two positions; ``QM``: four flags; ``QB``, ``QP``, ``ES``:
-    one flag; ``QG``: the status byte; ``QE``: two motor states; ``QU``: its value(s).
+    ``V``: the version text; ``QS``: two positions; ``QM``: four flags; ``QB``, ``QP``, ``ES``,
+    ``QR``: one flag; ``QG``: the status byte; ``QE``: two motor states; ``QU``: its value(s);
+    ``QT``: the stored nickname (bytes).
     ``ack=False`` is ``CU,1,0`` (no ``OK``, its line ending stays).
     """
     ok = OK if ack else b"\r\n"
@@ -295,6 +323,10 @@ def format_reply(cmd: Command, *values: int | str, ack: bool = True) -> bytes:
         body = data + b"\r\n" + ok
     elif name == "QU":
         body = b"QU," + _qu_value(cmd.params[0], tuple(map(int, values))) + b"\r\n" + ok
+    elif name == "QT":
+        stored = values[0] if values else b""
+        shown = stored.encode("latin-1") if isinstance(stored, str) else bytes(stored)
+        body = nickname_shown(shown) + b"\r\n" + ok
     elif name in _QUERY_OK:
         body = data + b"\n\r" + ok
     elif cmd.params[:2] == (10, 1) and name == "CU":
@@ -314,6 +346,8 @@ _SHAPES: dict[str, tuple[bytes, tuple[bytes, ...]]] = {
     "ES": (rb"([01])\n\r", (b"\n\r",)),
     "QE": (rb"([0-9]+),([0-9]+)\n\r", (b"\n\r",)),
     "QG": (rb"([0-9A-F]{2})\r\n", (b"\r\n",)),
+    "QR": (rb"([01])\n\r", (b"\n\r",)),
+    "QT": (rb"((?:[\x21-\x7f][\x20-\xff]*)?)\r\n", (b"\r\n",)),
 }
 """Legacy reply data of each query: its pattern and its line endings (``OK`` lines aside)."""
 _ERROR = re.compile(rb"(?:QU,)?(![0-9]+ Err: [^\r\n]*)(?:\n\r\r\n|\r\n)")
@@ -346,7 +380,7 @@ def _expected(cmd: Command, ack: bool) -> tuple[bytes, tuple[bytes, ...]]:
         return b"QU," + value + rb"\r\n" + ok, (b"\r\n", b"\r\n")
     if cmd.name in _SHAPES:
         pattern, ends = _SHAPES[cmd.name]
-        if cmd.name in _QUERY_OK:
+        if cmd.name in _QUERY_OK or cmd.name == "QT":
             return pattern + ok, ends + ok_end
         return pattern, ends
     fixed = format_reply(Command(cmd.name, cmd.params), ack=ack)
@@ -406,6 +440,8 @@ def _values(cmd: Command, match: re.Match[bytes]) -> tuple[int | str, ...]:
     name, groups = cmd.name, match.groups()
     if name == "V":
         return (groups[0].decode("ascii", "replace"),)
+    if name == "QT":
+        return (groups[0],)
     if name == "QG" or (name == "QU" and QU_VALUES[cmd.params[0]]):
         return (int(groups[0], 16),)
     if name == "QU":
@@ -445,7 +481,8 @@ COMMAND_SINCE: dict[str, tuple[int, int, int]] = {
     "SP": (1, 0, 0), "SM": (1, 0, 0), "QP": (1, 9, 0), "QB": (1, 9, 2), "S2": (2, 2, 0),
     "ES": (2, 2, 7), "XM": (2, 3, 0), "QS": (2, 4, 3), "CS": (2, 4, 3), "QM": (2, 4, 4),
     "RB": (2, 5, 4), "SR": (2, 6, 0), "QG": (2, 6, 2), "HM": (2, 6, 2), "LM": (2, 7, 0),
-    "LT": (2, 7, 0), "QE": (2, 8, 0), "QU": (3, 0, 0), "T3": (3, 0, 0),
+    "LT": (2, 7, 0), "QE": (2, 8, 0), "QU": (3, 0, 0), "T3": (3, 0, 0), "QT": (2, 5, 4),
+    "ST": (2, 5, 5), "QR": (2, 6, 0),
 }  # fmt: skip
 """First firmware version with each modelled command (each command's "Firmware versions")."""
 MIN_SUPPORTED = (3, 0, 0)

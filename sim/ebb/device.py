@@ -18,7 +18,8 @@ and runs from the next one, the following entry is loaded on the tick the previo
 
 State the host can read: ``QS`` (global step counters, cleared by ``CS``, ``EM`` and boot),
 ``QM``/``QG`` (command executing, motors moving, FIFO not empty), ``QB`` (the PRG button
-latch, cleared by reading it), ``QP``, ``QR``, ``QU``, ``QL``, ``QN``, ``QT``, ``V``. ``ES``
+latch, cleared by reading it), ``QP``, ``QR`` (the servo's power), ``QU``, ``QT`` (the nickname
+``ST`` stored: kept through resets, as in flash), ``V``. ``ES``
 stops at the current tick and flushes the FIFO. ``R`` re-initialises, ``RB`` reboots (the USB
 connection drops). Fault hooks: :meth:`~SimulatedEBB.stall_usb`,
 :meth:`~SimulatedEBB.reset_board`, :meth:`~SimulatedEBB.press_button`. Everything executed is
@@ -26,9 +27,10 @@ in :attr:`~SimulatedEBB.recorder` (:class:`~sim.ebb.recorder.Recorder`).
 
 Refusals: the error line (``format_error``) and nothing after it, as the firmware 3.0.3 source
 (``CheckForAndPrintErrors``) prints it, not the ``OK`` the reference's prose mentions; commands
-the shared parser knows but does not model (``UnsupportedCommand``: ``TP``, ``QR``, ``QL``,
-``L3``...) are refused as unknown and noted in the recorder's events, never guessed. A line with
-characters after its last parameter runs, answers, then ``!7`` (``format_reply``).
+the shared parser knows but does not model (``UnsupportedCommand``: ``TP``, ``QL``, ``QN``,
+``L3``, ``ST`` without its comma...) are refused as unknown and noted in the recorder's
+events, never guessed. A line with characters after its last parameter runs, answers, then
+``!7`` (``format_reply``).
 
 Documented simplifications: ``CS`` during a move clears the accumulators from the next move on;
 for ``LT``/``T3`` ``QM`` reports a motor moving while the move lasts if it has a nonzero rate,
@@ -54,6 +56,7 @@ from firmware_protocols.ebb.commands import (
     UnsupportedCommand,
     format_error,
     format_reply,
+    nickname_shown,
     parse_command,
 )
 from firmware_protocols.ebb.errors import EBBCommandError, unknown_command
@@ -731,7 +734,7 @@ class SimulatedEBB:
         if not self.future_syntax:
             self._emit(t, format_reply(command, *values, ack=self.ack))
             return
-        data = b"".join(b"," + str(v).encode() for v in values)
+        data = b"".join(b"," + (v if isinstance(v, bytes) else str(v).encode()) for v in values)
         if command.name == "QG":
             data = f",{int(values[0]):02X}".encode()
         self._emit(t, command.name.encode() + data + b"\n")
@@ -761,6 +764,19 @@ class SimulatedEBB:
         pressed, self._button = self._button, False
         value = (pressed << 5) | (self.pen_up << 4) | (executing << 3) | (m1 << 2)
         self._answer(t, command, value | (m2 << 1) | fifo)
+
+    def _cmd_QT(self, command: Command, t: float) -> None:
+        if self.future_syntax:
+            self._answer(t, command, nickname_shown(self.nickname))
+        else:
+            self._answer(t, command, self.nickname)
+
+    def _cmd_ST(self, command: Command, t: float) -> None:
+        self.nickname = command.text  # in flash: kept across resets
+        self._answer(t, command)
+
+    def _cmd_QR(self, command: Command, t: float) -> None:
+        self._answer(t, command, int(self.servo_powered()))
 
     def _cmd_QP(self, command: Command, t: float) -> None:
         self._answer(t, command, int(self.pen_up))

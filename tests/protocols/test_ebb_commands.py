@@ -195,7 +195,11 @@ def test_limit_checks_off() -> None:
 
 def test_not_modelled_and_not_lines() -> None:
     with pytest.raises(UnsupportedCommand):
-        parse_command(b"QT\r")
+        parse_command(b"TP\r")
+    with pytest.raises(UnsupportedCommand, match="ST without"):
+        parse_command(b"ST\r")  # the firmware clears the name and answers OK and an error
+    with pytest.raises(UnsupportedCommand, match="ST without"):
+        parse_command(b"STx\r")
     with pytest.raises(UnsupportedCommand):
         parse_command(b"CU,250,1\r")
     with pytest.raises(UnsupportedCommand):
@@ -243,7 +247,27 @@ REPLIES = [
     (b"EM,1,1", (), b"OK\r\n"),
     (b"CU,10,1", (), b"\n"),
     (b"CU,10,0", (), b"OK\r\n"),
+    (b"QR", (1,), b"1\n\rOK\r\n"),
+    (b"QT", (b"East EBB",), b"East EBB\r\nOK\r\n"),
+    (b"QT", (b"",), b"\r\nOK\r\n"),  # no nickname: an empty line
+    (b"ST,East EBB", (), b"OK\r\n"),
 ]  # fmt: skip
+
+
+def test_nicknames_as_st_reads_them_and_qt_prints_them() -> None:
+    assert parse_command(b"st,East EBB\r") == Command("ST", text=b"East EBB")
+    assert parse_command(b"ST,\r") == Command("ST", text=b"")  # clears the name
+    # 16 bytes at most, up to a comma; what is left is an extra parameter (!7 after OK).
+    long = parse_command(b"ST,abcdefghijklmnopq\r")
+    assert long.text == b"abcdefghijklmnop" and long.extra
+    assert parse_command(b"ST,ab,cd\r") == Command("ST", extra=True, text=b"ab")
+    assert format_reply(long) == b"OK\r\n!7 Err: Extra parameter\r\n"
+    # QT prints a stored name only when it starts with printable ASCII other than a space.
+    qt = parse_command(b"QT\r")
+    assert format_reply(qt, b" lead") == b"\r\nOK\r\n"
+    assert format_reply(qt, b"\xe9t\xe9") == b"\r\nOK\r\n"
+    assert format_reply(qt, b"t\xe9 x") == b"t\xe9 x\r\nOK\r\n"
+    assert read_reply(qt, b"t\xe9 x\r\nOK\r\n").values == (b"t\xe9 x",)
 
 
 @pytest.mark.parametrize(("line", "values", "reply"), REPLIES)
@@ -407,7 +431,8 @@ SINCE = [
     ("V", (1, 0, 0)), ("QP", (1, 9, 0)), ("QB", (1, 9, 2)), ("S2", (2, 2, 0)), ("ES", (2, 2, 7)),
     ("XM", (2, 3, 0)), ("QS", (2, 4, 3)), ("CS", (2, 4, 3)), ("QM", (2, 4, 4)), ("RB", (2, 5, 4)),
     ("SR", (2, 6, 0)), ("QG", (2, 6, 2)), ("HM", (2, 6, 2)), ("LM", (2, 7, 0)), ("LT", (2, 7, 0)),
-    ("QE", (2, 8, 0)), ("QU", (3, 0, 0)), ("T3", (3, 0, 0)),
+    ("QE", (2, 8, 0)), ("QU", (3, 0, 0)), ("T3", (3, 0, 0)), ("QT", (2, 5, 4)), ("ST", (2, 5, 5)),
+    ("QR", (2, 6, 0)),
 ]  # fmt: skip
 
 

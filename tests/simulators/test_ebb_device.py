@@ -275,6 +275,23 @@ def test_r_reinitialises_and_rb_reboots_off_the_usb():
     assert dropped and send(device, b"QS") == b"0,0\n\rOK\r\n"
 
 
+def test_the_nickname_is_kept_in_flash_and_qr_reads_the_servos_power():
+    device = SimulatedEBB()
+    assert send(device, b"QT") == b"\r\nOK\r\n"  # none set: an empty line
+    assert send(device, b"ST,East EBB", b"QT") == OK + b"East EBB\r\nOK\r\n"
+    send(device, b"R")
+    send(device, b"RB")
+    assert send(device, b"QT") == b"East EBB\r\nOK\r\n"  # flash survives a reboot
+    assert send(device, b"CU,10,1", b"QT", b"ST,", b"QT") == b"\nQT,East EBB\nST\nQT,\n"
+    send(device, b"CU,10,0")
+    assert send(device, b"ST,x") == OK
+    assert send(device, b"ST") == b"!8 Err: Unknown command 'ST:5354'\r\n"  # not modelled
+    assert device.nickname == b"x"
+    assert send(device, b"QR") == b"0\n\rOK\r\n"  # unpowered until the servo is used
+    assert send(device, b"SP,1", b"QR") == OK + b"1\n\rOK\r\n"
+    assert send(device, b"SR,60000,0", b"QR") == OK + b"0\n\rOK\r\n"
+
+
 def test_em_sets_the_step_mode_and_clears_the_counters():
     device = SimulatedEBB()
     send(device, b"SM,10,5,-7")
@@ -348,7 +365,7 @@ def test_the_pen_servo_moves_at_its_rate_and_sp_delays_the_next_move():
     assert down_from + travel - 0.024 < arrived <= down_from + travel
     moving = trace.pen[(trace.t > down_from + 0.03) & (trace.t < arrived)]
     assert np.all(np.diff(moving) <= 0) and set(np.diff(moving)) <= {0, -250}
-    assert send(device, b"QP", b"QR") == b"0\n\rOK\r\n" + b"!8 Err: Unknown command 'QR:5152'\r\n"
+    assert send(device, b"QP", b"QR") == b"0\n\rOK\r\n" + b"1\n\rOK\r\n"  # QR: powered
     assert device.servo_powered()
     device.advance(61.0)
     assert not device.servo_powered()  # the 60 s servo power timeout

@@ -30,16 +30,17 @@ def no_usb_scan(monkeypatch):
     monkeypatch.setattr(ebb3_serial, "find_named", lambda name=None: name)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="QT (the nickname, which EBB3.connect asks for) is answered '!8 Unknown command': "
-    "firmware_protocols.ebb.commands does not model QT/ST/TP/QR/SL/QL/NI/ND/SN/QN/PI...",
-)
 def test_plotink_ebb3_connects_and_reads_the_nickname(board, no_usb_scan):
-    _, path = board
+    device, path = board
+    device.nickname = b"East EBB"  # as ST stored it in flash
     ebb = ebb3_motion.EBBMotionWrap()
     try:
         assert ebb.connect(path, caller="tests"), ebb.err
+        assert ebb.err is None and ebb.name == "East EBB"
+        assert ebb.write_nickname("tagbot-1")  # ST in the future syntax
+        ebb.query_nickname()
+        assert ebb.name == "tagbot-1" and device.nickname == b"tagbot-1"
+        assert ebb.query("QR") in ("0", "1")
         assert ebb.err is None
     finally:
         ebb.disconnect()
@@ -47,8 +48,6 @@ def test_plotink_ebb3_connects_and_reads_the_nickname(board, no_usb_scan):
 
 def test_plotink_ebb3_drives_the_board_in_future_syntax(board, no_usb_scan, monkeypatch):
     device, path = board
-    # QT is not modelled yet (see the test above): connect without asking the nickname.
-    monkeypatch.setattr(ebb3_serial.EBB3, "query_nickname", lambda self: None)
     ebb = ebb3_motion.EBBMotionWrap()
     try:
         assert ebb.connect(path, caller="tests"), ebb.err
