@@ -187,9 +187,10 @@ def test_the_shortest_moves_end_on_their_goal(n):
                 assert j == 0
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def small():
-    """cae.json at 30 mm, parked elsewhere, from a home that is not (0, 0)."""
+    """cae.json small, parked elsewhere, from a home that is not (0, 0). Built for each test
+    (not shared): mutmut runs, for a mutant, the tests that called its function themselves."""
     tag = load_plan(CAE)
     profile = load_profile(overrides=["place.scale=0.3", "motion.park_x=20", "motion.park_y=15"])
     setpoints = place(tag, profile.placement())
@@ -309,15 +310,20 @@ def test_pen_lines_carry_the_servo_time_and_pin():
 
 def test_the_jobs_ticks_are_the_boards_from_the_accumulators_em_clears():
     # A crawl of exactly (2**32 - 1) / 3 units a tick (16 667 steps/s, one phase): three ticks
-    # end one unit short of two steps, so where the accumulator starts decides tick 3.
+    # end one unit short of two steps, so where each accumulator starts decides tick 3.
     fast = ["limits.travel_acceleration=208333.3333", "limits.travel_speed=208.3333333"]
     profile = load_profile(overrides=fast)
     tag = load_plan(CAE)
     setpoints = replace(place(tag, load_profile().placement()), runs=())
-    job = build_job(tag, setpoints, profile, start=(0, -40))
-    (entry,) = job.entries
-    assert entry.line == b"LM,0,0,0,1431655765,40,0\r"
     rate = 1431655765
-    expected = [min(k * rate // ACCUMULATOR_STEP, 40) for k in range(1, len(job.ticks) + 1)]
-    assert (job.ticks[:, 1] + 40).tolist() == expected
-    assert expected[:4] == [0, 1, 1, 2] and job.ticks[-1].tolist() == [0, 0]
+    for start, line in [
+        ((0, -40), b"LM,0,0,0,1431655765,40,0\r"),
+        ((-40, 0), b"LM,1431655765,40,0,0,0,0\r"),
+    ]:
+        job = build_job(tag, setpoints, profile, start=start)
+        (entry,) = job.entries
+        assert entry.line == line
+        expected = [min(k * rate // ACCUMULATOR_STEP, 40) for k in range(1, len(job.ticks) + 1)]
+        moving = int(np.argmin(start))
+        assert (job.ticks[:, moving] + 40).tolist() == expected
+        assert expected[:4] == [0, 1, 1, 2] and job.ticks[-1].tolist() == [0, 0]
