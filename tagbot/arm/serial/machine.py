@@ -55,7 +55,12 @@ from tagbot.arm.run import (
 )
 from tagbot.arm.serial.kinematics import SerialArm
 from tagbot.arm.serial.profile import SerialProfile, load_serial_profile
-from tagbot.arm.serial.program import MIN_JERK_PEAK_RATE, build_serial_program, min_jerk
+from tagbot.arm.serial.program import (
+    MIN_JERK_PEAK_RATE,
+    build_serial_program,
+    feedforward,
+    min_jerk,
+)
 from tagbot.control import RunControl
 from tagbot.draw import MachineRun
 from tagbot.errors import DeviceError, InputError, Interrupted
@@ -83,12 +88,22 @@ MIN_SPEED_SNR_DB = 25.0
 """A run's speed SNR below this is a report warning."""
 
 
+LIFT_LONGEST = 5.0
+"""s: the longest lift by the arm (a pose the joints leave only slowly is lifted in this)."""
+
+
 class ArmLift:
     """The pen lifted by the arm: from a pose, along the paper's normal to ``robot.pen_up``
     above the paper, minimum-jerk, slowed until every joint is within its limits."""
 
-    def __init__(self, profile: SerialProfile) -> None:
+    def __init__(self, profile: SerialProfile, program: ArmProgram | None = None) -> None:
         self.profile = profile
+        self.planned: dict[tuple[int, ...], Array] = {}
+        """The program's goal rows → their planned angles (a goal is the planned angle plus
+        the feedforward: the arm stands at the planned pose)."""
+        if program is not None:
+            for row, q in zip(program.goals.tolist(), program.angles, strict=True):
+                self.planned.setdefault(tuple(row), q)
         self.arm: SerialArm = profile.arm
         self.paper = profile.paper
         self.joints = profile.joints
@@ -106,7 +121,10 @@ class ArmLift:
     def up(self, row: NDArray[np.int64]) -> NDArray[np.int64]:
         """Goal rows from ``row`` up to the pen-up height (empty when already there)."""
         p = self.profile
-        q = self.angles(np.asarray(row))
+        key = tuple(int(v) for v in np.asarray(row).tolist())
+        q = self.planned.get(key)
+        if q is None:
+            q = self.angles(np.asarray(row))
         tip, _ = self.arm.fk(q)
         n = self.paper.normal
         rise = p["robot.pen_up"] / 1000.0 - self.height(q)
@@ -125,7 +143,9 @@ class ArmLift:
             excess = max(float(rate.max()), math.sqrt(float(acc.max())))
             if excess <= 1.0:
                 break
-            duration *= excess * 1.01
+            duration = min(duration * excess * 1.01, LIFT_LONGEST)
+        if p["servo.feedforward"]:  # as the program's goals: the torque each pose needs
+            path = path + feedforward(path, np.zeros(len(path), dtype=bool), p)
         goals = [angles_to_ticks(path[1:, i], j) for i, j in enumerate(self.joints)]
         return np.column_stack(goals).astype(np.int64)
 
@@ -204,7 +224,7 @@ def _connect_and_stream(
     control: RunControl | None,
     first: int,
 ) -> None:
-    driver.lifter = ArmLift(profile)
+    driver.lifter = ArmLift(profile, program)
     driver.connect()
     outcome.where = "approach"
     present = driver.read_present()

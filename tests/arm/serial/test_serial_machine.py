@@ -1,0 +1,271 @@
+"""The OpenManipulator-X as a machine (issue 32): its profile, its program (IK, touch-down and
+lift-off by the arm, retiming), refusals before anything moves, the physics simulator's drawing
+and a fault mid-run lifting the pen by the arm."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+import tagbot
+from tagbot.arm.serial.machine import FORCE_RANGE, SerialBudget, bridge_hops, prepare
+from tagbot.arm.serial.profile import is_serial_profile, load_serial_profile
+from tagbot.arm.serial.program import build_serial_program
+from tagbot.draw import draw
+from tagbot.errors import DeviceError, Interrupted, PlacementError, ProfileError, ReachError
+
+EXAMPLES = Path(tagbot.__file__).parent / "examples"
+
+
+@pytest.fixture(scope="module")
+def letter_b() -> tagbot.Tag:
+    return tagbot.load_plan(EXAMPLES / "letter-b.json")
+
+
+@pytest.fixture(scope="module")
+def profile():
+    return load_serial_profile("openmanipulator-x")
+
+
+@pytest.fixture(scope="module")
+def program(letter_b, profile):
+    return build_serial_program(letter_b, profile)
+
+
+@pytest.fixture(scope="module")
+def drawn(letter_b, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("serial") / "b"
+    result = draw(letter_b, folder, device="dynamixel", profile="openmanipulator-x", pictures=False)
+    return folder, result.report
+
+
+# -- profile ---------------------------------------------------------------------------------
+
+
+def test_the_profile_names_the_servos_joints_and_paper(profile) -> None:
+    assert profile.bus_ids == [11, 12, 13, 14]
+    assert [j.name for j in profile.joints] == ["joint1", "joint2", "joint3", "joint4"]
+    np.testing.assert_allclose(profile.paper.normal, (0, 0, 1), atol=1e-12)
+    assert profile.paper.origin == pytest.approx((0.1, -0.105, 0.0))
+    assert profile.pen_servo is None
+    # a P gain of 1600 on an XM430-W350: 4.1/885 N·m a PWM unit, 1600/128 per tick
+    assert profile.stiffness == pytest.approx(4.1 / 885 * 1600 / 128 * 4096 / (2 * math.pi))
+    assert is_serial_profile("openmanipulator-x") and not is_serial_profile("default")
+
+
+def test_a_bad_profile_value_is_one_line_naming_the_source_and_field() -> None:
+    with pytest.raises(ProfileError, match=r"^--set: joint2\.park_deg: 100° is outside"):
+        load_serial_profile("openmanipulator-x", ["joint2.park_deg=100"])
+    with pytest.raises(ProfileError, match=r"^--set: joint4\.id: IDs must differ$"):
+        load_serial_profile("openmanipulator-x", ["joint3.id=11"])
+    with pytest.raises(ProfileError, match=r"^--set: robot\.description: .*no-such-arm\.xml"):
+        load_serial_profile("openmanipulator-x", ["robot.description=no-such-arm.xml"])
+
+
+# -- program ---------------------------------------------------------------------------------
+
+
+def test_ik_puts_the_pen_on_every_planned_point_within_0_01_mm(program, profile) -> None:
+    sp = program.setpoints
+    tip, axis = profile.arm.fk(program.angles[sp.pen])
+    aim = profile.paper.to_arm(sp.xy[sp.pen] / 1000.0, -profile["robot.press"] / 1000.0)
+    assert np.linalg.norm(tip - aim, axis=1).max() <= 1e-5
+    tilt = np.degrees(np.arccos(np.clip(-axis @ profile.paper.normal, -1, 1)))
+    assert tilt.max() <= profile["robot.max_tilt_deg"] + 1e-6
+
+
+def _elbow_side(profile, q: np.ndarray) -> np.ndarray:
+    """Per pose: the elbow (joint3's axis) above (+) or below (−) the line from the shoulder
+    (joint2's) to the wrist (joint4's), in the arm's vertical plane: the IK's branch."""
+    model = profile.arm.model
+    data = mujoco.MjData(model)
+    side = np.empty(len(q))
+    for i, qi in enumerate(q):
+        data.qpos[:] = qi
+        mujoco.mj_kinematics(model, data)
+        shoulder, elbow, wrist = (data.xpos[model.body(b).id] for b in ("link3", "link4", "link5"))
+        axis = data.xmat[model.body("link3").id].reshape(3, 3)[:, 1]  # joint2's axis (y)
+        side[i] = np.cross(wrist - shoulder, elbow - shoulder) @ axis
+    return side
+
+
+def test_no_branch_flip_and_every_joint_within_its_limits(program, profile) -> None:
+    q, T = program.angles, profile.period
+    side = _elbow_side(profile, q)
+    assert np.all(np.sign(side) == np.sign(side[0])) and np.abs(side).min() > 1e-4
+    for i, joint in enumerate(profile.joints):
+        assert np.abs(np.diff(q[:, i])).max() / T <= joint.max_speed * (1 + 1e-6)
+        assert np.abs(np.diff(q[:, i], 2)).max() / T**2 <= joint.max_acceleration * (1 + 1e-6)
+    # the retiming slowed the tag only as much as a joint needs: one limit is met (within 2 %)
+    draw_rows = np.concatenate(
+        [np.arange(a - 1, b + 1) for k, _, a, b in program.segments if k == "draw"]
+    )
+    worst = 0.0
+    for i, joint in enumerate(profile.joints):
+        a = q[draw_rows, i]
+        worst = max(
+            worst,
+            np.abs(np.diff(a)).max() / T / joint.max_speed,
+            math.sqrt(np.abs(np.diff(a, 2)).max() / T**2 / joint.max_acceleration),
+        )
+    assert program.setpoints.run_scales[0] > 1.0
+    assert worst > 0.98
+
+
+def test_the_pen_touches_down_and_lifts_off_along_the_paper_normal(program, profile) -> None:
+    sp = program.setpoints
+    down = np.flatnonzero(sp.pen)
+    first, last = down[0], down[-1]
+    tip, _ = profile.arm.fk(program.angles)
+    height = (tip - np.asarray(profile.paper.origin)) @ profile.paper.normal
+    # before the ink: straight down over its first point from the pen-up height
+    approach = next(s for s in program.segments if s[0] == "pen")
+    rows = np.arange(approach[2], approach[3])
+    assert height[rows[0]] == pytest.approx(profile["robot.pen_up"] / 1000.0, abs=1e-6)
+    sideways = np.linalg.norm(
+        (tip[rows] - tip[first]) - np.outer(height[rows] - height[first], profile.paper.normal),
+        axis=1,
+    )
+    assert sideways.max() < 1e-5
+    assert np.all(np.diff(height[rows]) <= 1e-9)  # down all the way (resting at its ends)
+    # the ink starts where the plan's does (its drawn window's first point)
+    plan = program.setpoints.run_clocks[0]
+    assert sp.t[first] > sp.t[approach[2]]
+    assert height[first] == pytest.approx(-profile["robot.press"] / 1000.0, abs=1e-5)
+    assert plan.on >= 0
+    retreat = [s for s in program.segments if s[0] == "pen"][1]
+    rows = np.arange(retreat[2], retreat[3])
+    assert np.all(np.diff(height[rows]) >= -1e-9) and rows[0] == last + 1
+    assert height[rows[-1]] == pytest.approx(profile["robot.pen_up"] / 1000.0, abs=1e-6)
+
+
+def test_refusals_name_plan_stroke_and_time_before_anything_moves(letter_b, tmp_path) -> None:
+    folder = tmp_path / "never"
+    # the paper slid 30 cm away: out of reach from the first point on
+    with pytest.raises(ReachError, match=r"plan 0, (stroke \d+, t = [\d.]+ s|approach before it)"):
+        draw(
+            letter_b,
+            folder,
+            device="dynamixel",
+            profile="openmanipulator-x",
+            overrides=("paper.x=300",),
+            port="/dev/null-not-a-port",
+        )
+    assert not folder.exists()
+    with pytest.raises(PlacementError, match=r"plan 0: must be slowed down [\d.]+ times"):
+        prepare(letter_b, profile="openmanipulator-x", overrides=("motion.max_time_scale=1.5",))
+
+
+# -- the physics simulator ------------------------------------------------------------------
+
+
+def test_the_simulated_arm_draws_the_tag_within_its_budgets(drawn) -> None:
+    folder, report = drawn
+    assert report["completed"] and report["simulated"]
+    assert report["warnings"] == []
+    assert report["executed_source"].startswith("physics simulator")
+    (run,) = report["runs"]
+    assert run["path_deviation_max_mm"] <= 0.3
+    assert run["speed_snr_db"] >= 25.0
+    assert run["contact_kept_pct"] == 100.0
+    assert FORCE_RANGE[0] < run["force_max_n"] <= FORCE_RANGE[1]
+    header = (folder / "joints.csv").read_text().splitlines()[0]
+    assert header == "t,joint1,joint2,joint3,joint4"
+    assert json.loads((folder / "report.json").read_text())["device"] == "dynamixel"
+
+
+def test_contact_lost_and_force_out_of_range_are_warnings() -> None:
+    report = {"runs": [{"plan": 0, "path_deviation_max_mm": 0.1, "speed_snr_db": 30.0}] * 2}
+    judge = SerialBudget(
+        [
+            {"contact_kept_pct": 91.5, "force_min_n": 0.0, "force_max_n": 0.5},
+            {"contact_kept_pct": 100.0, "force_min_n": 0.3, "force_max_n": 2.4},
+        ]
+    )
+    warnings = judge(json.loads(json.dumps(report)))
+    assert warnings[0] == "run 1 (plan 0): contact lost: ink on 91.5 % of the planned ink length"
+    assert warnings[1].startswith("run 2 (plan 0): the nib's force reached 2.40 N, above 1.1 N")
+
+
+def test_the_pen_pressed_too_deep_digs_in_and_aimed_at_the_surface_skips(letter_b, tmp_path):
+    deep = draw(
+        letter_b,
+        tmp_path / "deep",
+        device="dynamixel",
+        profile="openmanipulator-x",
+        overrides=("robot.press=5.5", "robot.pen_force=1.3"),
+        pictures=False,
+    ).report
+    assert any("the pen digs in" in w for w in deep["warnings"])
+    shallow = draw(
+        letter_b,
+        tmp_path / "shallow",
+        device="dynamixel",
+        profile="openmanipulator-x",
+        overrides=("robot.press=0", "robot.pen_force=0"),
+        pictures=False,
+    ).report
+    assert any("contact lost" in w for w in shallow["warnings"])
+
+
+def test_a_hop_shorter_than_the_nib_is_no_gap_in_the_line() -> None:
+    t = np.arange(8) * 0.001
+    x = np.array([0, 0.3, 0.6, 0.9, 1.2, 5.0, 5.3, 5.6])
+    pen = np.array([1, 1, 0, 1, 1, 0, 0, 1.0])
+    out = bridge_hops(np.column_stack([t, x, np.zeros(8), pen]), nib=0.002)
+    np.testing.assert_array_equal(out[:, 3], [1, 1, 1, 1, 1, 0, 0, 1])
+
+
+# -- faults ---------------------------------------------------------------------------------
+
+
+def _faulted(letter_b, tmp_path, fire):
+    """Draw letter-b on the simulated arm, calling ``fire(chain)`` once mid-run (the middle of
+    the pen-down run); returns the error, the report and the physics."""
+    job = prepare(letter_b, profile="openmanipulator-x")
+    held = {}
+    job.fault = lambda chain: held.setdefault("chain", chain)
+    draw_rows = next(s for s in job.program.segments if s[0] == "draw")
+    middle = (draw_rows[2] + draw_rows[3]) // 2
+
+    def progress(done: int, total: int) -> None:
+        if done >= middle and "fired" not in held:
+            held["fired"] = done
+            fire(held["chain"])
+
+    with pytest.raises(BaseException) as caught:
+        draw(letter_b, tmp_path / "run", prepared=job, progress=progress, pictures=False)
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    return caught.value, report, held["chain"].plant, job, held["fired"]
+
+
+def test_a_fault_mid_run_lifts_the_pen_by_the_arm_and_stops_safely(letter_b, tmp_path) -> None:
+    error, report, physics, job, fired = _faulted(
+        letter_b, tmp_path, lambda chain: chain.set_hardware_error(13, 0x01)
+    )
+    assert isinstance(error, DeviceError) and "hardware error" in str(error)
+    assert not report["completed"] and report["details"]["lifted_by_arm_at_stop"]
+    assert fired <= report["executed"] < len(job.program)
+    trace = physics.pen_trace()
+    profile = job.profile
+    # inked up to the fault, then off the paper and up at the pen-up height, arm holding
+    assert trace[:, 3].any() and trace[-200:, 3].max() == 0.0
+    tip = physics.data.site_xpos[physics._tip]
+    height = float((tip - np.asarray(profile.paper.origin)) @ profile.paper.normal)
+    assert height == pytest.approx(profile["robot.pen_up"] / 1000.0, abs=0.002)
+    assert all(physics.chain.servo(id).torque for id in profile.bus_ids)
+
+
+def test_ctrl_c_mid_run_lifts_the_pen_by_the_arm(letter_b, tmp_path) -> None:
+    def interrupt(chain) -> None:
+        raise KeyboardInterrupt
+
+    error, report, physics, _job, _ = _faulted(letter_b, tmp_path, interrupt)
+    assert isinstance(error, Interrupted) and "pen lifted by the arm" in str(error)
+    assert report["resume_from"] == report["executed"] + 1
+    assert physics.pen_trace()[-100:, 4].max() == 0.0
