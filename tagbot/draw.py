@@ -262,8 +262,17 @@ def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[s
     if run.executed.size and run.planned_runs:
         try:
             if run.sparse and run.executed_runs is not None:
+                # Reports taken during a pause left out, later ones moved back (as for a
+                # recorder's trace, below): a pause is no drawing time.
+                t = run.executed[:, 0] if run.executed.ndim == 2 else np.zeros(0)
+                kept = np.ones(len(t), dtype=bool)
+                for start, length in run.pauses:
+                    kept &= (t < start) | (t >= start + length)
                 comparison = compare_reports(
-                    run.planned_runs, run.executed, run.executed_runs, plans=run.plans
+                    run.planned_runs,
+                    without_pauses(run.executed, run.pauses),
+                    np.asarray(run.executed_runs)[kept],
+                    plans=run.plans,
                 )
             else:
                 comparison = compare_execution(

@@ -186,3 +186,47 @@ def test_sigterm_stops_an_axidraw_draw_safely(tmp_path):
     assert not report["completed"] and report["executed"] >= 1
     assert f"after move {report['executed']} " in report["error"]
     assert device.pen_up and report["details"]["stopped_at_steps"] is not None
+
+
+def test_space_on_the_terminal_pauses_and_resumes_an_axidraw_draw(tmp_path):
+    import pty
+
+    device = SimulatedEBB(clock="real")
+    path, stop = serve_pty(device)
+    out = tmp_path / "keys"
+    master, slave = pty.openpty()
+    try:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "tagbot", "draw", str(LETTER_B), "--device", "axidraw",
+             "--port", path, "--out", str(out), "--no-pictures"],
+            stdin=slave,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        first = process.stderr.readline()
+        assert first.startswith("drawing ") and "space pauses" in first
+        deadline = time.monotonic() + 30
+        while len(device.recorder.moves()) < 30 and time.monotonic() < deadline:
+            time.sleep(0.05)  # well into the drawing
+        os.write(master, b" ")
+        time.sleep(2.0)
+        moves = len(device.recorder.moves())
+        time.sleep(1.0)
+        held = len(device.recorder.moves()) == moves  # nothing ran while paused
+        os.write(master, b" ")
+        said, err = process.communicate(timeout=60)
+    finally:
+        os.close(master)
+        os.close(slave)
+        stop()
+    assert process.returncode == 0, err
+    assert "paused: space resumes" in said + err and "resumed" in said + err
+    assert held
+    report = json.loads((out / "report.json").read_text())
+    assert report["completed"] and report["executed"] == report["total"]
+    # The pause from the motors' stop (after the moves the board held) to the pen's return,
+    # left out of the drawing time the board's QS polls give.
+    assert report["pauses"] == 1 and report["paused_s"] >= 2.0
+    assert report["executed_source"] == "QS polls, 20 Hz"
+    assert abs(report["drawing_duration_ratio"] - 1.0) < 0.15  # 1.3 with the pause left in
