@@ -100,6 +100,8 @@ def test_a_clean_run_reports_its_counts_times_and_comparison():
     assert report["pen_down_runs"] == {"planned": 1, "executed": 1}
     assert report["drawing_duration_ratio"] == pytest.approx(1.0, abs=0.01)
     assert report["runs"][0]["executed_start"] == pytest.approx(0.25, abs=0.002)
+    assert report["runs"][0]["plan"] == 0
+    assert run_report(machine_run(plans=[2]))["runs"][0]["plan"] == 2
     assert "comparison_error" not in report and "recorded_speed_snr_db" not in report
 
 
@@ -165,9 +167,12 @@ def test_a_sparse_trace_is_compared_like_with_like_and_not_with_the_recording():
     te = np.arange(0.0, 2.0, 0.2) + 0.3
     on = np.column_stack([np.interp(te - 0.3, t, xy[:, i]) for i in (0, 1)])
     executed = np.column_stack([te, on, np.ones(len(te))])
-    run = machine_run(executed=executed, sparse=True, executed_runs=np.zeros(len(te), int))
+    run = machine_run(
+        executed=executed, sparse=True, executed_runs=np.zeros(len(te), int), plans=[3]
+    )
     report = run_report(run, recorded=[object()])
     assert report["speed_snr_db"] is None and report["path_deviation_max_mm"] < 0.01
+    assert [r["plan"] for r in report["runs"]] == [3]  # the run drew the tag's plan 3
     assert report["recorded_comparison_error"].startswith(
         "the executed trace is the device's status reports (a few a second): too sparse"
     )
