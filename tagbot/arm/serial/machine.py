@@ -493,22 +493,30 @@ class SerialJob:
 
 
 def time_bound(program: ArmProgram, profile: SerialProfile) -> float:
-    """The shortest time the job's joint paths allow, s: each move (run, approach, retreat,
-    travel, park) traversed as fast as every joint's speed and acceleration permit (a
-    bang-bang profile along each joint's path length, the slowest joint setting the pace), as
-    if nothing else (the tag's own timing, the Cartesian shape of the moves) mattered."""
+    """The shortest time the joints allow for this job's moves, s: each move (a run, an
+    approach, a retreat, travel, the moves from and to park) with its own shape, sped up until
+    a joint meets its ``max_speed`` or ``max_acceleration`` (its duration ÷ its excess:
+    rates scale with 1/duration, accelerations with 1/duration²), a run never faster than the
+    tag's own timing. The program's duration over this is what the Cartesian speed caps
+    (``motion.travel_speed``, ``motion.approach_speed``) and the sampling cost."""
+    T = profile.period
+    speed = np.array([j.max_speed for j in profile.joints])
+    acceleration = np.array([j.max_acceleration for j in profile.joints])
+    scales = iter(program.setpoints.run_scales)
     total = 0.0
-    for _, _, first, stop in program.segments:
-        q = program.angles[max(0, first - 1) : stop]
-        if len(q) < 2:
+    for kind, _, first, stop in program.segments:
+        q = program.angles[max(0, first - 1) : stop + 1]
+        duration = (stop - first) * T
+        if len(q) < 2 or duration <= 0:
             continue
-        worst = 0.0
-        for i, joint in enumerate(profile.joints):
-            d = float(np.sum(np.abs(np.diff(q[:, i]))))
-            v, a = joint.max_speed, joint.max_acceleration
-            t = 2 * math.sqrt(d / a) if d < v * v / a else d / v + v / a
-            worst = max(worst, t)
-        total += worst
+        steps = np.concatenate([q[:1], q, q[-1:]])
+        rate = np.max(np.abs(np.diff(steps, axis=0)), axis=0) / T / speed
+        acc = np.max(np.abs(np.diff(steps, 2, axis=0)), axis=0) / T**2 / acceleration
+        excess = max(float(rate.max()), math.sqrt(float(acc.max())))
+        fastest = duration * excess
+        if kind == "draw":
+            fastest = max(fastest, duration / next(scales))
+        total += fastest
     return total
 
 
