@@ -3,7 +3,7 @@
 Run from the repository root (``../shared/data`` adds the development GML tags when present)::
 
     python benchmarks/bench_axidraw.py [--gml 45] [--data ../shared/data] [--quick]
-                                       [--profile default] [--csv axidraw.csv]
+                                       [--tags NAME,...] [--profile default] [--csv axidraw.csv]
 
 Every tag is placed on the AxiDraw V3 profile (``default``) and drawn twice on the in-process
 simulated EBB (firmware 3.0.3, ``ebbsim://``, 1 ms recorder of its 40 µs ticks):
@@ -464,7 +464,8 @@ def lower_bound(tag: tagbot.Tag, setpoints: Any, profile: Profile) -> tuple[floa
 
     for run in setpoints.runs:
         clock = run.clock
-        u = np.append(np.arange(0.0, clock.duration, BOUND_STEP), clock.duration)
+        u = np.arange(0.0, clock.duration, BOUND_STEP)
+        u = np.append(u[u < clock.duration - 1e-6], clock.duration)
         p, _ = evaluate_plan(tag.plans[run.plan], clock.tag_time(u), tag.size)
         p = p @ setpoints.matrix.T + setpoints.offset
         away = np.abs((p - p[0]) @ MOTOR_AXES.T).max(axis=1) > 1.0 / k
@@ -651,6 +652,7 @@ def main() -> None:
     parser.add_argument("--data", type=Path, default=DATA, help="the shared data folder")
     parser.add_argument("--profile", default="default", help="an AxiDraw profile (name or path)")
     parser.add_argument("--quick", action="store_true", help="letter-b and cae only")
+    parser.add_argument("--tags", default="", help="only tags whose name holds one of A,B,...")
     parser.add_argument("--csv", type=Path, help="write every row to this CSV file")
     args = parser.parse_args()
     tags: list[tuple[str, Callable[[], tagbot.Tag]]] = example_tags()
@@ -658,6 +660,9 @@ def main() -> None:
         tags = [t for t in tags if t[0] in ("letter-b.json", "cae.json")]
     else:
         tags += gml_tags(args.data, args.gml)
+    wanted = [w for w in args.tags.split(",") if w]
+    if wanted:
+        tags = [t for t in tags if any(w in t[0] for w in wanted)]
     rows: list[dict[str, Any]] = []
     failures: list[str] = []
     with tempfile.TemporaryDirectory(prefix="bench_axidraw_") as scratch:

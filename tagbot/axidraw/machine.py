@@ -105,8 +105,7 @@ def timeline(job: Job, dt: float) -> MotionTable:
     """The job's planned motion every ``dt`` s (and at its end): the exact step positions of
     its tick record in mm, velocities from them, the pen from its pen commands."""
     end = job.duration
-    t = np.arange(0.0, end, dt)
-    t = np.append(t, end) if not len(t) or t[-1] < end else t
+    t = _grid(end, dt)
     if len(job.ticks):
         i = np.searchsorted(job.tick_time, t + 0.5 / TICK_HZ, side="right") - 1
         steps = np.where((i >= 0)[:, None], job.ticks[np.clip(i, 0, None)], job.entries[0].steps)
@@ -234,7 +233,7 @@ class AxiDrawJob:
         for run, start in zip(self.job.runs, self.job.run_start, strict=True):
             at = run_reference(self.tag, run, self.setpoints.matrix, self.setpoints.offset)
             end = float(run.t[-1])
-            t = np.append(np.arange(0.0, end, PLAN_STEP), end)
+            t = _grid(end, PLAN_STEP)
             out.append((start + t, at(t)))
         return out
 
@@ -321,6 +320,13 @@ def _runs_from(
         if rest.sum() >= 2:
             kept.append(((t[rest], xy[rest]), run.plan))
     return kept
+
+
+def _grid(end: float, dt: float) -> np.ndarray:
+    """``0, dt, 2·dt, ...`` and ``end`` (a sample within 1 µs of the end dropped: two samples
+    that close would be one after adding a job time, and their velocity 0/0)."""
+    t = np.arange(0.0, end, dt)
+    return np.append(t[t < end - 1e-6], end)
 
 
 def _until(job: Job, done: int) -> float:

@@ -259,3 +259,14 @@ def test_the_stopped_position_names_the_moves_executed(job):
     assert locate(job.job, middle, inside - 2, inside + 2) == inside
     # Nowhere on the record after the executed moves: as many as the board said.
     assert locate(job.job, (10**6, 10**6), 5, 9) == 5
+
+
+@pytest.mark.parametrize("end", [0.397, 0.3960000000000001, 0.396 + 4e-7, 15.16, 0.0005])
+def test_the_plans_samples_never_repeat_an_instant(end):
+    """A run's plan every 1 ms and at its end, on the job's clock: never two samples at one
+    instant (their velocity would be 0/0), however close the end falls to a sample."""
+    from tagbot.axidraw.machine import PLAN_STEP, _grid
+
+    t = 28.2844 + _grid(end, PLAN_STEP)
+    assert np.all(np.diff(t) > 0) and t[-1] == 28.2844 + end and t[0] == 28.2844
+    assert np.diff(t).max() <= PLAN_STEP + 1e-6
