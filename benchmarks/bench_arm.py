@@ -37,6 +37,17 @@ Three parts, each printed as a table:
    missed, the path deviation max against ``motion.max_deviation`` and the speed SNR (from the
    100 Hz read-back: positions the servos reported), the warnings, and how the run ended.
 3. **IK throughput**: :meth:`tagbot.arm.Arm.ik` on 10⁶ reachable points, points per second.
+4. **OpenManipulator-X in the physics simulator** (``--serial-gml N``, ``--skip-serial``): the
+   same tags through ``prepare(tag, profile="openmanipulator-x")`` and ``.run`` on the simulated
+   chain with MuJoCo physics behind it (simulated time). Per tag: the path deviation max on the
+   paper (goal ≤ 0.3 mm, the nib's contact points against the plan), the smallest per-run speed
+   SNR (goal ≥ 25 dB), the smallest contact kept (goal 100 % of the planned ink length), the
+   largest nib force, the job time against the joints' speed/acceleration bound (each move's own
+   shape sped up until a joint meets a limit; goal ≤ 1.2×), the warnings, planning time (IK,
+   retiming) and the simulation's speed against real time. Then ``--serial-timing-tag`` drawn in
+   real time at 100 Hz over a ``tagbot sim arm --profile openmanipulator-x`` pty (its own
+   process, physics running): loop rate, period jitter p99, lateness p99, late ticks, read-back
+   replies missed, and how the run ended (``--skip-serial-timing`` leaves it out).
 """
 
 from __future__ import annotations
@@ -385,6 +396,115 @@ def ik_throughput(points: int = 1_000_000) -> float:
     return points / best
 
 
+# -- the OpenManipulator-X in the physics simulator ---------------------------------------------
+
+SERIAL = "openmanipulator-x"
+TIME_GOAL = 1.2  # job time ÷ the joints' bound, at most
+
+
+def serial_fidelity(tags: list[tuple[str, Callable[[], tagbot.Tag]]]) -> list[dict[str, Any]]:
+    """Each tag drawn on the simulated OpenManipulator-X with physics; planned and measured."""
+    rows = []
+    for name, load in tags:
+        tag = load()
+        started = time.process_time()
+        try:
+            job = prepare(tag, profile=SERIAL)
+        except tagbot.TagbotError as e:
+            rows.append({"tag": name, "refused": str(e)})
+            continue
+        planning = time.process_time() - started
+        wall = time.perf_counter()
+        with tempfile.TemporaryDirectory() as out:
+            run = job.run(Path(out))
+        wall = time.perf_counter() - wall
+        report = run_report(run)
+        runs = report.get("runs", [])
+        contacts = run.details["runs_contact"]
+        rows.append(
+            {
+                "tag": name,
+                "runs": len(runs),
+                "deviation": max((r["path_deviation_max_mm"] for r in runs), default=math.nan),
+                "snr": min((r["speed_snr_db"] for r in runs), default=math.nan),
+                "contact": min((c["contact_kept_pct"] for c in contacts), default=math.nan),
+                "force": max((c["force_max_n"] for c in contacts), default=math.nan),
+                "duration": report["planned_duration_s"],
+                "bound": run.details["time_bound_s"],
+                "scale": max(job.program.setpoints.run_scales),
+                "planning": planning,
+                "speedup": report["planned_duration_s"] / wall,
+                "warnings": len(report["warnings"]),
+                "error": report["error"],
+            }
+        )
+    return rows
+
+
+def print_serial(rows: list[dict[str, Any]]) -> None:
+    print("OpenManipulator-X, physics simulator (MuJoCo, 1 ms), 100 Hz, in process:")
+    print(
+        "| tag | runs | deviation max mm | SNR min dB | contact min % | force max N |"
+        " job s | bound s | ratio | largest run scale | planning s | x real time | warnings |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        if "refused" in r:
+            print(f"| {r['tag']} | refused: {r['refused']} |")
+            continue
+        ratio = r["duration"] / r["bound"]
+        near = mark(r["deviation"] <= DEVIATION_GOAL)
+        print(
+            f"| {r['tag']} | {r['runs']} | {r['deviation']:.3f} {near}"
+            f" | {r['snr']:.1f} {mark(r['snr'] >= SNR_GOAL)}"
+            f" | {r['contact']:.1f} {mark(r['contact'] >= 100.0)} | {r['force']:.2f}"
+            f" | {r['duration']:.2f} | {r['bound']:.2f} | {ratio:.2f} {mark(ratio <= TIME_GOAL)}"
+            f" | {r['scale']:.2f} | {r['planning']:.2f} | {r['speedup']:.1f} | {r['warnings']} |"
+        )
+
+
+def serial_timing(tag: tagbot.Tag) -> dict[str, Any]:
+    """``tag`` drawn in real time over a ``tagbot sim arm --profile openmanipulator-x`` pty."""
+    server = subprocess.Popen(
+        [sys.executable, "-m", "tagbot", "sim", "arm", "--profile", SERIAL],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        assert server.stdout is not None
+        path = server.stdout.readline().decode().strip()
+        job = prepare(tag, profile=SERIAL, port=path)
+        with tempfile.TemporaryDirectory() as out:
+            run = job.run(Path(out))
+            loadavg = os.getloadavg()[0]
+    finally:
+        server.send_signal(signal.SIGINT)
+        server.wait(timeout=10)
+    report = run_report(run)
+    d = run.details
+    return {
+        "loadavg": loadavg,
+        "ticks": d.get("ticks_sent", 0),
+        "error": None if run.error is None else str(run.error),
+        **{key: report.get(key, math.nan) for key in _REPORT_KEYS},
+        **{key: d.get(key, math.nan) for key in _TIMING_KEYS},
+    }
+
+
+def print_serial_timing(row: dict[str, Any], tag: str) -> None:
+    print(f"OpenManipulator-X over a pty with physics, real time, 100 Hz ({tag}):")
+    print(
+        f"load average {row['loadavg']:.2f}; loop rate {row['loop_rate_hz']:.2f} Hz; period"
+        f" jitter p99 {row['period_jitter_p99_ms']:.2f} ms; lateness p99"
+        f" {row['lateness_p99_ms']:.2f} ms, max {row['max_lateness_ms']:.2f} ms; late ticks"
+        f" {row['late_ticks']} of {row['ticks']}; resyncs {row['resyncs']}; read-back replies"
+        f" missed {row['readback_missed_replies']} of {4 * row['readback_requests']}, late"
+        f" {row['readback_late_replies']}; host stalls {row['stalls']}; deviation max (read-back)"
+        f" {_number(row['path_deviation_max_mm'], 3)} mm; speed SNR (read-back)"
+        f" {_number(row['speed_snr_db'], 1)} dB; ended: {row['error'] or 'completed'}"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--gml", type=int, default=4, help="GML tags from ../shared/data")
@@ -398,6 +518,15 @@ def main() -> None:
     parser.add_argument("--timing-tag", default="letter-b.json", help="example drawn over the pty")
     parser.add_argument("--skip-timing", action="store_true", help="no real-time pty part")
     parser.add_argument("--skip-fidelity", action="store_true", help="no per-tag part")
+    parser.add_argument("--skip-ik", action="store_true", help="no IK throughput part")
+    parser.add_argument("--serial-gml", type=int, default=4, help="GML tags for the OM-X part")
+    parser.add_argument(
+        "--serial-timing-tag", default="letter-b.json", help="example drawn over the OM-X pty"
+    )
+    parser.add_argument("--skip-serial", action="store_true", help="no OpenManipulator-X part")
+    parser.add_argument(
+        "--skip-serial-timing", action="store_true", help="no OpenManipulator-X pty timing"
+    )
     args = parser.parse_args()
     rates = [int(r) for r in args.rates.split(",")]
 
@@ -411,7 +540,16 @@ def main() -> None:
         fifo = [word == "on" for word in args.fifo.split(",")]
         print_timing(timing(rates, tag, loads, fifo), args.timing_tag)
         print()
-    print(f"IK throughput: {ik_throughput() / 1e6:.1f} M points/s")
+    if not args.skip_ik:
+        print(f"IK throughput: {ik_throughput() / 1e6:.1f} M points/s")
+    if not args.skip_serial:
+        print()
+        tags = example_tags() + gml_tags(args.data, args.serial_gml)
+        print_serial(serial_fidelity(tags))
+        if not args.skip_serial_timing:
+            print()
+            tag = load_tag(str(EXAMPLES / args.serial_timing_tag))
+            print_serial_timing(serial_timing(tag), args.serial_timing_tag)
 
 
 if __name__ == "__main__":

@@ -11,6 +11,8 @@
 5. **plotter**: drawn on the simulated Grbl plotter (run folder ``plotter/``, with the pictures
    of what the plan asked for and what the machine drew);
 6. **arm**: drawn by the simulated DYNAMIXEL arm (run folder ``arm/``, the same pictures);
+7. **openmanipulator-x**: drawn by ROBOTIS's OpenManipulator-X in the physics simulator (run
+   folder ``openmanipulator-x/``: where the nib touched the paper);
 
 then ``summary.json`` and a short summary of where everything is. Nothing touches hardware.
 """
@@ -32,7 +34,14 @@ __all__ = ["DEMO_INPUT", "DemoResult", "run_demo"]
 DEMO_INPUT = "hello-world-147.json"
 """The shipped capture the demo starts from (public domain, see examples/README.md)."""
 
-STEPS = ("fit", "plots", "variations", "render", "plotter", "arm")
+STEPS = ("fit", "plots", "variations", "render", "plotter", "arm", "openmanipulator-x")
+
+MACHINES = (
+    ("plotter", "grbl", None),
+    ("arm", "dynamixel", None),
+    ("openmanipulator-x", "dynamixel", "openmanipulator-x"),
+)
+"""Demo steps drawing on a machine: step name (and run folder), device, profile."""
 
 
 @dataclass
@@ -57,7 +66,7 @@ class DemoResult:
             f"{self.files['variations_sheet']}"
         )
         lines.append(f"  render     {self.files['png']}, {self.files['svg']}, {self.files['gif']}")
-        for device in ("plotter", "arm"):
+        for device, _, _ in MACHINES:
             r = f[device]
             lines.append(
                 f"  {device:<10} run folder {self.files[device]}: path deviation "
@@ -136,10 +145,10 @@ def run_demo(
     result.files.update(png="tag.png", svg="tag.svg", gif="tag.gif")
     timed("render", started)
 
-    for device, name in (("grbl", "plotter"), ("dynamixel", "arm")):
+    for name, device, profile in MACHINES:
         started = time.perf_counter()
         step(name)
-        run = draw(tag, folder / name, device=device)
+        run = draw(tag, folder / name, device=device, profile=profile)
         keys = ("path_deviation_mean_mm", "path_deviation_max_mm", "speed_snr_db")
         result.figures[name] = {k: run.report.get(k) for k in keys}
         result.files[name] = f"{name}/"

@@ -364,13 +364,13 @@ def test_sigterm_stops_a_draw_safely_and_keeps_the_run_folder(tmp_path):
 def test_demo_makes_everything_it_lists(tmp_path, capsys):
     code = main(["demo", "--out", str(tmp_path / "demo")])
     out, err = capsys.readouterr()
-    assert code == 0 and "[6/6] arm" in err
+    assert code == 0 and "[6/7] arm" in err and "[7/7] openmanipulator-x" in err
     folder = tmp_path / "demo"
     summary = json.loads((folder / "summary.json").read_text())
     for name in summary["files"].values():
         assert (folder / name).exists(), name
     assert len(list((folder / "variations").glob("*.json"))) == 6
-    for device in ("plotter", "arm"):
+    for device in ("plotter", "arm", "openmanipulator-x"):
         report = json.loads((folder / device / "report.json").read_text())
         assert report["completed"] and report["error"] is None and report["speed_snr_db"] > 25
     assert f"demo folder: {folder}" in out

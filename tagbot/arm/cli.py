@@ -1,9 +1,12 @@
 """``tagbot sim arm``: serve a simulated servo chain for the arm on a pseudo-terminal.
 
 The chain has the profile's servo IDs, models and baud rate, and its geometry (for the
-simulator's pen-tip recorder); it runs in real time until Ctrl-C. Any program opens the printed
-device path like a USB adapter: ``tagbot draw … --device dynamixel --port PATH``, the unmodified
-``dynamixel_sdk.PortHandler(PATH)``, or DYNAMIXEL Wizard-like tools that accept a device file.
+simulator's pen-tip recorder); it runs in real time until Ctrl-C. A serial arm's profile
+(``--profile openmanipulator-x``) serves its servos with the MuJoCo physics of the arm behind
+them (:class:`sim.dynamixel.physics.ArmPhysics`), the paper where the profile puts it. Any
+program opens the printed device path like a USB adapter: ``tagbot draw … --device dynamixel
+--port PATH``, the unmodified ``dynamixel_sdk.PortHandler(PATH)``, or DYNAMIXEL Wizard-like
+tools that accept a device file.
 ``--reply-latency``, ``--reply-jitter`` and ``--drop`` make the line behave like a real one
 (:meth:`sim.dynamixel.SimulatedChain.set_reply_faults`): replies late, or lost.
 """
@@ -11,6 +14,7 @@ device path like a USB adapter: ``tagbot draw … --device dynamixel --port PATH
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import click
 
@@ -76,10 +80,18 @@ def sim_arm_command(
     from sim.dynamixel import serve_pty
     from tagbot.arm.profile import load_profile
     from tagbot.arm.run import simulated_chain
+    from tagbot.arm.serial.profile import is_serial_profile
     from tagbot.signals import label, signal_of
 
-    machine = load_profile(profile, overrides)
-    chain = simulated_chain(machine, real_time=True)
+    if is_serial_profile(profile):  # a serial arm: its servos with MuJoCo physics behind them
+        from tagbot.arm.serial.machine import simulated_arm
+        from tagbot.arm.serial.profile import load_serial_profile
+
+        machine: Any = load_serial_profile(profile, overrides)
+        chain, _physics = simulated_arm(machine, real_time=True)
+    else:
+        machine = load_profile(profile, overrides)
+        chain = simulated_chain(machine, real_time=True)
     chain.set_reply_faults(reply_latency, reply_jitter, drop, seed)
     path, stop = serve_pty(chain)
     servos = ", ".join(f"{id} {model}" for id, model in machine.servos.items())

@@ -169,13 +169,15 @@ def _physics_model(profile: SerialProfile, folder: Path) -> Path:
     return path
 
 
-def simulated_arm(profile: SerialProfile) -> tuple[Any, Any]:
+def simulated_arm(profile: SerialProfile, *, real_time: bool = False) -> tuple[Any, Any]:
     """A simulated chain of the profile's servos (at park) with MuJoCo physics behind it:
-    ``(chain, physics)``, the paper where the profile puts it."""
+    ``(chain, physics)``, the paper where the profile puts it; ``real_time`` follows the wall
+    clock (for a pseudo-terminal: ``tagbot sim arm --profile openmanipulator-x``)."""
     from sim.dynamixel import SimulatedChain
     from sim.dynamixel.physics import ArmPhysics
 
-    chain = SimulatedChain(servos=profile.servos, baud=profile["bus.baud"], clock="simulated")
+    clock = "real" if real_time else "simulated"
+    chain = SimulatedChain(servos=profile.servos, baud=profile["bus.baud"], clock=clock)
     park = profile.park
     for joint, angle in zip(profile.joints, park, strict=True):
         chain.set_position(joint.id, float(angles_to_ticks(angle, joint)))
