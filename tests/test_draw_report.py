@@ -121,6 +121,14 @@ def test_a_stopped_run_names_its_error_and_where_it_stopped():
     assert report["completed"] is False
     assert report["error"] == "board replied !8 Err: Unknown command"
     assert (report["executed"], report["resume_from"]) == (5, 6)
+    # Compared with the plan up to where the machine had drawn (1 s of the 2 s run).
+    line = executed_line()
+    drawn = line[line[:, 0] <= 1.25]
+    executed = np.vstack([drawn, [[1.3, *drawn[-1, 1:3], 0.0]]])
+    report = run_report(machine_run(error=fault, executed=executed, until=1.0))
+    assert report["planned_drawing_s"] == pytest.approx(1.0, abs=0.05)  # from 0.02 mm moved
+    assert report["drawing_duration_ratio"] == pytest.approx(1.0, abs=0.02)
+    assert report["path_deviation_max_mm"] < 0.01
     # A fault with no message is named by its type.
     assert run_report(machine_run(error=KeyboardInterrupt()))["error"] == "KeyboardInterrupt"
 
