@@ -252,8 +252,8 @@ def test_report_json_holds_plain_numbers_and_null_for_non_finite(tmp_path):
 
 def test_the_run_folder_holds_the_plan_the_timeline_and_the_executed_trace(tmp_path):
     tag = load_plan(LETTER_B)
-    draw(tag, tmp_path / "run", prepared=Recorded(machine_run()), pictures=False)
-    folder = tmp_path / "run"
+    folder = tmp_path / "runs" / "today" / "run"  # its parents are made too
+    draw(tag, folder, prepared=Recorded(machine_run()), pictures=False)
     assert sorted(p.name for p in folder.iterdir()) == [
         "executed.csv", "motion.csv", "plan.json", "report.json"]  # fmt: skip
     assert json.loads((folder / "plan.json").read_text()) == json.loads(LETTER_B.read_text())
