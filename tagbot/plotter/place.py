@@ -24,7 +24,8 @@ Grbl's motion, so a plotter cannot touch down moving.
 **Time scale** ``s ≥ 1``: the retimed motion is ``q(τ) = p(τ / s)``, so speeds divide by ``s``
 and accelerations by ``s²`` while the path and the lognormal shape of the speed profile are
 kept. With ``motion.time_scale = "run"`` (default) every run has its own ``s_k``, the smallest
-meeting the limits below along that run; with ``"uniform"`` one ``s`` (the largest ``s_k``)
+meeting the limits below along that run as it is drawn (trimmed, eased: not at the plan's own
+speed where the pen touches down moving); with ``"uniform"`` one ``s`` (the largest ``s_k``)
 serves the whole tag. Runs are independent on the machine (each starts and ends at rest, with a
 pen change between), so a per-run scale changes no run's shape, only the job's length. Limits:
 
@@ -192,11 +193,7 @@ def place(tag: Tag, profile: Profile) -> Setpoints:
         _span(tag, k, t, xy @ matrix.T + offset, matrix, offset, profile)
         for k, (t, xy, _) in enumerate(fine)
     ]
-    first: list[dict[str, float]] = []
-    for (t, _, v), (on, off) in zip(fine, spans, strict=True):
-        keep = (t >= on - FINE_STEP) & (t <= off + FINE_STEP)
-        first.append(limit_scale(v[keep] @ matrix.T, FINE_STEP, profile))
-        first[-1]["junction"] = 1.0
+    first = [_drawn_limits(tag, k, span, matrix, profile) for k, span in enumerate(spans)]
     uniform = profile["motion.time_scale"] == "uniform"
     if uniform:
         joint = {name: max(f[name] for f in first) for name in first[0]} if first else {}
@@ -211,6 +208,24 @@ def place(tag: Tag, profile: Profile) -> Setpoints:
     scale = max((r.scale for r in runs), default=1.0)
     mode = "uniform" if uniform else "run"
     return Setpoints(tuple(runs), profile.dt, scale, size, matrix, offset, limits, mode)
+
+
+def _drawn_limits(
+    tag: Tag, k: int, span: tuple[float, float], matrix: Array, profile: Profile
+) -> dict[str, float]:
+    """The scale each limit needs for plan ``k``'s run as it is drawn: its velocity on the run's
+    own clock (trimmed to ``span``, eased from and to rest where the plan touches down or lifts
+    off moving) every :data:`FINE_STEP`, not the plan's own speed where the pen touches down."""
+    plan = tag.plans[k]
+    on, off = span
+    clock = run_clock(plan, on, off, tag.size, jerk_limited=False)
+    u = np.minimum(
+        np.arange(math.floor(clock.duration / FINE_STEP) + 2) * FINE_STEP, clock.duration
+    )
+    _, v = evaluate_plan(plan, clock.tag_time(u), tag.size)
+    limits = limit_scale((v @ matrix.T) * clock.rate(u)[:, None], FINE_STEP, profile)
+    limits["junction"] = 1.0
+    return limits
 
 
 def step_box(profile: Profile) -> Array:

@@ -198,3 +198,32 @@ def test_the_lower_bound_is_below_the_plan_and_agrees_on_each_runs_scale(cae_job
     for run, s in zip(setpoints.runs, scales, strict=True):
         assert s <= run.scale * (1 + 1e-3)
         assert s >= run.scale * 0.99
+
+
+def test_a_run_touching_down_at_its_peak_speed_is_scaled_by_its_drawn_motion() -> None:
+    """letter-b with its pen touching down at the plan's fastest instant: the run eases from
+    rest there, so its scale is the eased motion's (as the bound computes it independently),
+    not the one the plan's own touch-down speed would ask for."""
+    from dataclasses import replace
+
+    from tagbot.axidraw.profile import MOTOR_AXES
+    from tagbot.io.planfile import load_plan
+    from tagbot.model import Tag
+    from tagbot.model.motion import evaluate_plan
+    from tagbot.plotter.place import place
+
+    letter = load_plan(Path(__file__).resolve().parents[2] / "tagbot/examples/letter-b.json")
+    plan = letter.plans[0]
+    t = np.linspace(plan.start, plan.end(letter.size), 4001)
+    _, v = evaluate_plan(plan, t, letter.size)
+    peak = float(t[np.argmax(np.hypot(*v.T))])
+    tag = Tag((replace(plan, ink=(peak - plan.start, plan.end(letter.size) - plan.start)),),
+              letter.model, letter.units)  # fmt: skip
+    profile = load_profile()
+    setpoints = place(tag, profile.placement())
+    (run,) = setpoints.runs
+    _, (bound_scale,) = lower_bound(tag, setpoints, profile)
+    assert run.scale == pytest.approx(bound_scale, rel=0.01)
+    # The plan's own speed where the pen touches down would have asked for far more.
+    touch = np.abs(v[np.argmax(np.hypot(*v.T))] @ setpoints.matrix.T @ MOTOR_AXES.T).max()
+    assert touch / profile["limits.draw_speed"] > 1.2 * run.scale
