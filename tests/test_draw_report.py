@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from tagbot import load_plan
+from tagbot.control import RunControl
 from tagbot.draw import DEVICES, MachineRun, draw, prepare, run_report, write_executed_csv
 from tagbot.errors import DeviceFault, InputError, PlacementError, PortError, ProfileError
 from tagbot.io.motionfile import MotionTable
@@ -72,9 +73,11 @@ class Recorded:
 
     def __init__(self, result: MachineRun | None = None, fault: BaseException | None = None):
         self.result, self.fault = result, fault
+        self.calls: list[tuple[object, object, object]] = []
         self.planned = machine_run().motion
 
     def run(self, out, *, progress=None, control=None) -> MachineRun:
+        self.calls.append((out, progress, control))
         if self.fault is not None:
             raise self.fault
         assert self.result is not None
@@ -253,7 +256,14 @@ def test_report_json_holds_plain_numbers_and_null_for_non_finite(tmp_path):
 def test_the_run_folder_holds_the_plan_the_timeline_and_the_executed_trace(tmp_path):
     tag = load_plan(LETTER_B)
     folder = tmp_path / "runs" / "today" / "run"  # its parents are made too
-    draw(tag, folder, prepared=Recorded(machine_run()), pictures=False)
+    prepared, control = Recorded(machine_run()), RunControl()
+
+    def progress(done: int, total: int) -> None:
+        pass
+
+    draw(tag, folder, prepared=prepared, pictures=False, progress=progress, control=control)
+    # The machine got the folder, the progress callback and the pause control.
+    assert prepared.calls == [(folder, progress, control)]
     assert sorted(p.name for p in folder.iterdir()) == [
         "executed.csv", "motion.csv", "plan.json", "report.json"]  # fmt: skip
     assert json.loads((folder / "plan.json").read_text()) == json.loads(LETTER_B.read_text())
