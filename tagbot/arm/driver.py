@@ -150,9 +150,12 @@ STATUS = 0x55
 class Lifter(Protocol):
     """How a serial arm lifts its pen by itself: :meth:`up` gives the goal rows (one a period,
     every servo in bus order) from the pose ``row`` to the pen-up height above it along the
-    paper's normal, empty when the pen is up already; lowering is the same rows backwards."""
+    paper's normal, empty when the pen is up already; :meth:`down` the way back, ending on the
+    pose of ``row`` held still."""
 
     def up(self, row: NDArray[np.int64]) -> NDArray[np.int64]: ...
+
+    def down(self, row: NDArray[np.int64]) -> NDArray[np.int64]: ...
 
 
 class Scheduler:
@@ -1138,7 +1141,8 @@ class ArmDriver:
         held = goals[k - 1] if k else None
         log.info("paused at %s: pen up, holding the pose", where)
         if self.lifter is not None:
-            up = self.lifter.up(held if held is not None else np.array(self.last_row))
+            pose = held if held is not None else np.array(self.last_row)
+            up = self.lifter.up(pose)
             lifted = len(up) > 0
             if lifted:
                 self._rows(up, readback, where)
@@ -1157,9 +1161,7 @@ class ArmDriver:
             readback.poll(where)
             clock.sleep_until(min(next_read, clock.now() + 0.01))
         if lifted and self.lifter is not None:
-            self._rows(
-                np.concatenate([up[::-1][1:], [self.resume_row(held, k, goals)]]), readback, where
-            )
+            self._rows(self.lifter.down(pose)[1:], readback, where)
         elif lifted:
             assert held is not None
             self._pen_ramp(p["pen.up"], int(held[2]), readback, where)
@@ -1198,20 +1200,11 @@ class ArmDriver:
         if settle:
             clock.sleep_until(clock.now() + p.lead)
 
-    def resume_row(
-        self, held: NDArray[np.int64] | None, k: int, goals: NDArray[np.int64]
-    ) -> list[int]:
-        """The row a serial arm's lowering ends on: the one held (tick k's predecessor)."""
-        return [int(g) for g in (held if held is not None else goals[k])]
-
     def lower_pen(self, pen: int | NDArray[np.int64], where: str = "resume") -> None:
         """From up, put the pen to ``pen`` ticks as a pause's resume does (before streaming);
         a serial arm lowers itself to the row ``pen`` along the paper's normal."""
         if self.lifter is not None:
-            row = np.asarray(pen, dtype=np.int64)
-            up = self.lifter.up(row)
-            if len(up):
-                self._rows(np.concatenate([up[::-1][1:], [row]]), None, where)
+            self._rows(self.lifter.down(np.asarray(pen, dtype=np.int64))[1:], None, where)
             return
         if pen != self.profile["pen.up"]:
             self._pen_ramp(self.profile["pen.up"], pen, None, where, settle=True)

@@ -120,6 +120,16 @@ class ArmLift:
 
     def up(self, row: NDArray[np.int64]) -> NDArray[np.int64]:
         """Goal rows from ``row`` up to the pen-up height (empty when already there)."""
+        return self._path(row)[1:]
+
+    def down(self, row: NDArray[np.int64]) -> NDArray[np.int64]:
+        """Goal rows from the pen-up height above ``row`` down to its pose, held still (the
+        goal of a pose standing, not moving: its feedforward without the motion's)."""
+        return self._path(row)[::-1]
+
+    def _path(self, row: NDArray[np.int64]) -> NDArray[np.int64]:
+        """Goal rows from ``row``'s planned pose (standing: the first row) to the pen-up height
+        above it; just that first row when the pen is up already."""
         p = self.profile
         key = tuple(int(v) for v in np.asarray(row).tolist())
         q = self.planned.get(key)
@@ -129,7 +139,12 @@ class ArmLift:
         n = self.paper.normal
         rise = p["robot.pen_up"] / 1000.0 - self.height(q)
         if rise <= 1e-4:
-            return np.zeros((0, len(self.joints)), dtype=np.int64)
+            path = q[None, :]
+            if p["servo.feedforward"]:
+                path = path + feedforward(path, np.zeros(1, dtype=bool), p)
+            return np.column_stack(
+                [angles_to_ticks(path[:, i], j) for i, j in enumerate(self.joints)]
+            ).astype(np.int64)
         T = p.period
         duration = MIN_JERK_PEAK_RATE * rise * 1000.0 / p["motion.approach_speed"]
         for _ in range(8):
@@ -146,7 +161,7 @@ class ArmLift:
             duration = min(duration * excess * 1.01, LIFT_LONGEST)
         if p["servo.feedforward"]:  # as the program's goals: the torque each pose needs
             path = path + feedforward(path, np.zeros(len(path), dtype=bool), p)
-        goals = [angles_to_ticks(path[1:, i], j) for i, j in enumerate(self.joints)]
+        goals = [angles_to_ticks(path[:, i], j) for i, j in enumerate(self.joints)]
         return np.column_stack(goals).astype(np.int64)
 
 
@@ -315,10 +330,15 @@ def _stream(
     return outcome
 
 
+HOP = 0.02
+"""s: the longest loss of contact :func:`bridge_hops` closes (a pen lift takes far longer)."""
+
+
 def bridge_hops(trace: Array, nib: float) -> Array:
-    """The trace with the nib's hops closed: a gap in contact shorter on the paper than the
-    nib's radius ``nib`` (m) leaves no gap in the line (the nib's width covers it), so its
-    samples count as ink. The simulated nib chatters on the paper for single 1 ms steps at
+    """The trace with the nib's hops closed: a gap in contact of at most :data:`HOP` and shorter
+    on the paper than the nib's radius ``nib`` (m) leaves no gap in the line (the nib's width
+    covers it), so its samples count as ink. The simulated nib chatters on the paper for single 1 ms
+    steps at
     speed (its 3 g slider against the soft contact); what it inks is the union of where it
     touched, which such hops do not break."""
     out = np.array(trace, dtype=float)
@@ -330,20 +350,26 @@ def bridge_hops(trace: Array, nib: float) -> Array:
         if not len(back):
             break
         e = int(back[0])
-        if math.hypot(*(out[e, 1:3] - out[s - 1, 1:3])) < nib * 1000.0:
+        short = out[e, 0] - out[s - 1, 0] <= HOP
+        if short and math.hypot(*(out[e, 1:3] - out[s - 1, 1:3])) < nib * 1000.0:
             out[s:e, 3] = 1.0
     return out
 
 
 def contact_figures(
-    planned_runs: list[tuple[Array, Array]], executed: Array, force: Array
+    planned_runs: list[tuple[Array, Array]],
+    executed: Array,
+    force: Array,
+    pauses: list[tuple[float, float]] = (),  # type: ignore[assignment]
 ) -> list[dict[str, float]]:
     """Per planned run: ``contact_kept_pct`` (of its planned ink length, the share whose
-    instant finds the nib on the paper), ``force_min_n`` and ``force_max_n`` while it draws
-    (NaN without a force record)."""
+    instant finds the nib on the paper; the executed clock runs on through ``pauses``,
+    ``(start, length)``, so planned instants after one are found that much later),
+    ``force_min_n`` and ``force_max_n`` while it draws (NaN without a force record)."""
     out = []
     t_exec, pen = executed[:, 0], executed[:, 3] > 0.5
     for t, xy in planned_runs:
+        t = _on_executed_clock(t, pauses)
         if len(t) < 2 or not len(t_exec):
             out.append(
                 {"contact_kept_pct": math.nan, "force_min_n": math.nan, "force_max_n": math.nan}
@@ -361,6 +387,15 @@ def contact_figures(
         else:
             figures.update(force_min_n=math.nan, force_max_n=math.nan)
         out.append(figures)
+    return out
+
+
+def _on_executed_clock(t: Array, pauses: list[tuple[float, float]]) -> Array:
+    """Planned instants on the executed clock: each pause (``start``, ``length`` on the
+    executed clock) puts everything after it that much later."""
+    out = np.array(t, dtype=float)
+    for start, length in sorted(pauses):
+        out[out >= start - 1e-9] += length
     return out
 
 
@@ -463,7 +498,7 @@ class SerialJob:
             if rest.sum() >= 2:
                 planned_runs.append((sp.t[rest], sp.xy[rest]))
                 plans.append(k)
-        contacts = contact_figures(planned_runs, outcome.executed, outcome.force)
+        contacts = contact_figures(planned_runs, outcome.executed, outcome.force, pauses)
         figures["runs_contact"] = contacts
         figures["time_bound_s"] = time_bound(program, profile)
         return MachineRun(

@@ -13,13 +13,16 @@ that fits, centred. :func:`build_serial_program` then lays out the job at the lo
   speed along the paper, speeds ÷ ``s_k``;
 - the approach and the retreat are minimum-jerk moves along the paper's normal between
   ``robot.pen_up`` above the run's first (last) point and ``robot.press`` below it: the ink
-  starts where the plan's starts; travel is a minimum-jerk straight line at the pen-up height;
-- the moves from and to park are minimum-jerk in joint space.
+  starts where the plan's starts;
+- travel between runs and the moves from and to park are minimum-jerk in joint space (at least
+  as long as the straight line at ``motion.travel_speed`` would take), refused if the point
+  would come closer to the paper than half the pen-up height.
 
-Every sample of the Cartesian moves is solved by :meth:`SerialArm.solve_path` in one pass
-(continuous joints: no branch flip); then each move's joints are checked by differences at the
-loop period (the arm standing still before and after it), and a move that exceeds a joint's
-``max_speed`` or ``max_acceleration`` is slowed by the excess and the job solved again (a run
+Each run's samples (approach, ink, retreat) are solved by :meth:`SerialArm.solve_path` in one
+pass from where the last run ended (continuous joints: no branch flip); then each move's joints
+are checked by differences at the loop period (the arm standing still before and after it),
+and a move that exceeds a joint's ``max_speed`` or ``max_acceleration`` is slowed by the excess and
+the job solved again (a run
 keeps its shape: its scale grows; a pen-up move takes longer), until none does. A point out of
 reach, beyond a joint limit, tilted beyond ``robot.max_tilt_deg`` or a run that must be slowed
 more than ``motion.max_time_scale`` is a :class:`~tagbot.errors.PlacementError` naming the
@@ -170,24 +173,20 @@ def build_serial_program(
         ends.append(paper.to_arm(mm / 1000.0, -press))
     lift = (up + press) * normal
     moves: list[_Move] = []
+    approach = MIN_JERK_PEAK_RATE * (up + press) * 1000.0 / profile["motion.approach_speed"]
     for k in range(n):
         start, end = ends[k]
-        if k:
-            a, b = ends[k - 1][1] + lift, start + lift
-            d = float(np.linalg.norm(b - a))
+        if k:  # in joint space, at least as long as the straight line at travel_speed takes
+            d = float(np.linalg.norm(start - ends[k - 1][1]))
             moves.append(
                 _Move("travel", k, duration=MIN_JERK_PEAK_RATE * d * 1000.0 / _travel(profile))
             )
-            moves[-1].a, moves[-1].b = a, b
-        approach = MIN_JERK_PEAK_RATE * (up + press) * 1000.0 / profile["motion.approach_speed"]
         moves.append(_Move("approach", k, duration=approach, a=start + lift, b=start))
         moves.append(_Move("draw", k))
         moves.append(_Move("retreat", k, duration=approach, a=end, b=end + lift))
     cap = profile["motion.max_time_scale"]
     for _ in range(ROUNDS):
-        parts = [_sample(m, tag, clocks, placement, profile) for m in moves]
-        points = np.concatenate([p for p, _, _ in parts])
-        q = _solve(points, parts, moves, tag, clocks, profile)
+        parts, q = _solve_job(moves, tag, clocks, placement, profile)
         slowed = False
         at = 0
         for m, (p, _, _) in zip(moves, parts, strict=True):
@@ -230,6 +229,9 @@ def build_serial_program(
         at += len(p)
     segments.append(("park", n - 1, at, at + len(to_park)))
     rows.append(_pen_up_rows(arm.fk(to_park)[0].reshape(-1, 3), paper))
+    for kind, k, first, stop in segments:
+        if kind in ("travel", "park") and stop > first:
+            _check_clearance(angles[first:stop], profile, k, kind, first)
     N = len(angles)
     t = np.arange(N) * T
     pen = np.concatenate([r[2] for r in rows])
@@ -255,6 +257,71 @@ def build_serial_program(
     )
     check_serial_program(program, profile)
     return program
+
+
+def _solve_job(
+    moves: list[_Move],
+    tag: Tag,
+    clocks: list[RunClock],
+    placement: Placement,
+    profile: SerialProfile,
+) -> tuple[list[tuple[Array, Array, Array]], Array]:
+    """Each move's points (m, arm frame; a travel's the tip's through forward kinematics) and
+    the job's joint angles: each run (approach, ink, retreat) solved in one pass from where the
+    last one ended (park before the first), travel between runs a minimum-jerk move in joint
+    space (no branch to flip, no joint motion on the spot where the pen-up points repeat)."""
+    T, arm = profile.period, profile.arm
+    parts: list[tuple[Array, Array, Array] | None] = [None] * len(moves)
+    angles: list[Array | None] = [None] * len(moves)
+    q_end = profile.park
+    travel: int | None = None
+    i = 0
+    while i < len(moves):
+        if moves[i].kind == "travel":
+            travel, i = i, i + 1
+            continue
+        run = [i, i + 1, i + 2]  # approach, draw, retreat
+        sampled = [_sample(moves[j], tag, clocks, placement, profile) for j in run]
+        q = _solve(
+            np.concatenate([p for p, _, _ in sampled]),
+            sampled,
+            [moves[j] for j in run],
+            tag,
+            clocks,
+            profile,
+            q_end,
+        )
+        at = 0
+        for j, part in zip(run, sampled, strict=True):
+            parts[j], angles[j] = part, q[at : at + len(part[0])]
+            at += len(part[0])
+        if travel is not None:
+            count = max(2, math.ceil(moves[travel].duration / T - 1e-9))
+            tq = q_end + min_jerk(count)[1:-1, None] * (q[0] - q_end)
+            tips = arm.fk(tq)[0].reshape(-1, 3)
+            parts[travel] = (tips, np.zeros((len(tq), 2)), np.zeros((len(tq), 2)))
+            angles[travel] = tq
+            travel = None
+        q_end = q[-1]
+        i += 3
+    return [p for p in parts if p is not None], np.concatenate([a for a in angles if a is not None])
+
+
+def _check_clearance(q: Array, profile: SerialProfile, plan: int, kind: str, tick: int) -> None:
+    """Refuse a joint-space move that brings the pen's point closer than half the pen-up
+    height to the paper's plane."""
+    tips, _ = profile.arm.fk(q)
+    paper = profile.paper
+    height = (tips.reshape(-1, 3) - np.asarray(paper.origin)) @ paper.normal
+    low = int(np.argmin(height))
+    floor = profile["robot.pen_up"] / 2000.0
+    if height[low] < floor:
+        where = "to park" if kind == "park" else f"before plan {plan}"
+        raise PlacementError(
+            f"tick {tick + low} ({kind} {where}): the pen's point would pass"
+            f" {1000 * height[low]:.1f} mm above the paper, less than half robot.pen_up"
+            " (raise it, or move the park pose)"
+        )
 
 
 def _travel(profile: SerialProfile) -> float:
@@ -338,8 +405,8 @@ def _sample(
     count = max(2, math.ceil(m.duration / T - 1e-9))
     f = min_jerk(count)
     # Each point once: the approach ends before the run's first point, the retreat starts after
-    # its last, travel between the retreat's end and the next approach's start.
-    f = {"approach": f[:-1], "retreat": f[1:], "travel": f[1:-1]}[m.kind]
+    # its last.
+    f = {"approach": f[:-1], "retreat": f[1:]}[m.kind]
     points = m.a + f[:, None] * (m.b - m.a)
     return points, np.zeros((len(points), 2)), np.zeros((len(points), 2))
 
@@ -351,11 +418,12 @@ def _solve(
     tag: Tag,
     clocks: list[RunClock],
     profile: SerialProfile,
+    q0: Array,
 ) -> Array:
-    """Joint angles of every point, one pass from park; a ReachError named by plan, stroke and
-    time (the tag's clock for a run's point, the move's own otherwise)."""
+    """Joint angles of every point, one pass from ``q0``; a ReachError named by plan, stroke
+    and time (the tag's clock for a run's point, the move's own otherwise)."""
     try:
-        return profile.arm.solve_path(points, profile.paper.normal, profile.max_tilt, profile.park)
+        return profile.arm.solve_path(points, profile.paper.normal, profile.max_tilt, q0)
     except ReachError as exc:
         i = exc.index
         m = moves[-1]

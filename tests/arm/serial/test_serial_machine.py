@@ -16,6 +16,7 @@ import tagbot
 from tagbot.arm.serial.machine import FORCE_RANGE, SerialBudget, bridge_hops, prepare
 from tagbot.arm.serial.profile import is_serial_profile, load_serial_profile
 from tagbot.arm.serial.program import build_serial_program
+from tagbot.control import RunControl
 from tagbot.draw import draw
 from tagbot.errors import DeviceError, Interrupted, PlacementError, ProfileError, ReachError
 
@@ -219,6 +220,9 @@ def test_a_hop_shorter_than_the_nib_is_no_gap_in_the_line() -> None:
     pen = np.array([1, 1, 0, 1, 1, 0, 0, 1.0])
     out = bridge_hops(np.column_stack([t, x, np.zeros(8), pen]), nib=0.002)
     np.testing.assert_array_equal(out[:, 3], [1, 1, 1, 1, 1, 0, 0, 1])
+    # a pen lift between two runs close together is no hop: it lasts longer
+    slow = np.column_stack([t * 30, x, np.zeros(8), pen])
+    np.testing.assert_array_equal(bridge_hops(slow, nib=0.002)[:, 3], pen)
 
 
 # -- faults ---------------------------------------------------------------------------------
@@ -262,11 +266,73 @@ def test_a_fault_mid_run_lifts_the_pen_by_the_arm_and_stops_safely(letter_b, tmp
     assert all(physics.chain.servo(id).torque for id in profile.bus_ids)
 
 
-def test_ctrl_c_mid_run_lifts_the_pen_by_the_arm(letter_b, tmp_path) -> None:
-    def interrupt(chain) -> None:
-        raise KeyboardInterrupt
+def _interrupt(chain) -> None:
+    raise KeyboardInterrupt
 
-    error, report, physics, _job, _ = _faulted(letter_b, tmp_path, interrupt)
+
+def test_ctrl_c_mid_run_lifts_the_pen_by_the_arm(letter_b, tmp_path) -> None:
+    error, report, physics, _job, _ = _faulted(letter_b, tmp_path, _interrupt)
     assert isinstance(error, Interrupted) and "pen lifted by the arm" in str(error)
     assert report["resume_from"] == report["executed"] + 1
     assert physics.pen_trace()[-50:, 4].max() == 0.0
+
+
+def test_a_resumed_job_lowers_the_pen_where_it_stopped_and_draws_the_rest(
+    letter_b, tmp_path
+) -> None:
+    _, stopped, _, _, _ = _faulted(letter_b, tmp_path, _interrupt)
+    tick = stopped["resume_from"]
+    job = prepare(letter_b, profile="openmanipulator-x", resume_from=tick)
+    report = draw(letter_b, tmp_path / "rest", prepared=job, pictures=False).report
+    assert report["completed"] and report["executed"] == len(job.program)
+    executed = np.loadtxt(tmp_path / "rest" / "executed.csv", delimiter=",", skiprows=1)
+    inked = executed[executed[:, 3] > 0.5]
+    # the arm stands where the last tick executed left it (row tick - 2), the pen lowered there
+    stood = job.program.joints[tick - 2, 0]
+    assert inked[0, 0] >= stood - 1e-6  # nothing drawn twice
+    planned = job.program.setpoints.xy[tick - 2]
+    assert np.hypot(*(inked[0, 1:3] - planned)) < 0.3  # the ink goes on where it stopped
+    (run,) = report["runs"]
+    assert run["contact_kept_pct"] == 100.0
+
+
+class _PauseMidRun(RunControl):
+    """Paused for ``checks`` of the loop's questions once ``armed`` (a count, not a clock)."""
+
+    def __init__(self, checks: int) -> None:
+        super().__init__()
+        self.left = checks
+        self.armed = False
+
+    @property
+    def paused(self) -> bool:
+        if not self.armed:
+            return False
+        self.left -= 1
+        return self.left >= 0
+
+
+def test_a_pause_lifts_the_pen_by_the_arm_and_puts_it_back(letter_b, tmp_path) -> None:
+    job = prepare(letter_b, profile="openmanipulator-x")
+    held = {}
+    job.fault = lambda chain: held.setdefault("chain", chain)
+    control = _PauseMidRun(300)
+    first, stop = next(s for s in job.program.segments if s[0] == "draw")[2:]
+
+    def progress(done: int, total: int) -> None:
+        control.armed = control.armed or done >= (first + stop) // 2
+
+    report = draw(
+        letter_b, tmp_path / "p", prepared=job, progress=progress, control=control, pictures=False
+    ).report
+    assert report["completed"] and report["pauses"] == 1 and report["paused_s"] > 0.5
+    (run,) = report["runs"]
+    # the pen back on the paper where it lifted (the planned stretch at the pause's edge, one
+    # tick of it, falls inside the lift)
+    assert run["contact_kept_pct"] >= 99.5 and run["speed_snr_db"] >= 25.0
+    trace = held["chain"].plant.pen_trace()
+    # the nib left the paper once in the middle of the run (the pause) and came back
+    inked = trace[:, 3] > 0.5
+    lifts = np.flatnonzero(inked[:-1] & ~inked[1:])
+    long_lifts = [i for i in lifts if not inked[i + 1 : i + 200].any()]
+    assert len(long_lifts) == 2  # the pause, and the run's end
