@@ -25,9 +25,12 @@ went down away from the plan's first point, so the next move starts on the plan.
 at that tick: :attr:`Job.move_error` (mm, the largest distance over each move's ticks) and
 :attr:`Job.run_error` (each run's largest). It is half a step per motor away from ``P`` (at most
 ``½/k`` mm: 0.00625 mm at 80 steps/mm), plus how far ``P`` strays from the plan within a move,
-plus, in a run's first 2 ms, up to a step more. Measured on ``cae.json`` (AxiDraw V3): at
-``motion.dt`` = 10, 30, 50, 100 ms 0.0062, 0.0063, 0.0070, 0.022 mm with ``T3``; 0.011, 0.015,
-0.015, 0.044 mm with ``LT``.
+plus, in a run's first 2 ms, up to a step more. A move that strays more than
+:data:`SPLIT_ERROR` (0.012 mm) is split at its middle tick, onto the plan's position and
+velocity there, down to 4 ms halves, and the run built again. Measured on ``cae.json``
+(AxiDraw V3): at ``motion.dt`` = 10, 30, 50, 100 ms 0.0062, 0.0063, 0.0072, 0.0118 mm with
+``T3`` (1467, 511, 313, 191 moves; 100 ms setpoints need 34 splits); 0.011, 0.0115, 0.0116,
+0.012 mm with ``LT`` (0.022 and 0.044 mm at 100 ms before splitting).
 
 **Travel** (``LM``, pen up): a trapezoid along the longer motor axis at ``limits.travel_speed``
 and ``limits.travel_acceleration`` (accelerate, cruise, decelerate: three ``LM``, step-exact per
@@ -62,6 +65,12 @@ Steps = tuple[int, int]
 SETTLE = 0.002
 """s: with ``T3``, a run's first move, which takes up the pen-down position's fraction of a step
 (module docstring)."""
+SPLIT_ERROR = 0.012
+"""mm: a drawing move whose ticks stray further from the plan is split in two (half a step per
+motor, 0.0088 mm at 80 steps/mm, is the position's own rounding; the rest is the move's cubic
+missing the plan, which halving a move divides by about 16)."""
+MIN_SPLIT_TICKS = 100
+"""Ticks (4 ms): a move is split only into halves this long at least."""
 CRAWL = 0.001
 """s of travel acceleration a pen-up move starts and ends at (its slowest rate)."""
 _MAX_RATE = ACCUMULATOR_STEP - 1
@@ -216,10 +225,42 @@ class _Builder:
             raise RuntimeError(f"travel ended at {self.steps}, not {target}")
 
     def draw(self, run: Run, reference: Callable[[Array], Array]) -> None:
-        """``T3`` (or ``LT``) moves through the run's setpoints (module docstring)."""
+        """``T3`` (or ``LT``) moves through the run's setpoints (module docstring); a move whose
+        ticks stray more than :data:`SPLIT_ERROR` from the plan is split at its middle tick
+        (the plan's position and velocity there) and the run built again."""
         index = len(self.runs)
         self.runs.append(run)
         self.run_start.append(self.time)
+        before = (len(self.entries), len(self.errors), len(self.tick_parts), len(self.time_parts))
+        state = (self.steps, self.accumulators, self.time)
+        splits: list[int] = []
+        while True:
+            starts = self._draw(run, reference, index, splits)
+            first = before[0]
+            errors = self.errors[first:]
+            wide = [
+                g + n // 2
+                for g, n, e in zip(starts[:-1], np.diff(starts), errors, strict=True)
+                if e > SPLIT_ERROR and n >= 2 * MIN_SPLIT_TICKS
+            ]
+            if not wide:
+                break
+            splits += wide
+            del self.entries[before[0] :], self.errors[before[1] :]
+            del self.tick_parts[before[2] :], self.time_parts[before[3] :]
+            self.steps, self.accumulators, self.time = state
+        if starts[-1] == starts[0]:  # a dot: no move
+            here = steps_to_xy(self.steps, self.k) - reference(np.zeros(1))[0]
+            self.run_error.append(float(np.hypot(*here)))
+        else:
+            self.run_error.append(float(max(self.errors[before[1] :])))
+
+    def _draw(
+        self, run: Run, reference: Callable[[Array], Array], index: int, splits: list[int]
+    ) -> list[int]:
+        """The run's moves through its setpoints and the ``splits`` (ticks of the run's clock);
+        each move's largest error in :attr:`errors`. Returns the moves' start ticks and the last
+        one's end."""
         command = "T3" if self.profile["motion.jerk"] else "LT"
         t, xy, v = run.t, run.xy, run.v
         if command == "T3" and len(t) > 1 and t[1] > 2 * SETTLE:
@@ -229,6 +270,14 @@ class _Builder:
             t = np.insert(t, 1, SETTLE)
             xy = np.insert(xy, 1, here, axis=0)
             v = np.insert(v, 1, (ahead - here) * TICK_HZ, axis=0)
+        if splits:
+            at = np.asarray(sorted(splits), dtype=float) / TICK_HZ
+            step = 1.0 / TICK_HZ
+            order = np.argsort(np.concatenate([t, at]), kind="stable")
+            t = np.concatenate([t, at])[order]
+            xy = np.vstack([xy, reference(at)])[order]
+            rates = (reference(at + step) - reference(at - step)) / (2 * step)
+            v = np.vstack([v, rates])[order]
         grid = np.round(t * TICK_HZ).astype(np.int64)
         keep = np.concatenate([[True], np.diff(grid) > 0])
         grid, m, v = grid[keep], xy[keep] @ MOTOR_AXES.T * self.k, v[keep] @ MOTOR_AXES.T
@@ -271,10 +320,7 @@ class _Builder:
             gap = np.hypot(*(steps_to_xy(np.concatenate(ticks), self.k) - reference(times)).T)
             bounds = np.cumsum([0] + [len(t) for t in ticks[:-1]])
             self.errors[first:] = np.maximum.reduceat(gap, bounds).tolist()
-            self.run_error.append(float(gap.max()))
-        else:  # a dot: no move
-            here = steps_to_xy(self.steps, self.k) - reference(np.zeros(1))[0]
-            self.run_error.append(float(np.hypot(*here)))
+        return [int(g) for g in grid]
 
     def job(self) -> Job:
         ticks = np.concatenate(self.tick_parts) if self.tick_parts else np.zeros((0, 2), np.int64)

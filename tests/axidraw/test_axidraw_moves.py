@@ -220,3 +220,31 @@ def test_travel_starts_and_ends_at_a_crawl(cae_job):
             + 2 * decelerate.accel[dominant] * abs(decelerate.steps[dominant]) * ACCUMULATOR_STEP
         )
         assert math.sqrt(slowest) / unit == pytest.approx(crawl, rel=0.01)
+
+
+@pytest.mark.parametrize("overrides", [("motion.dt=0.2", "motion.max_dt=0.2"),
+                                       ("motion.jerk=false", "motion.dt=0.1")])  # fmt: skip
+def test_a_move_that_strays_from_the_plan_is_split(overrides):
+    """Setpoints far apart (or LT's constant acceleration) leave moves whose cubic misses the
+    plan: each is split at its middle tick until every tick is within SPLIT_ERROR (cae: 0.022
+    and 0.044 mm before splitting), measured against the plan here from the job's own ticks."""
+    from tagbot.axidraw.moves import SPLIT_ERROR
+    from tagbot.io.planfile import load_plan
+
+    from .conftest import CAE
+
+    tag = load_plan(CAE)
+    profile = load_profile(overrides=overrides)
+    setpoints = place(tag, profile.placement())
+    job = build_job(tag, setpoints, profile)
+    draws = [e for e in job.entries if e.kind == "draw"]
+    intervals = sum(len(r.t) - 1 for r in setpoints.runs)
+    assert len(draws) > intervals + len(setpoints.runs)  # more than one move per setpoint
+    assert max(job.move_error) <= SPLIT_ERROR
+    # Every tick of every run against the plan, independently of the job's own figures.
+    for k, (run, start) in enumerate(zip(setpoints.runs, job.run_start, strict=True)):
+        at = run_reference(tag, run, setpoints.matrix, setpoints.offset)
+        mine = [e for e in draws if e.run == k]
+        inside = (job.tick_time > mine[0].start + 1e-9) & (job.tick_time <= mine[-1].end + 1e-9)
+        gap = np.hypot(*(job.xy(job.ticks[inside]) - at(job.tick_time[inside] - start)).T)
+        assert gap.max() <= SPLIT_ERROR + 1e-9, (k, gap.max())
