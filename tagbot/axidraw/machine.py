@@ -59,6 +59,10 @@ PLAN_STEP = 0.001
 """s between the samples of each run's plan in the comparison."""
 TRACE_STEP = 25
 """Ticks between the executed trace's samples (1 ms)."""
+DEVIATION_BUDGET = 0.02
+"""mm: a run's path deviation beyond this carries a warning (issue 31's goal)."""
+MIN_SPEED_SNR_DB = 25.0
+"""A run's speed SNR below this carries a warning, as on the other machines."""
 PAUSE_EDGE = 0.005
 """s either side of a pause the host cannot place exactly: it sees the motors stop at its
 polls, and the board starts the next move once it has read it (4 ms for a ``T3``, the
@@ -224,6 +228,7 @@ class AxiDrawJob:
             stalls=[(a - report.started, n) for a, n in report.stalls],
             until=None if error is None else _until(job, done),
             ramp=PAUSE_EDGE if report.pauses else 0.0,
+            judge=Budget(job, [(a - report.started, n) for a, n in report.stalls]),
         )
 
     def _planned_runs(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -306,6 +311,47 @@ class AxiDrawJob:
             "errors": list(report.errors),
             "stopped_at_steps": list(report.stopped_at) if report.stopped_at else None,
         }
+
+
+@dataclass(frozen=True, eq=False)
+class Budget:
+    """The AxiDraw's budgets for :attr:`tagbot.draw.MachineRun.judge`: each pen-down run's path
+    deviation within :data:`DEVIATION_BUDGET` and speed SNR at least :data:`MIN_SPEED_SNR_DB`,
+    or a warning naming the run, the figure and its cause: host stalls with the pen down (the
+    board ran dry), the moves' own stated error, else the executed motion beyond it."""
+
+    job: Job
+    stalls: list[tuple[float, float]]
+    """``(start, length)`` on the job's clock."""
+
+    def __call__(self, report: dict[str, Any]) -> list[str]:
+        out = []
+        plans = [run.plan for run in self.job.runs]
+        for i, run in enumerate(report.get("runs", [])):
+            deviation, snr = run["path_deviation_max_mm"], run["speed_snr_db"]
+            over = []
+            if deviation is not None and deviation > DEVIATION_BUDGET:
+                over.append(f"path deviation {deviation:.3f} mm over {DEVIATION_BUDGET:g} mm")
+            if snr is not None and snr < MIN_SPEED_SNR_DB:
+                over.append(f"speed SNR {snr:.1f} dB below {MIN_SPEED_SNR_DB:g} dB")
+            if not over:
+                continue
+            k = plans.index(run["plan"]) if run["plan"] in plans else i
+            start = run["executed_start"]
+            end = start + run["executed_duration"] + 1.0
+            held = [n for a, n in self.stalls if start - 0.05 <= a <= end]
+            stated = self.job.run_error[k] if k < len(self.job.run_error) else 0.0
+            if held:
+                cause = (
+                    f"{len(held)} host stall{'s' * (len(held) > 1)} ({1e3 * sum(held):.0f} ms)"
+                    " with the pen down: the board ran dry"
+                )
+            elif stated > DEVIATION_BUDGET:
+                cause = f"its moves' own error against the plan ({stated:.3f} mm, stated)"
+            else:
+                cause = f"the executed motion beyond its moves' stated {stated:.3f} mm"
+            out.append(f"run {i + 1} (plan {run['plan']}): {' and '.join(over)}: {cause}")
+        return out
 
 
 def _runs_from(

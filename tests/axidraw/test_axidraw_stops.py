@@ -230,3 +230,25 @@ def test_space_on_the_terminal_pauses_and_resumes_an_axidraw_draw(tmp_path):
     assert report["pauses"] == 1 and report["paused_s"] >= 2.0
     assert report["executed_source"] == "QS polls, 20 Hz"
     assert abs(report["drawing_duration_ratio"] - 1.0) < 0.15  # 1.3 with the pause left in
+
+
+def test_a_stall_with_the_pen_down_is_a_warning_naming_the_run(job, tag, tmp_path, monkeypatch):
+    """The USB carries nothing for 1.5 s in the middle of letter-b's one run: the board runs dry
+    with the pen down (the simulator's recorder sees it stand), and the report says which run,
+    which figure and why."""
+    import sim.ebb.transport as transport
+
+    attach = transport.attach_device
+    middle = job.job.run_start[0] + 0.5 * job.setpoints.runs[0].duration
+
+    def stalled(device: SimulatedEBB, name: str) -> str:
+        device.stall_usb(middle, 1.5)
+        return attach(device, name)
+
+    monkeypatch.setattr(transport, "attach_device", stalled)
+    report = draw(tag, tmp_path / "dry", prepared=job, pictures=False).report
+    assert report["completed"] and report["stalls"] == 1
+    assert report["speed_snr_db"] < 25.0
+    (warning,) = report["warnings"]
+    assert warning.startswith("run 1 (plan 0): speed SNR ")
+    assert "1 host stall (" in warning and "with the pen down" in warning
