@@ -187,11 +187,14 @@ def vertex_speeds(points: np.ndarray, rule: Classic) -> tuple[np.ndarray, np.nda
     return path, speeds
 
 
-def _ramp(v_from: float, v_to: float, span: float, slices: int) -> list[tuple[float, float]]:
-    """``slices`` equal slices over ``span`` s, stepping from ``v_from`` towards ``v_to`` (the
-    first at one step above ``v_from``, the last one step short of ``v_to``)."""
+def _ramp(
+    v_from: float, v_to: float, span: float, slices: int, start: float | None = None
+) -> list[tuple[float, float]]:
+    """``slices`` equal slices over ``span`` s, in steps of ``(v_to - v_from) / (slices + 1)``
+    from ``start`` (default ``v_from``): the first one step past it."""
     step = (v_to - v_from) / (slices + 1.0)
-    return [(span / slices, v_from + step * (j + 1)) for j in range(slices)]
+    begin = v_from if start is None else start
+    return [(span / slices, begin + step * (j + 1)) for j in range(slices)]
 
 
 def segment_slices(
@@ -244,7 +247,10 @@ def segment_slices(
             if n_up > 0:
                 out += _ramp(v0, peak, t_a, n_up)
             if n_down > 0:
-                out += _ramp(peak, v1, t_d, n_down)
+                # The way down steps from the speed the way up reached, short of the peak (so
+                # the last slice ends a step below v_out), as the published planner does.
+                reached = out[-1][1] if out else v0
+                out += _ramp(peak, v1, t_d, n_down, start=reached)
         else:
             v0 = (peak + v0) / 2.0  # a short segment starts boosted
             change = (v1 * v1 - v0 * v0) / (2.0 * length)

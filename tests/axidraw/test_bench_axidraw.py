@@ -68,10 +68,11 @@ def test_a_long_segment_from_rest_to_rest_is_the_trapezoid() -> None:
 def test_short_segments_are_triangles_ramps_or_one_slice() -> None:
     # 4.5 mm from rest to rest: too short to cruise (it would need 3.125 + 1.25 mm and 5 mm);
     # over 0.9 of the 3.125 mm the ramps take, so the acceleration eases to
-    # 0.9 · 3.125 / 4.5 · 800 = 500 mm/s²: a triangle peaking at √(500 · 4.5) in 3 + 3 slices.
+    # 0.9 · 3.125 / 4.5 · 800 = 500 mm/s²: a triangle peaking at √(500 · 4.5) in 3 + 3 slices,
+    # the way down stepping from where the way up got to (3/4 of the peak), to rest.
     slices = segment_slices(4.5, 0.0, 0.0, RULE)
     peak = math.sqrt(500.0 * 4.5)
-    assert [v for _, v in slices] == pytest.approx([peak * j / 4 for j in (1, 2, 3, 3, 2, 1)])
+    assert [v for _, v in slices] == pytest.approx([peak * j / 4 for j in (1, 2, 3, 2, 1, 0)])
     assert sum(d for d, _ in slices) == pytest.approx(2 * math.sqrt(4.5 / 500.0))
     # 2 mm: a triangle of only 2 + 2 slices (peak 40 mm/s) becomes a linear ramp from the
     # boosted start (40 + 0) / 2 to rest: 8 slices over (0 - 20) / ((0 - 20²) / (2 · 2)) = 0.2 s.
