@@ -205,8 +205,9 @@ def build_serial_program(
                         f" motion.max_time_scale = {cap:g} (raise it, or the joint limits, or"
                         " draw smaller)"
                     )
-            else:
-                m.duration *= excess * (1.0 + 1e-4)
+            else:  # sampled whole ticks: at least one tick longer, or nothing changes
+                ticks = len(p) + (1 if m.kind == "travel" else 0)
+                m.duration = max(m.duration * excess * (1.0 + 1e-4), (ticks + 1) * T)
         if not slowed:
             break
     else:  # pragma: no cover - converges in a few rounds
