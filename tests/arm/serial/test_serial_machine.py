@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import mujoco
@@ -13,9 +14,15 @@ import numpy as np
 import pytest
 
 import tagbot
-from tagbot.arm.serial.machine import FORCE_RANGE, SerialBudget, bridge_hops, prepare
+from tagbot.arm.serial.machine import (
+    FORCE_RANGE,
+    SerialBudget,
+    bridge_hops,
+    prepare,
+    time_bound,
+)
 from tagbot.arm.serial.profile import is_serial_profile, load_serial_profile
-from tagbot.arm.serial.program import build_serial_program
+from tagbot.arm.serial.program import build_serial_program, check_serial_program
 from tagbot.control import RunControl
 from tagbot.draw import draw
 from tagbot.errors import DeviceError, Interrupted, PlacementError, ProfileError, ReachError
@@ -336,3 +343,43 @@ def test_a_pause_lifts_the_pen_by_the_arm_and_puts_it_back(letter_b, tmp_path) -
     lifts = np.flatnonzero(inked[:-1] & ~inked[1:])
     long_lifts = [i for i in lifts if not inked[i + 1 : i + 200].any()]
     assert len(long_lifts) == 2  # the pause, and the run's end
+
+
+def test_the_check_names_the_tick_of_a_joint_beyond_its_speed_or_the_servo_range(
+    program, profile
+) -> None:
+    k = next(s for s in program.segments if s[0] == "draw")[2] + 10
+    jumped = program.angles.copy()
+    jumped[k:, 1] += 0.05  # 0.05 rad in one tick: 5 rad/s
+    with pytest.raises(
+        PlacementError, match=rf"^tick {k} \(t = {k / 100:.3f} s, plan 0\): joint2 speed"
+    ):
+        check_serial_program(replace(program, angles=jumped), profile)
+    ramp = program.angles.copy()
+    ramp[k, 3] += 0.005  # a 0.29° spike: 0.5 rad/s, 50 rad/s² at the tick
+    with pytest.raises(PlacementError, match=r"joint4 acceleration \d+°/s² above joint4\.max_"):
+        check_serial_program(replace(program, angles=ramp), profile)
+    goals = program.joints.copy()
+    goals[5, 2] = 4200
+    with pytest.raises(PlacementError, match=r"^tick 5 .*joint2 goal 4200 ticks is outside"):
+        check_serial_program(replace(program, joints=goals), profile)
+
+
+def test_a_scale_too_large_and_a_park_pose_near_the_paper_are_refused(letter_b) -> None:
+    with pytest.raises(PlacementError, match=r"place\.scale: 10 mm per unit does not fit .* 3\.0"):
+        prepare(letter_b, profile="openmanipulator-x", overrides=("place.scale=10",))
+    low = ("joint2.park_deg=40", "joint3.park_deg=0", "joint4.park_deg=80")  # the pen under it
+    with pytest.raises(PlacementError, match=r"\(travel before plan 0\): the pen's point would"):
+        prepare(letter_b, profile="openmanipulator-x", overrides=low)
+
+
+def test_the_job_time_bound_is_each_move_at_the_joints_limits(program, profile) -> None:
+    bound = time_bound(program, profile)
+    # letter-b: one run slowed 3.4 times by its joints (its own bound), pen-up moves near theirs
+    assert program.setpoints.duration / 1.1 < bound < program.setpoints.duration
+    fast = load_serial_profile(
+        "openmanipulator-x",
+        [f"joint{i}.max_speed=300" for i in range(1, 5)]
+        + [f"joint{i}.max_acceleration=3000" for i in range(1, 5)],
+    )
+    assert time_bound(program, fast) < 0.75 * bound  # the same moves, faster joints
