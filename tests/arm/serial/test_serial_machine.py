@@ -383,3 +383,22 @@ def test_the_job_time_bound_is_each_move_at_the_joints_limits(program, profile) 
         + [f"joint{i}.max_acceleration=3000" for i in range(1, 5)],
     )
     assert time_bound(program, fast) < 0.75 * bound  # the same moves, faster joints
+
+
+def test_a_run_is_slowed_by_the_joints_acceleration_where_that_binds(letter_b, program) -> None:
+    gentle = load_serial_profile(
+        "openmanipulator-x", [f"joint{i}.max_acceleration=200" for i in range(1, 5)]
+    )
+    slow = build_serial_program(letter_b, gentle)
+    assert slow.setpoints.run_scales[0] > 1.2 * program.setpoints.run_scales[0]
+    q, T = slow.angles, gentle.period
+    first, stop = next(s for s in slow.segments if s[0] == "draw")[2:]
+    run = q[first - 1 : stop + 1]
+    speed = max(
+        np.abs(np.diff(run[:, i])).max() / T / j.max_speed for i, j in enumerate(gentle.joints)
+    )
+    acc = max(
+        np.abs(np.diff(run[:, i], 2)).max() / T**2 / j.max_acceleration
+        for i, j in enumerate(gentle.joints)
+    )
+    assert speed < 0.9 and 0.95 < acc <= 1.0 + 1e-6  # the acceleration, not the speed, binds
