@@ -322,6 +322,7 @@ def test_an_unknown_device_is_refused_naming_the_known_ones():
 def test_prepare_hands_the_profile_overrides_and_port_to_the_device(tmp_path):
     tag = load_plan(LETTER_B)
     assert prepare(tag, device="axidraw").device == "axidraw"
+    assert prepare(tag).device == "grbl"  # the pen plotter unless another device is named
     with pytest.raises(PlacementError, match=r"^placement: the drawing reaches"):
         prepare(tag, device="axidraw", overrides=("place.scale=1000",))
     with pytest.raises(ProfileError, match=r"nowhere\.toml"):

@@ -18,6 +18,7 @@ from firmware_protocols.ebb.commands import (
     GeneralStatus,
     Kind,
     LineReader,
+    Reply,
     ReplyError,
     UnsupportedCommand,
     format_command,
@@ -492,3 +493,19 @@ def test_xm_sums_its_axes_in_the_firmwares_32_bit_ints() -> None:
     assert parse_command(b"XM,100000000,2147483647,1").params == (100000000, 2**31 - 1, 1)
     with pytest.raises(EBBCommandError, match="step rate too high"):
         parse_command(b"XM,80000000,2147483647,1")
+
+
+def test_sm_without_a_second_axis_moves_only_the_first() -> None:
+    # 2000 steps over 90 000 s: slow but within the rate; motor 2 has no steps, so no rate.
+    assert parse_command(b"SM,90000000,2000").params == (90000000, 2000)
+    with pytest.raises(EBBCommandError, match="axis2> step rate too slow"):
+        parse_command(b"SM,90000000,2000,1")
+
+
+def test_a_one_byte_reply_is_complete_when_it_is_the_whole_reply() -> None:
+    # CU,10,1 (future syntax) is answered with a lone <NL>.
+    assert read_reply(parse_command(b"CU,10,1"), b"\n") == Reply((), 1)
+    # A QU reply is incomplete until its "QU," and more have come.
+    assert read_reply(parse_command(b"QU,2"), b"Q") is None
+    assert read_reply(parse_command(b"QU,2"), b"QU,") is None
+    assert read_reply(parse_command(b"V"), b"!") is None

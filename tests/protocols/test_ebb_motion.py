@@ -372,3 +372,36 @@ def test_negative_steps_with_a_zero_rate_run_backwards_on_the_accel():
 )
 def test_wrap32_is_the_firmwares_signed_32_bit_variable(value, held):
     assert wrap32(value) == held == i32(value)
+
+
+def test_an_lm_clear_looks_ahead_at_the_accel_alone():
+    """``LM`` has no jerk: Rate 1 and Accel -1 give a first tick of rate 0 and a negative second
+    one, so its clear loads 2**31 - 1 (a jerk of 1 would have made the second zero)."""
+    assert cleared_accumulator(1, -1) == 2**31 - 1
+    positions, final = lm_axis(3, 1, -1, 0, clear=True)
+    expected, acc = isr(1, -1, 0, 0, steps=3, clear=True)
+    assert positions.tolist() == expected and final == acc
+
+
+def test_no_ticks_is_an_empty_int64_trace():
+    positions, final = axis_positions(0, 1000, 0, 0, 77)
+    assert positions.dtype == np.int64 and positions.shape == (0,) and final == 77
+    positions, final = lm_axis(0, 1000, 0, 77)
+    assert positions.dtype == np.int64 and positions.shape == (0,) and final == 77
+    out, finals = execute(Move("LT", (5, 5), ticks=0), (3, 4), limit_checks=False)
+    assert out.dtype == np.int64 and out.shape == (0, 2) and finals == (3, 4)
+
+
+def test_parameter_refusals_name_their_reason():
+    cases = [
+        (Move("LT", (2**31, 0), ticks=10), "a 32-bit signed parameter out of range"),
+        (Move("LT", (1, 0), ticks=2**32), "a 32-bit unsigned parameter out of range"),
+        (Move("LT", (1, 0), ticks=10, clear=-1), "a 32-bit unsigned parameter out of range"),
+        (Move("LM", (-5, 0), steps=(-3, 0)), "LM: negative Steps with a negative Rate"),
+        (Move("LM", (0, 5), steps=(3, 0)), "LM: no axis can move"),
+        (Move("T3", (1, 0), ticks=0), "T3: Intervals must be > 0"),
+    ]
+    for move, detail in cases:
+        with pytest.raises(EBBCommandError) as caught:
+            move.validate()
+        assert str(caught.value) == f"!6 Err: Invalid parameter value ({detail})"
