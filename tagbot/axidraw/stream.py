@@ -120,21 +120,24 @@ class EBBStreamer:
 
     # -- the wire ---------------------------------------------------------------------------
     def _line(self, command: bytes, timeout: float = REPLY_TIMEOUT) -> bytes:
-        """The next non-empty reply line (legacy mode ends lines with CR, LF or both)."""
+        """The next non-empty reply line (legacy mode ends lines with CR, LF or both). Late
+        only if a read after the deadline brings nothing (a host descheduled past it finds the
+        reply waiting)."""
         deadline = self.clock.now() + timeout
         while True:
             parts = re.split(rb"[\r\n]+", self._buffer.lstrip(b"\r\n"), maxsplit=1)
             if len(parts) == 2:
                 self._buffer = parts[1]
                 return parts[0]
-            if self.clock.now() >= deadline:
-                name = command.split(b",")[0].strip().decode("ascii", "replace")
-                raise DeviceTimeout(f"{name}: no reply from the EBB in {timeout:g} s")
+            expired = self.clock.now() >= deadline
             try:
                 chunk = self.link.read(max(1, getattr(self.link, "in_waiting", 0) or 1))
             except (OSError, ValueError) as e:
                 raise ConnectionLost(f"the EBB's line failed: {e}") from e
             self._buffer += chunk
+            if expired and not chunk:
+                name = command.split(b",")[0].strip().decode("ascii", "replace")
+                raise DeviceTimeout(f"{name}: no reply from the EBB in {timeout:g} s")
 
     def ask(self, command: str | bytes, *, data: bool = False, ok: bool = True) -> bytes:
         """Send ``command`` (``\\r`` added); its data line if ``data``, then ``OK`` if ``ok``.

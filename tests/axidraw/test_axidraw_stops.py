@@ -252,3 +252,46 @@ def test_a_stall_with_the_pen_down_is_a_warning_naming_the_run(job, tag, tmp_pat
     (warning,) = report["warnings"]
     assert warning.startswith("run 1 (plan 0): speed SNR ")
     assert "1 host stall (" in warning and "with the pen down" in warning
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep_until(self, t: float) -> None:
+        self.t = max(self.t, t)
+
+
+class _DescheduledLink:
+    """A port whose host is descheduled for 3 s during its first read, while the board's
+    reply arrives; then the reply is waiting. ``replies``: what each later read finds."""
+
+    def __init__(self, replies: list[bytes]) -> None:
+        self.clock = _Clock()
+        self.replies = replies
+        self.reads = 0
+
+    def write(self, data: bytes) -> int:
+        return len(data)
+
+    def read(self, n: int = 1) -> bytes:
+        self.reads += 1
+        if self.reads == 1:
+            self.clock.t += 3.0  # past the 2 s a reply may take
+            return b""
+        return self.replies.pop(0) if self.replies else b""
+
+
+def test_a_reply_waiting_when_a_descheduled_host_wakes_is_no_timeout(job):
+    from tagbot.axidraw.stream import EBBStreamer
+    from tagbot.errors import DeviceTimeout
+
+    link = _DescheduledLink([b"12,-3\n\r", b"OK\r\n"])
+    streamer = EBBStreamer(link, job.profile, {})
+    assert streamer.position() == (12, -3)
+    # Nothing there even after reading past the deadline: a timeout, naming the command.
+    with pytest.raises(DeviceTimeout, match=r"^QM: no reply from the EBB in 2 s"):
+        EBBStreamer(_DescheduledLink([]), job.profile, {}).ask("QM", data=True, ok=False)
