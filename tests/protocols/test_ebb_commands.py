@@ -509,3 +509,7 @@ def test_a_one_byte_reply_is_complete_when_it_is_the_whole_reply() -> None:
     assert read_reply(parse_command(b"QU,2"), b"Q") is None
     assert read_reply(parse_command(b"QU,2"), b"QU,") is None
     assert read_reply(parse_command(b"V"), b"!") is None
+    # Two bytes that can no longer become an error line are refused at once, not waited on.
+    for cmd in (b"V", b"QU,2"):
+        with pytest.raises(ReplyError, match="a line ending out of place"):
+            read_reply(parse_command(cmd), b"!\n")
