@@ -86,6 +86,8 @@ MAX_DEVIATION_MM = 0.3
 """A run's path deviation on the paper beyond this is a report warning."""
 MIN_SPEED_SNR_DB = 25.0
 """A run's speed SNR below this is a report warning."""
+SHORT_RUN_MM = 10.0
+"""A run shorter than this (mm) is named short when its speed SNR is low."""
 
 
 LIFT_LONGEST = 5.0
@@ -404,9 +406,14 @@ class SerialBudget:
     """The serial arm's budgets for :attr:`~tagbot.draw.MachineRun.judge`: per run, path
     deviation on the paper within :data:`MAX_DEVIATION_MM`, speed SNR at least
     :data:`MIN_SPEED_SNR_DB`, contact kept through the planned ink and the nib's force within
-    :data:`FORCE_RANGE`; a warning naming the run and the figure otherwise."""
+    :data:`FORCE_RANGE`; a warning naming the run and the figure otherwise. A run whose SNR
+    is low and whose planned path is shorter than :data:`SHORT_RUN_MM` is named as such: the
+    nib's chatter and sticking on the paper are as large as such a run's motion (measured:
+    BENCHMARKS.md, session 19)."""
 
     contacts: list[dict[str, float]]
+    lengths: list[float] = field(default_factory=list)
+    """Each run's planned path length, mm."""
 
     def __call__(self, report: dict[str, Any]) -> list[str]:
         out = []
@@ -416,7 +423,12 @@ class SerialBudget:
             if deviation is not None and deviation > MAX_DEVIATION_MM:
                 over.append(f"path deviation {deviation:.3f} mm over {MAX_DEVIATION_MM:g} mm")
             if snr is not None and snr < MIN_SPEED_SNR_DB:
-                over.append(f"speed SNR {snr:.1f} dB below {MIN_SPEED_SNR_DB:g} dB")
+                why = ""
+                if i < len(self.lengths) and self.lengths[i] < SHORT_RUN_MM:
+                    why = (
+                        f" (a short run, {self.lengths[i]:.1f} mm: the nib's chatter on the paper)"
+                    )
+                over.append(f"speed SNR {snr:.1f} dB below {MIN_SPEED_SNR_DB:g} dB{why}")
             if i < len(self.contacts):
                 c = self.contacts[i]
                 run.update(c)
@@ -525,7 +537,10 @@ class SerialJob:
             pauses=pauses,
             stalls=stalls,
             until=outcome.until,
-            judge=SerialBudget(contacts),
+            judge=SerialBudget(
+                contacts,
+                [float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) for _, xy in planned_runs],
+            ),
         )
 
 

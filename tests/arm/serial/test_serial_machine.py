@@ -198,6 +198,14 @@ def test_contact_lost_and_force_out_of_range_are_warnings() -> None:
     warnings = judge(json.loads(json.dumps(report)))
     assert warnings[0] == "run 1 (plan 0): contact lost: ink on 91.5 % of the planned ink length"
     assert warnings[1].startswith("run 2 (plan 0): the nib's force reached 2.40 N, above 1.1 N")
+    slow = {"runs": [{"plan": 3, "path_deviation_max_mm": 0.1, "speed_snr_db": 12.0}] * 2}
+    contacts = [{"contact_kept_pct": 100.0, "force_min_n": 0.3, "force_max_n": 0.5}] * 2
+    warnings = SerialBudget(contacts, [1.4, 10.0])(json.loads(json.dumps(slow)))
+    assert warnings == [
+        "run 1 (plan 3): speed SNR 12.0 dB below 25 dB (a short run, 1.4 mm: the nib's chatter"
+        " on the paper)",
+        "run 2 (plan 3): speed SNR 12.0 dB below 25 dB",
+    ]
 
 
 def test_the_pen_pressed_too_deep_digs_in_and_aimed_at_the_surface_skips(letter_b, tmp_path):
