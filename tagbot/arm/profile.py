@@ -142,7 +142,32 @@ class Joint:
         return next(n for n, t in MODELS.items() if t.model_name == self.model)
 
 
-class ArmProfile(LayeredProfile):
+class ServoLoopProfile(LayeredProfile):
+    """What every arm's profile says of its servo loop: the setpoint rate, the servos' time-based
+    profile and how often present positions are read back (the planar and the serial arms)."""
+
+    @property
+    def period(self) -> float:
+        """Seconds between setpoints."""
+        return 1.0 / self["motion.rate"]
+
+    @property
+    def profile_ms(self) -> int:
+        """Profile Velocity in the time-based profile: the time each goal move takes, ms."""
+        return int(self["servo.profile_ms"])
+
+    @property
+    def lead(self) -> float:
+        """Seconds between sending a goal and when the servos should be there."""
+        return self.profile_ms / 1000.0
+
+    @property
+    def readback_every(self) -> int:
+        """Present positions are read every this many ticks."""
+        return max(1, math.ceil(self["motion.rate"] / self["bus.readback_rate"] - 1e-9))
+
+
+class ArmProfile(ServoLoopProfile):
     """A merged, validated arm profile: ``profile["arm.l1"]`` and named views."""
 
     @property
@@ -208,26 +233,6 @@ class ArmProfile(LayeredProfile):
         """The paper ``(x_min, x_max, y_min, y_max)``, mm."""
         a = self.values["area"]
         return a["x_min"], a["x_max"], a["y_min"], a["y_max"]
-
-    @property
-    def period(self) -> float:
-        """Seconds between setpoints."""
-        return 1.0 / self["motion.rate"]
-
-    @property
-    def profile_ms(self) -> int:
-        """Profile Velocity in the time-based profile: the time each goal move takes, ms."""
-        return int(self["servo.profile_ms"])
-
-    @property
-    def lead(self) -> float:
-        """Seconds between sending a goal and when the servos should be there."""
-        return self.profile_ms / 1000.0
-
-    @property
-    def readback_every(self) -> int:
-        """Present positions are read every this many ticks."""
-        return max(1, math.ceil(self["motion.rate"] / self["bus.readback_rate"] - 1e-9))
 
     @property
     def park(self) -> tuple[float, float]:

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from firmware_protocols.dynamixel import TICKS_PER_REV
-from tagbot.arm.profile import BAUDS, MAX_RATE, MODEL_NAMES, Joint
+from tagbot.arm.profile import BAUDS, MAX_RATE, MODEL_NAMES, Joint, ServoLoopProfile
 from tagbot.arm.serial import MODELS
 from tagbot.arm.serial.kinematics import SerialArm
 from tagbot.arm.serial.reach import Paper
@@ -34,7 +34,6 @@ from tagbot.config import (
     NUMBER,
     POSITIVE,
     TEXT,
-    LayeredProfile,
     load_layered,
     packaged_names,
 )
@@ -125,7 +124,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
 """Every section and key a serial profile may hold, with the kind of value it takes."""
 
 
-class SerialProfile(LayeredProfile):
+class SerialProfile(ServoLoopProfile):
     """A merged, validated serial-arm profile: ``profile["paper.pitch"]`` and named views.
 
     It offers the views the servo driver (:class:`tagbot.arm.driver.ArmDriver`) reads from any
@@ -210,25 +209,6 @@ class SerialProfile(LayeredProfile):
     @property
     def max_tilt(self) -> float:
         return math.radians(self["robot.max_tilt_deg"])
-
-    @property
-    def period(self) -> float:
-        """Seconds between setpoints."""
-        return 1.0 / self["motion.rate"]
-
-    @property
-    def profile_ms(self) -> int:
-        return int(self["servo.profile_ms"])
-
-    @property
-    def lead(self) -> float:
-        """Seconds between sending a goal and when the servos should be there."""
-        return self.profile_ms / 1000.0
-
-    @property
-    def readback_every(self) -> int:
-        """Present positions are read every this many ticks."""
-        return max(1, math.ceil(self["motion.rate"] / self["bus.readback_rate"] - 1e-9))
 
     @property
     def gains(self) -> tuple[int, int, int]:
