@@ -119,7 +119,11 @@ def run_clock(
         return RunClock(on, max(on, off), jerk_limited=jerk_limited)
     down, up = plan.ink_window(size)
     touches, lifts = plan.moving_ends(size)
+    eases = (touches and on <= down + _EDGE, lifts and off >= up - _EDGE)
     ramp = min(EASE, off - on)
-    ease_in = ramp if touches and on <= down + _EDGE else 0.0
-    ease_out = ramp if lifts and off >= up - _EDGE else 0.0
+    if all(eases):  # both ramps within the run: together they cover 2·S(1)·ramp of its clock
+        kept = RunClock(on, off, jerk_limited=jerk_limited)._kept
+        ramp = min(ramp, (off - on) / (2.0 * kept))
+    ease_in = ramp if eases[0] else 0.0
+    ease_out = ramp if eases[1] else 0.0
     return RunClock(on, off, ease_in, ease_out, jerk_limited)

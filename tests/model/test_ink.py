@@ -123,6 +123,25 @@ def test_a_steady_run_clock_starts_at_a_constant_acceleration_and_joins_smoothly
     assert rest.tag_start == 0.6 and rest.duration == pytest.approx(0.6)
 
 
+@pytest.mark.parametrize("jerk_limited", [True, False])
+def test_a_short_run_eased_at_both_ends_keeps_its_clock_in_order(jerk_limited: bool) -> None:
+    """A run of 0.117 s of its plan, touching down and lifting off moving (ga3__katsu-6721 has
+    one): both ramps together must not cover more of the plan's clock than the run has, or the
+    clock would run backwards where they meet (steady ramps cover 2/3 of their length each)."""
+    plan = lifted((0.3, 0.417))
+    size = Tag((plan,)).size
+    on, off = plan.ink_window(size)
+    clock = run_clock(plan, on, off, size, jerk_limited=jerk_limited)
+    u = np.linspace(0.0, clock.duration, 20001)
+    tau = clock.tag_time(u)
+    assert np.all(np.diff(tau) >= 0)
+    assert tau[0] == pytest.approx(on) and tau[-1] == pytest.approx(off)
+    kept = 0.5 if jerk_limited else 2.0 / 3.0
+    assert clock.ease_in == clock.ease_out == pytest.approx(min(EASE, (off - on) / (2 * kept)))
+    # The plan's positions along it follow in order too: no step back along the path.
+    evaluate_plan(plan, tau, size)
+
+
 def test_runs_at_rest_keep_the_identity_clock() -> None:
     plan = lifted(None)
     size = Tag((plan,)).size
