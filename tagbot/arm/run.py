@@ -200,6 +200,84 @@ class _Outcome:
     """After a stop: the program time the pen had drawn to (see :func:`_drawn_to`)."""
 
 
+def finish_run(
+    outcome: _Outcome,
+    program: Any,
+    profile: Any,
+    port: str | None,
+    first: int,
+    device: str,
+    planned: MotionTable,
+    n_plans: int,
+    stopped: str,
+    recorder: str,
+    judge: Callable[[dict[str, Any], list, list, list], Any],
+) -> MachineRun:
+    """What an arm's streaming ``outcome`` (from row ``first`` of ``program``) did, as every
+    machine reports it: Ctrl-C as :class:`Interrupted` (``stopped`` says what the arm did), the
+    tick a stopped job resumes from, pauses and stalls on the program's clock, what was left of
+    each plan to draw, the executed trace's source (``recorder`` when the simulator recorded
+    it). ``judge(figures, planned runs, pauses, stalls)`` may add figures and gives the report's
+    budget judge. Any other error is a bug and raised (:func:`tagbot.draw.draw` reports it)."""
+    error = outcome.error
+    if isinstance(error, KeyboardInterrupt):
+        error = Interrupted(f"interrupted ({label(signal_of(error))}): {stopped}", outcome.where)
+    elif error is not None and not isinstance(error, DeviceError):
+        raise error
+    sp, result = program.setpoints, outcome.result
+    sent = first + (result.ticks_sent if result is not None else 0)
+    if error is not None and first < sent < len(program):
+        error = _with_resume(error, sent)
+    figures = arm_figures(outcome, profile, port)
+    executed_duration = 0.0
+    pauses: list[tuple[float, float]] = []
+    stalls: list[tuple[float, float]] = []
+    if result is not None and result.scheduler is not None:
+        zero = origin(result, program)
+        executed_duration = max(0.0, result.end - result.start - result.lead)
+        pauses = [(a - zero, length) for a, length in result.pause_spans]
+        stalls = [(a - zero, hole) for a, hole in result.scheduler.stalls]
+        outcome.warnings += _stall_warnings(stalls, outcome.executed, program)
+    if outcome.recorder:
+        source = recorder
+    else:
+        source = f"read-back, {profile['motion.rate'] / profile.readback_every:g} Hz"
+    begin = float(program.joints[first - 1, 0]) if first else -math.inf
+    planned_runs, plans = [], []
+    for k in range(n_plans):
+        rest = (sp.plan == k) & (sp.t >= begin - 1e-9)
+        if rest.sum() >= 2:  # what is left of it to draw
+            planned_runs.append((sp.t[rest], sp.xy[rest]))
+            plans.append(k)
+    verdict = judge(figures, planned_runs, pauses, stalls)
+    return MachineRun(
+        device=device,
+        motion=planned,
+        planned_runs=planned_runs,
+        plans=plans,
+        executed=outcome.executed,
+        executed_source=source,
+        sparse=False,
+        executed_runs=None,
+        unit="tick",
+        total=len(program),
+        sent=sent,
+        executed_steps=sent,
+        resume_from=sent + 1 if error is not None and first < sent < len(program) else None,
+        planned_duration=sp.duration,
+        executed_duration=executed_duration,
+        placement=placement_of(sp),
+        port=port or "simulator",
+        details=figures,
+        warnings=list(outcome.warnings),
+        error=error,
+        pauses=pauses,
+        stalls=stalls,
+        until=outcome.until,
+        judge=verdict,
+    )
+
+
 def _stream(
     program: ArmProgram,
     profile: ArmProfile,
@@ -321,64 +399,14 @@ class ArmJob:
         _write_joints(program.joints, Path(out) / "joints.csv")
         first = 0 if self.resume_from is None else self.resume_from - 1
         outcome = _stream(program, profile, self.port, progress, control, self.sysfs, first)
-        error = outcome.error
-        if isinstance(error, KeyboardInterrupt):
-            how = label(signal_of(error))
-            error = Interrupted(f"interrupted ({how}): the arm stopped, pen up", outcome.where)
-        elif error is not None and not isinstance(error, DeviceError):
-            raise error  # a bug: draw() writes a report saying so
-        sp = program.setpoints
-        result = outcome.result
-        sent = first + (result.ticks_sent if result is not None else 0)
-        if error is not None and first < sent < len(program):
-            error = _with_resume(error, sent)
-        figures = arm_figures(outcome, profile, self.port)
-        executed_duration = 0.0
-        pauses: list[tuple[float, float]] = []
-        stalls: list[tuple[float, float]] = []
-        if result is not None and result.scheduler is not None:
-            zero = origin(result, program)
-            executed_duration = max(0.0, result.end - result.start - result.lead)
-            pauses = [(a - zero, length) for a, length in result.pause_spans]
-            stalls = [(a - zero, hole) for a, hole in result.scheduler.stalls]
-            outcome.warnings += _stall_warnings(stalls, outcome.executed, program)
-        if outcome.recorder:
-            source = f"simulator recorder, {RECORDER_DT * 1e3:g} ms"
-        else:
-            source = f"read-back, {profile['motion.rate'] / profile.readback_every:g} Hz"
-        begin = float(program.joints[first - 1, 0]) if first else -math.inf
-        planned_runs, plans = [], []
-        for k in range(len(self.tag.plans)):
-            rest = (sp.plan == k) & (sp.t >= begin - 1e-9)
-            if rest.sum() >= 2:  # what is left of it to draw
-                planned_runs.append((sp.t[rest], sp.xy[rest]))
-                plans.append(k)
-        return MachineRun(
-            device=self.device,
-            motion=self.planned,
-            planned_runs=planned_runs,
-            plans=plans,
-            executed=outcome.executed,
-            executed_source=source,
-            sparse=False,
-            executed_runs=None,
-            unit="tick",
-            total=len(program),
-            sent=sent,
-            executed_steps=sent,
-            resume_from=sent + 1 if error is not None and first < sent < len(program) else None,
-            planned_duration=sp.duration,
-            executed_duration=executed_duration,
-            placement=placement_of(sp),
-            port=self.port or "simulator",
-            details=figures,
-            warnings=list(outcome.warnings),
-            error=error,
-            pauses=pauses,
-            stalls=stalls,
-            until=outcome.until,
-            judge=Budget(program, profile, stalls, _late(result, program)),
-        )
+        return finish_run(
+            outcome, program, profile, self.port, first, self.device, self.planned,
+            len(self.tag.plans), "the arm stopped, pen up",
+            f"simulator recorder, {RECORDER_DT * 1e3:g} ms",
+            lambda figures, runs, pauses, stalls: Budget(
+                program, profile, stalls, _late(outcome.result, program)
+            ),
+        )  # fmt: skip
 
 
 MIN_SPEED_SNR_DB = 25.0

@@ -45,12 +45,9 @@ from tagbot.arm.run import (
     _drawn_to,
     _executed,
     _Outcome,
-    _stall_warnings,
-    _with_resume,
-    arm_figures,
     check_bus,
+    finish_run,
     origin,
-    placement_of,
     planned_motion,
 )
 from tagbot.arm.serial.kinematics import SerialArm
@@ -63,11 +60,10 @@ from tagbot.arm.serial.program import (
 )
 from tagbot.control import RunControl
 from tagbot.draw import MachineRun
-from tagbot.errors import DeviceError, InputError, Interrupted
+from tagbot.errors import DeviceError, InputError
 from tagbot.io.motionfile import MotionTable
 from tagbot.model import Tag
 from tagbot.ports import check_port
-from tagbot.signals import label, signal_of
 
 __all__ = ["FORCE_RANGE", "ArmLift", "SerialJob", "contact_figures", "prepare", "simulated_arm"]
 
@@ -474,74 +470,20 @@ class SerialJob:
         _write_joints(program.joints, profile, Path(out) / "joints.csv")
         first = 0 if self.resume_from is None else self.resume_from - 1
         outcome = _stream(program, profile, self.port, progress, control, first, self.fault)
-        error = outcome.error
-        if isinstance(error, KeyboardInterrupt):
-            how = label(signal_of(error))
-            error = Interrupted(
-                f"interrupted ({how}): the arm stopped, pen lifted by the arm", outcome.where
-            )
-        elif error is not None and not isinstance(error, DeviceError):
-            raise error  # a bug: draw() writes a report saying so
-        sp, result = program.setpoints, outcome.result
-        sent = first + (result.ticks_sent if result is not None else 0)
-        if error is not None and first < sent < len(program):
-            error = _with_resume(error, sent)
-        figures = arm_figures(outcome, profile, self.port)
-        figures["lifted_by_arm_at_stop"] = outcome.lifted
-        executed_duration = 0.0
-        pauses: list[tuple[float, float]] = []
-        stalls: list[tuple[float, float]] = []
-        if result is not None and result.scheduler is not None:
-            zero = origin(result, program)
-            executed_duration = max(0.0, result.end - result.start - result.lead)
-            pauses = [(a - zero, length) for a, length in result.pause_spans]
-            stalls = [(a - zero, hole) for a, hole in result.scheduler.stalls]
-            outcome.warnings += _stall_warnings(stalls, outcome.executed, program)
-        if outcome.recorder:
-            source = "physics simulator: the nib's contact with the paper, 1 ms"
-        else:
-            source = f"read-back, {profile['motion.rate'] / profile.readback_every:g} Hz"
-        begin = float(program.joints[first - 1, 0]) if first else -math.inf
-        planned_runs, plans = [], []
-        for k in range(len(self.tag.plans)):
-            rest = (sp.plan == k) & (sp.t >= begin - 1e-9)
-            if outcome.until is not None:
-                rest &= sp.t <= outcome.until + 1e-9
-            if rest.sum() >= 2:
-                planned_runs.append((sp.t[rest], sp.xy[rest]))
-                plans.append(k)
-        contacts = contact_figures(planned_runs, outcome.executed, outcome.force, pauses)
-        figures["runs_contact"] = contacts
-        figures["time_bound_s"] = time_bound(program, profile)
-        return MachineRun(
-            device=self.device,
-            motion=self.planned,
-            planned_runs=planned_runs,
-            plans=plans,
-            executed=outcome.executed,
-            executed_source=source,
-            sparse=False,
-            executed_runs=None,
-            unit="tick",
-            total=len(program),
-            sent=sent,
-            executed_steps=sent,
-            resume_from=sent + 1 if error is not None and first < sent < len(program) else None,
-            planned_duration=sp.duration,
-            executed_duration=executed_duration,
-            placement=placement_of(sp),
-            port=self.port or "simulator",
-            details=figures,
-            warnings=list(outcome.warnings),
-            error=error,
-            pauses=pauses,
-            stalls=stalls,
-            until=outcome.until,
-            judge=SerialBudget(
-                contacts,
-                [float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) for _, xy in planned_runs],
-            ),
-        )
+
+        def judge(figures: dict[str, Any], runs: list, pauses: list, stalls: list) -> SerialBudget:
+            figures["lifted_by_arm_at_stop"] = outcome.lifted
+            contacts = contact_figures(runs, outcome.executed, outcome.force, pauses)
+            figures["runs_contact"] = contacts
+            figures["time_bound_s"] = time_bound(program, profile)
+            lengths = [float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) for _, xy in runs]
+            return SerialBudget(contacts, lengths)
+
+        return finish_run(
+            outcome, program, profile, self.port, first, self.device, self.planned,
+            len(self.tag.plans), "the arm stopped, pen lifted by the arm",
+            "physics simulator: the nib's contact with the paper, 1 ms", judge,
+        )  # fmt: skip
 
 
 def time_bound(program: ArmProgram, profile: SerialProfile) -> float:
