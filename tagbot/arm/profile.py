@@ -144,7 +144,14 @@ class Joint:
 
 class ServoLoopProfile(LayeredProfile):
     """What every arm's profile says of its servo loop: the setpoint rate, the servos' time-based
-    profile and how often present positions are read back (the planar and the serial arms)."""
+    profile and how often present positions are read back (the planar and the serial arms),
+    and where on the paper a tag may go."""
+
+    @property
+    def area(self) -> tuple[float, float, float, float]:
+        """Where the tag may go ``(x_min, x_max, y_min, y_max)``, mm on the paper."""
+        a = self.values["area"]
+        return a["x_min"], a["x_max"], a["y_min"], a["y_max"]
 
     @property
     def period(self) -> float:
@@ -229,12 +236,6 @@ class ArmProfile(ServoLoopProfile):
         return {self[f"{role}.id"]: role for role in ("shoulder", "elbow", "pen")}
 
     @property
-    def area(self) -> tuple[float, float, float, float]:
-        """The paper ``(x_min, x_max, y_min, y_max)``, mm."""
-        a = self.values["area"]
-        return a["x_min"], a["x_max"], a["y_min"], a["y_max"]
-
-    @property
     def park(self) -> tuple[float, float]:
         """The rest pose ``(a1, a2)`` in radians."""
         return math.radians(self["motion.park_shoulder"]), math.radians(self["motion.park_elbow"])
@@ -252,6 +253,56 @@ def load_profile(profile: str | Path | None = None, overrides: Iterable[str] = (
     of the wrong kind and inconsistent values (limits, IDs, branch, rates).
     """
     return load_layered(ArmProfile, "tagbot.arm", SCHEMA, profile, overrides, _check)
+
+
+def check_area(p: ServoLoopProfile) -> None:
+    """The drawing area's checks, any arm's profile (``area.*``)."""
+    need = p.need
+    x_min, x_max, y_min, y_max = p.area
+    need(x_max > x_min, ("area.x_min", "area.x_max"), "must be > area.x_min")
+    need(y_max > y_min, ("area.y_min", "area.y_max"), "must be > area.y_min")
+    need(
+        2 * p["area.margin"] < min(x_max - x_min, y_max - y_min),
+        ("area.margin",),
+        "leaves no room in the area",
+    )
+
+
+def check_servo_loop(p: ServoLoopProfile) -> None:
+    """The servo loop's checks, any arm's profile (``motion.*``, ``servo.*``, ``bus.*``)."""
+    need = p.need
+    rate = p["motion.rate"]
+    need(rate <= MAX_RATE, ("motion.rate",), f"must be <= {MAX_RATE:g} Hz, got {rate:g}")
+    need(
+        p.profile_ms >= 1000.0 / rate - 1e-9,
+        ("motion.rate", "servo.profile_ms"),
+        f"must be >= the period ({1000.0 / rate:g} ms at {rate:g} Hz), or the servos stop"
+        " between goals",
+    )
+    need(p.profile_ms <= 32737, ("servo.profile_ms",), "must be <= 32737 ms")
+    need(
+        p["servo.acceleration_fraction"] <= 0.5,
+        ("servo.acceleration_fraction",),
+        "must be <= 0.5 (the ramps take at most half the move)",
+    )
+    need(p["motion.max_time_scale"] >= 1.0, ("motion.max_time_scale",), "must be >= 1")
+    need(
+        p["bus.baud"] in BAUDS,
+        ("bus.baud",),
+        f"must be one of {', '.join(str(b) for b in BAUDS)}, got {p['bus.baud']}",
+    )
+    delay = p["bus.return_delay_us"]
+    need(
+        delay <= 508 and float(delay).is_integer() and int(delay) % 2 == 0,
+        ("bus.return_delay_us",),
+        f"must be an even number of µs 0..508, got {delay:g}",
+    )
+    need(
+        p["bus.readback_rate"] <= rate,
+        ("motion.rate", "bus.readback_rate"),
+        "must be <= motion.rate",
+    )
+    need(p["bus.max_corrupt"] >= 0, ("bus.max_corrupt",), "must be >= 0")
 
 
 def _check(p: ArmProfile) -> None:
@@ -294,49 +345,11 @@ def _check(p: ArmProfile) -> None:
     for key in ("up", "down"):
         need(0 <= p[f"pen.{key}"] <= 4095, (f"pen.{key}",), "must be 0..4095 ticks")
     need(p["pen.up"] != p["pen.down"], ("pen.down", "pen.up"), "must differ from pen.down")
-    x_min, x_max, y_min, y_max = p.area
-    need(x_max > x_min, ("area.x_min", "area.x_max"), "must be > area.x_min")
-    need(y_max > y_min, ("area.y_min", "area.y_max"), "must be > area.y_min")
-    need(
-        2 * p["area.margin"] < min(x_max - x_min, y_max - y_min),
-        ("area.margin",),
-        "leaves no room in the area",
-    )
+    check_area(p)
     l1, l2 = p.links
     need(
         2 * p["arm.reach_margin"] < 2 * min(l1, l2),
         ("arm.reach_margin",),
         "leaves no reachable ring",
     )
-    rate = p["motion.rate"]
-    need(rate <= MAX_RATE, ("motion.rate",), f"must be <= {MAX_RATE:g} Hz, got {rate:g}")
-    need(
-        p.profile_ms >= 1000.0 / rate - 1e-9,
-        ("motion.rate", "servo.profile_ms"),
-        f"must be >= the period ({1000.0 / rate:g} ms at {rate:g} Hz), or the servos stop"
-        " between goals",
-    )
-    need(p.profile_ms <= 32737, ("servo.profile_ms",), "must be <= 32737 ms")
-    need(
-        p["servo.acceleration_fraction"] <= 0.5,
-        ("servo.acceleration_fraction",),
-        "must be <= 0.5 (the ramps take at most half the move)",
-    )
-    need(p["motion.max_time_scale"] >= 1.0, ("motion.max_time_scale",), "must be >= 1")
-    need(
-        p["bus.baud"] in BAUDS,
-        ("bus.baud",),
-        f"must be one of {', '.join(str(b) for b in BAUDS)}, got {p['bus.baud']}",
-    )
-    delay = p["bus.return_delay_us"]
-    need(
-        delay <= 508 and float(delay).is_integer() and int(delay) % 2 == 0,
-        ("bus.return_delay_us",),
-        f"must be an even number of µs 0..508, got {delay:g}",
-    )
-    need(
-        p["bus.readback_rate"] <= rate,
-        ("motion.rate", "bus.readback_rate"),
-        "must be <= motion.rate",
-    )
-    need(p["bus.max_corrupt"] >= 0, ("bus.max_corrupt",), "must be >= 0")
+    check_servo_loop(p)

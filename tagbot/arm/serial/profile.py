@@ -21,7 +21,13 @@ from typing import Any
 import numpy as np
 
 from firmware_protocols.dynamixel import TICKS_PER_REV
-from tagbot.arm.profile import BAUDS, MAX_RATE, MODEL_NAMES, Joint, ServoLoopProfile
+from tagbot.arm.profile import (
+    MODEL_NAMES,
+    Joint,
+    ServoLoopProfile,
+    check_area,
+    check_servo_loop,
+)
 from tagbot.arm.serial import MODELS
 from tagbot.arm.serial.kinematics import SerialArm
 from tagbot.arm.serial.reach import Paper
@@ -196,12 +202,6 @@ class SerialProfile(ServoLoopProfile):
         return Paper.from_pose(np.array([p["x"], p["y"], p["z"]]) / 1000.0, rpy)
 
     @property
-    def area(self) -> tuple[float, float, float, float]:
-        """Where the tag may go ``(x_min, x_max, y_min, y_max)``, mm on the paper."""
-        a = self.values["area"]
-        return a["x_min"], a["x_max"], a["y_min"], a["y_max"]
-
-    @property
     def park(self) -> np.ndarray:
         """The rest pose, radians per joint."""
         return np.radians([self[f"{name}.park_deg"] for name in JOINT_SECTIONS])
@@ -308,33 +308,14 @@ def _check(p: SerialProfile) -> None:
         ("robot.max_tilt_deg",),
         "must be < 90 (the pen must point into the paper)",
     )
+    check_area(p)
     x_min, x_max, y_min, y_max = p.area
-    need(x_max > x_min, ("area.x_min", "area.x_max"), "must be > area.x_min")
-    need(y_max > y_min, ("area.y_min", "area.y_max"), "must be > area.y_min")
     need(
         x_min >= 0 and y_min >= 0 and x_max <= p["paper.width"] and y_max <= p["paper.height"],
         ("area.x_min", "area.x_max", "area.y_min", "area.y_max"),
         f"the area must lie on the paper (0..{p['paper.width']:g} by 0..{p['paper.height']:g} mm)",
     )
-    need(
-        2 * p["area.margin"] < min(x_max - x_min, y_max - y_min),
-        ("area.margin",),
-        "leaves no room in the area",
-    )
-    rate = p["motion.rate"]
-    need(rate <= MAX_RATE, ("motion.rate",), f"must be <= {MAX_RATE:g} Hz, got {rate:g}")
-    need(
-        p.profile_ms >= 1000.0 / rate - 1e-9,
-        ("motion.rate", "servo.profile_ms"),
-        f"must be >= the period ({1000.0 / rate:g} ms at {rate:g} Hz), or the servos stop"
-        " between goals",
-    )
-    need(p.profile_ms <= 32737, ("servo.profile_ms",), "must be <= 32737 ms")
-    need(
-        p["servo.acceleration_fraction"] <= 0.5,
-        ("servo.acceleration_fraction",),
-        "must be <= 0.5 (the ramps take at most half the move)",
-    )
+    check_servo_loop(p)
     for key in ("position_p_gain", "position_i_gain", "position_d_gain"):
         need(0 <= p[f"servo.{key}"] <= 16383, (f"servo.{key}",), "must be 0..16383")
     need(
@@ -342,21 +323,3 @@ def _check(p: SerialProfile) -> None:
         ("servo.feedforward", "servo.position_p_gain"),
         "the feedforward needs a position P gain > 0",
     )
-    need(p["motion.max_time_scale"] >= 1.0, ("motion.max_time_scale",), "must be >= 1")
-    need(
-        p["bus.baud"] in BAUDS,
-        ("bus.baud",),
-        f"must be one of {', '.join(str(b) for b in BAUDS)}, got {p['bus.baud']}",
-    )
-    delay = p["bus.return_delay_us"]
-    need(
-        delay <= 508 and float(delay).is_integer() and int(delay) % 2 == 0,
-        ("bus.return_delay_us",),
-        f"must be an even number of µs 0..508, got {delay:g}",
-    )
-    need(
-        p["bus.readback_rate"] <= rate,
-        ("motion.rate", "bus.readback_rate"),
-        "must be <= motion.rate",
-    )
-    need(p["bus.max_corrupt"] >= 0, ("bus.max_corrupt",), "must be >= 0")
