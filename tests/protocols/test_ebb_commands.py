@@ -24,6 +24,7 @@ from firmware_protocols.ebb.commands import (
     format_command,
     format_error,
     format_reply,
+    nickname_shown,
     parse_command,
     read_reply,
 )
@@ -513,3 +514,24 @@ def test_a_one_byte_reply_is_complete_when_it_is_the_whole_reply() -> None:
     for cmd in (b"V", b"QU,2"):
         with pytest.raises(ReplyError, match="a line ending out of place"):
             read_reply(parse_command(cmd), b"!\n")
+
+
+def test_format_command_refuses_parameters_a_command_ignores() -> None:
+    # R runs whatever follows it: a parameter given to R would be silently dropped.
+    with pytest.raises(ValueError, match=r"1 parameters, R takes 0"):
+        format_command("R", 5)
+    assert format_command("R") == b"R\r"
+
+
+def test_qt_shows_a_nickname_only_from_a_printable_first_byte() -> None:
+    assert nickname_shown(b"!ok") == b"!ok"  # 33: the first printable after the space
+    assert nickname_shown(b"\x7fok") == b"\x7fok"
+    assert nickname_shown(b" ok") == b"" and nickname_shown(b"\x80ok") == b""
+    assert nickname_shown(b"") == b""
+
+
+def test_an_error_reply_has_no_values() -> None:
+    reply = read_reply(parse_command(b"V"), b"!8 Err: Unknown command 'X:58'\r\n")
+    assert reply == Reply((), 32, b"!8 Err: Unknown command 'X:58'")
+    with pytest.raises(EBBCommandError, match="Unknown command"):
+        reply.check()

@@ -405,3 +405,25 @@ def test_parameter_refusals_name_their_reason():
         with pytest.raises(EBBCommandError) as caught:
             move.validate()
         assert str(caught.value) == f"!6 Err: Invalid parameter value ({detail})"
+
+
+def test_a_t3_that_wraps_only_at_its_peak_is_summed_tick_by_tick():
+    """Loaded rate r + 100k - k² over 100 ticks peaks at tick 50, 3 above int32 (ticks 49-51
+    wrap, 48 and 52 do not), while both ends stay inside: the closed form would miss it."""
+    r = 2**31 - 1 - 2497
+    positions, final = axis_positions(100, r + 49, 99, -2)
+    expected, acc = isr(r + 49, 99, -2, 0, ticks=100)
+    assert positions.tolist() == expected and final == acc
+    assert axis_final(100, r + 49, 99, -2) == (expected[-1], acc)
+
+
+def test_zero_ticks_leave_the_axis_where_it_was():
+    # Even with a first rate beyond int32 (that tick never comes).
+    assert axis_final(0, 2**31 - 1, 1000, 0, 5) == (0, 5)
+    assert axis_final(-3, 7, 0, 0, 9) == (0, 9)
+
+
+def test_an_lm_longer_than_the_per_tick_model_is_refused_by_name():
+    # Rate 1: one step takes 2**31 ticks.
+    with pytest.raises(MoveTooLong, match=r"^LM axis with 1 steps: longer than 16777216 ticks$"):
+        lm_axis(1, 1, 0)
