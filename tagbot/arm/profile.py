@@ -63,6 +63,15 @@ _JOINT = {
     "max_acceleration": POSITIVE,
 }
 
+AREA_SCHEMA: dict[str, Any] = {
+    "x_min": NUMBER,
+    "x_max": NUMBER,
+    "y_min": NUMBER,
+    "y_max": NUMBER,
+    "margin": NON_NEGATIVE,
+}
+"""Where on the paper a tag may go, mm, and the margin kept inside it: every arm's ``[area]``."""
+
 SCHEMA: dict[str, dict[str, Any]] = {
     "arm": {
         "l1": POSITIVE,
@@ -81,13 +90,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "down": INTEGER,
         "move_time": POSITIVE,
     },
-    "area": {
-        "x_min": NUMBER,
-        "x_max": NUMBER,
-        "y_min": NUMBER,
-        "y_max": NUMBER,
-        "margin": NON_NEGATIVE,
-    },
+    "area": AREA_SCHEMA,
     "place": {"scale": FIT_OR_POSITIVE, "rotation": NUMBER},
     "motion": {
         "rate": POSITIVE,

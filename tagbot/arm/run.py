@@ -200,6 +200,14 @@ class _Outcome:
     """After a stop: the program time the pen had drawn to (see :func:`_drawn_to`)."""
 
 
+def check_resume(resume_from: int | None, program: Any) -> None:
+    """An arm job resumes from one of its program's ticks after the first (``--resume-from``)."""
+    if resume_from is not None and not 2 <= resume_from <= len(program):
+        raise InputError(
+            f"--resume-from: tick {resume_from} is not in the program (ticks 2 to {len(program)})"
+        )
+
+
 def finish_run(
     outcome: _Outcome,
     program: Any,
@@ -606,10 +614,7 @@ def prepare(
     arm = load_profile(profile, overrides)
     check_bus(arm)
     program = build_program(tag, arm)
-    if resume_from is not None and not 2 <= resume_from <= len(program):
-        raise InputError(
-            f"--resume-from: tick {resume_from} is not in the program (ticks 2 to {len(program)})"
-        )
+    check_resume(resume_from, program)
     if port is not None:
         check_port(port)
     job = ArmJob(tag, arm, program, port, planned_motion(program), sysfs)

@@ -46,6 +46,7 @@ from tagbot.arm.run import (
     _executed,
     _Outcome,
     check_bus,
+    check_resume,
     finish_run,
     origin,
     planned_motion,
@@ -541,10 +542,7 @@ def prepare(
     machine = load_serial_profile(profile, overrides)
     check_bus(machine)
     program = build_serial_program(tag, machine)
-    if resume_from is not None and not 2 <= resume_from <= len(program):
-        raise InputError(
-            f"--resume-from: tick {resume_from} is not in the program (ticks 2 to {len(program)})"
-        )
+    check_resume(resume_from, program)
     if port is not None:
         check_port(port)
     job = SerialJob(tag, machine, program, port, planned_motion(program))

@@ -22,6 +22,7 @@ import numpy as np
 
 from firmware_protocols.dynamixel import TICKS_PER_REV
 from tagbot.arm.profile import (
+    AREA_SCHEMA,
     MODEL_NAMES,
     Joint,
     ServoLoopProfile,
@@ -90,13 +91,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "width": POSITIVE,
         "height": POSITIVE,
     },
-    "area": {
-        "x_min": NUMBER,
-        "x_max": NUMBER,
-        "y_min": NUMBER,
-        "y_max": NUMBER,
-        "margin": NON_NEGATIVE,
-    },
+    "area": AREA_SCHEMA,
     "place": {"scale": FIT_OR_POSITIVE, "rotation": NUMBER},
     "motion": {
         "rate": POSITIVE,
