@@ -228,3 +228,20 @@ def test_a_run_touching_down_at_its_peak_speed_is_scaled_by_its_drawn_motion() -
     # The plan's own speed where the pen touches down would have asked for far more.
     touch = np.abs(v[np.argmax(np.hypot(*v.T))] @ setpoints.matrix.T @ MOTOR_AXES.T).max()
     assert touch / profile["limits.draw_speed"] > 1.2 * run.scale
+
+
+def test_the_step_ceiling_is_the_rounding_to_motor_steps() -> None:
+    """A run along x whose speed varies (v + 0.9·cos 3t mm/s) for 1 s, rounded to motor steps
+    (1/80 mm on each motor): the slower it is, the fewer steps per 10 ms of the comparison and
+    the lower its ceiling (about 6 dB per doubling); a run on whole steps has no rounding."""
+    from bench_axidraw import step_ceiling
+
+    t = np.arange(0.0, 1.0005, 0.001)
+
+    def ceiling(v: float) -> float:
+        return step_ceiling(t, np.column_stack([v * t + 0.3 * np.sin(3 * t), 0 * t]), 80.0)
+
+    slow, fast = ceiling(1.0), ceiling(10.0)
+    assert 10.0 < slow < 20.0 and 27.0 < fast < 37.0 and fast - slow > 15.0
+    on_steps = np.column_stack([np.round(t * 1000) / 80.0, np.zeros_like(t)])
+    assert step_ceiling(t, on_steps, 80.0) > 200.0  # float rounding only
