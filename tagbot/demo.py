@@ -55,21 +55,23 @@ class DemoResult:
 
     def summary(self) -> str:
         f = self.figures
+        w = max(len(step) for step in STEPS)  # every step's label in one column
         lines = [f"demo folder: {self.folder}"]
         lines.append(
-            f"  fit        {f['strokes']} strokes in {f['plans']} plans, shape error "
+            f"  {'fit':<{w}} {f['strokes']} strokes in {f['plans']} plans, shape error "
             f"{100 * f['shape_error_mean']:.2f} % mean of the size -> {self.files['plan']}"
         )
-        lines.append(f"  plots      {self.files['plan_plot']}, {self.files['speed_plot']}")
+        lines.append(f"  {'plots':<{w}} {self.files['plan_plot']}, {self.files['speed_plot']}")
         lines.append(
-            f"  variations {f['variations']} plans (seed {f['seed']}) -> "
+            f"  {'variations':<{w}} {f['variations']} plans (seed {f['seed']}) -> "
             f"{self.files['variations_sheet']}"
         )
-        lines.append(f"  render     {self.files['png']}, {self.files['svg']}, {self.files['gif']}")
+        files = self.files
+        lines.append(f"  {'render':<{w}} {files['png']}, {files['svg']}, {files['gif']}")
         for device, _, _ in MACHINES:
             r = f[device]
             lines.append(
-                f"  {device:<10} run folder {self.files[device]}: path deviation "
+                f"  {device:<{w}} run folder {self.files[device]}: path deviation "
                 f"{r['path_deviation_mean_mm']:.3f} mm mean / {r['path_deviation_max_mm']:.3f} "
                 f"mm max, speed SNR {r['speed_snr_db']:.1f} dB"
             )

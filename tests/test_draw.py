@@ -374,4 +374,16 @@ def test_demo_makes_everything_it_lists(tmp_path, capsys):
         report = json.loads((folder / device / "report.json").read_text())
         assert report["completed"] and report["error"] is None and report["speed_snr_db"] > 25
     assert f"demo folder: {folder}" in out
+    # One line a step, its label padded so that what it made starts in one column.
+    lines = out.splitlines()[-7:]
+    assert [line.split()[0] for line in lines] == [
+        "fit",
+        "plots",
+        "variations",
+        "render",
+        "plotter",
+        "arm",
+        "openmanipulator-x",
+    ]
+    assert len({len(line) - len(line[2:].split(" ", 1)[1].lstrip()) for line in lines}) == 1
     assert os.path.getsize(folder / "tag.gif") > 10_000
