@@ -236,7 +236,7 @@ def test_each_entry_has_its_run_its_pen_and_its_place_on_the_clock(small):
         elif entry.kind == "draw":
             assert entry.pen and entry.run == run
         else:
-            assert not entry.pen and entry.run == -1
+            assert entry.pen is False and entry.run == -1
     assert job.pen_at == [(e.start, e.pen) for e in job.entries if e.kind == "pen"]
     assert job.duration == job.entries[-1].end
     firsts = [e.start for e in job.entries if e.kind == "draw"]
@@ -327,3 +327,17 @@ def test_the_jobs_ticks_are_the_boards_from_the_accumulators_em_clears():
         moving = int(np.argmin(start))
         assert (job.ticks[:, moving] + 40).tolist() == expected
         assert expected[:4] == [0, 1, 1, 2] and job.ticks[-1].tolist() == [0, 0]
+
+
+@pytest.mark.parametrize("n", [50, 1250, 2500])
+def test_a_t3_from_rest_to_rest_starts_and_ends_at_rest(n):
+    # 0.3 steps a tick on average, from and to a standstill: all of it is the jerk's. The rates
+    # at the move's ends (ticks 1/2 and n + 1/2) are within 1 step/s of zero.
+    distance = 0.3 * n
+    aim, goal = round(distance * ACCUMULATOR_STEP), math.floor(distance)
+    rate, accel, j = _axis(n, 0, aim, (0.0, 0.0), goal, True)
+    r, a = rate - int(accel / 2) + int(j / 6), accel - j
+    for k in (0.5, n + 0.5):
+        at = r + a * k + j * k * (k + 1) / 2
+        assert abs(at) / ACCUMULATOR_STEP * TICK_HZ < 1.0
+    assert axis_final(n, rate, accel, j)[0] == goal and j < 0

@@ -535,3 +535,13 @@ def test_an_error_reply_has_no_values() -> None:
     assert reply == Reply((), 32, b"!8 Err: Unknown command 'X:58'")
     with pytest.raises(EBBCommandError, match="Unknown command"):
         reply.check()
+
+
+def test_st_takes_the_name_up_to_the_first_comma() -> None:
+    cmd = parse_command(b"ST,abc,def,ghi")
+    assert cmd.text == b"abc" and cmd.extra
+
+
+def test_a_line_starting_with_an_error_mark_that_is_no_error_is_named() -> None:
+    with pytest.raises(ReplyError, match=r"^V: b'!x\\r\\n' is not an EBB error line$"):
+        read_reply(parse_command(b"V"), b"!x\r\n")
