@@ -218,14 +218,24 @@ def test_reference_velocity_spreads_repeated_stamps() -> None:
 
 
 def test_reference_velocity_cost_is_linear() -> None:
-    """200 000 samples (about an hour at 60 Hz) in well under a second."""
+    """Four times the samples (up to 200 000, about an hour at 60 Hz) cost about four times
+    as much, not sixteen: the ratio of the best of three timings each, which holds on a busy
+    host as on an idle one (the absolute time is the benchmark's)."""
     import time
 
-    t = np.arange(200_000) / 60.0
-    xy = np.column_stack([np.sin(t), np.cos(t / 3)])
-    started = time.perf_counter()
-    grid, _ = recorded_velocity(t, xy, cutoff=VELOCITY_CUTOFF)
-    assert time.perf_counter() - started < 1.0 and len(grid) <= 4 * len(t) + 1
+    def cost(n: int) -> float:
+        t = np.arange(n) / 60.0
+        xy = np.column_stack([np.sin(t), np.cos(t / 3)])
+        best = math.inf
+        for _ in range(3):
+            started = time.perf_counter()
+            grid, _ = recorded_velocity(t, xy, cutoff=VELOCITY_CUTOFF)
+            best = min(best, time.perf_counter() - started)
+            assert len(grid) <= 4 * n + 1
+        return best
+
+    cost(1_000)  # compiled and warm
+    assert cost(200_000) < 8.0 * cost(50_000)
 
 
 def test_velocity_snr_never_misses_the_shared_clock() -> None:
