@@ -192,6 +192,25 @@ def test_a_sparse_trace_is_compared_like_with_like_and_not_with_the_recording():
     assert "recorded_comparison_error" not in run_report(run)
 
 
+def test_reports_taken_during_a_pause_are_left_out_of_a_sparse_comparison():
+    t, xy = planned_line()
+    te = np.arange(0.0, 2.6, 0.1) + 0.3
+    # Drawing from 0.3 s, held for 0.5 s at 1.3 s (reports there stand still), then on.
+    planned_at = np.where(te < 1.3, te - 0.3, np.where(te < 1.8, 1.0, te - 0.8))
+    on = np.column_stack([np.interp(planned_at, t, xy[:, i]) for i in (0, 1)])
+    executed = np.column_stack([te, on, np.ones(len(te))])[planned_at <= 2.0]
+    run = machine_run(
+        executed=executed,
+        sparse=True,
+        executed_runs=np.zeros(len(executed), int),
+        pauses=[(1.3, 0.5)],
+    )
+    report = run_report(run)
+    assert "comparison_error" not in report and report["pauses"] == 1
+    assert report["path_deviation_max_mm"] < 0.01
+    assert report["drawing_duration_ratio"] == pytest.approx(1.0, abs=0.1)
+
+
 def test_the_recording_is_compared_only_where_the_pen_went_down():
     # No recorded trace is timed: no figure, no runs, and no error either.
     report = run_report(machine_run(), recorded=[])

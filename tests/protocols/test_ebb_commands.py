@@ -545,3 +545,8 @@ def test_st_takes_the_name_up_to_the_first_comma() -> None:
 def test_a_line_starting_with_an_error_mark_that_is_no_error_is_named() -> None:
     with pytest.raises(ReplyError, match=r"^V: b'!x\\r\\n' is not an EBB error line$"):
         read_reply(parse_command(b"V"), b"!x\r\n")
+
+
+def test_qt_answers_a_nickname_given_as_text_or_bytes_alike() -> None:
+    qt = parse_command(b"QT")
+    assert format_reply(qt, "abc") == format_reply(qt, b"abc") == b"abc\r\nOK\r\n"
