@@ -72,6 +72,16 @@ AREA_SCHEMA: dict[str, Any] = {
 }
 """Where on the paper a tag may go, mm, and the margin kept inside it: every arm's ``[area]``."""
 
+BUS_SCHEMA: dict[str, Any] = {
+    "baud": INT,
+    "return_delay_us": NON_NEGATIVE,
+    "readback_rate": POSITIVE,
+    "max_corrupt": INTEGER,
+    "max_missed": INT,
+    "silence_timeout": POSITIVE,
+}
+"""The servo bus: every arm's ``[bus]``."""
+
 SCHEMA: dict[str, dict[str, Any]] = {
     "arm": {
         "l1": POSITIVE,
@@ -109,14 +119,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "torque_off_at_end": BOOL,
         "torque_off_after_error": BOOL,
     },
-    "bus": {
-        "baud": INT,
-        "return_delay_us": NON_NEGATIVE,
-        "readback_rate": POSITIVE,
-        "max_corrupt": INTEGER,
-        "max_missed": INT,
-        "silence_timeout": POSITIVE,
-    },
+    "bus": BUS_SCHEMA,
 }
 """Every section and key a profile may hold, with the kind of value it takes."""
 

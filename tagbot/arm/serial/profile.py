@@ -23,6 +23,7 @@ import numpy as np
 from firmware_protocols.dynamixel import TICKS_PER_REV
 from tagbot.arm.profile import (
     AREA_SCHEMA,
+    BUS_SCHEMA,
     MODEL_NAMES,
     Joint,
     ServoLoopProfile,
@@ -113,14 +114,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "torque_off_at_end": BOOL,
         "torque_off_after_error": BOOL,
     },
-    "bus": {
-        "baud": INT,
-        "return_delay_us": NON_NEGATIVE,
-        "readback_rate": POSITIVE,
-        "max_corrupt": INTEGER,
-        "max_missed": INT,
-        "silence_timeout": POSITIVE,
-    },
+    "bus": BUS_SCHEMA,
 }
 """Every section and key a serial profile may hold, with the kind of value it takes."""
 
