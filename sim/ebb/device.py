@@ -97,7 +97,9 @@ OTHER_COMMAND_TIME = 0.0002
 """Seconds for any other line (an assumption: the reference gives no figure)."""
 
 PEN_PIN = 4
-"""RP4 (RB1), the pen-lift servo output."""
+"""RP4 (RB1): the pen servo's output at boot, and ``S2``'s pin when none is given."""
+DEFAULT_SP_PIN = 1
+"""``SP``'s port B pin when none is given (RB1, RP4): the pen output moves back there."""
 
 _VERSION_TEXT = "EBBv13_and_above EB Firmware Version {}"
 STACK_HIGH_WATER = 0xE00
@@ -157,7 +159,11 @@ class _Line:
 
 class SimulatedEBB:
     """An EiBotBoard running ``version`` (``"3.0.3"``; a ``"2.x"`` string for refusal tests),
-    on a simulated clock from 0 (``clock="real"``: :meth:`poll` follows the wall clock)."""
+    on a simulated clock from 0 (``clock="real"``: :meth:`poll` follows the wall clock).
+
+    ``pen_pin``: the port B pin the pen-lift motor is wired to (1, RB1: the AxiDraw's servo;
+    2, RB2: the NextDraw's brushless motor). ``SP``'s pin (RB1 when none is given) routes the
+    pen pulses, as the firmware's ``g_servo2_RPn``; the pen moves only with pulses on its pin."""
 
     def __init__(
         self,
@@ -169,12 +175,17 @@ class SimulatedEBB:
         servo_max: int = 15302,
         servo_rate: int = 400,
         servo_timeout_ms: int = 60_000,
+        pen_pin: int = 1,
     ) -> None:
         if clock not in ("simulated", "real"):
             raise ValueError(f"clock: expected 'simulated' or 'real', got {clock!r}")
         parts = version.split(".")
         if len(parts) != 3 or not all(p.isdigit() for p in parts):
             raise ValueError(f"version: expected like '3.0.3', got {version!r}")
+        if not 0 <= pen_pin <= 7:
+            raise ValueError(f"pen_pin: a port B pin 0-7, got {pen_pin}")
+        self.pen_rpn = pen_pin + 3
+        """The RPn the pen-lift motor is wired to: the pen moves with the pulses there only."""
         self.version = version
         self.version_tuple = tuple(int(p) for p in parts)
         self.clock = clock
@@ -339,7 +350,9 @@ class SimulatedEBB:
         self.servo_timeout_ms = timeout
         self._servo_power_until = -math.inf
         self.pen_up = True
-        self._servo = ServoSegment(t, servo_min, servo_min, 0, self._servo_period(), t)
+        self.servo_rpn = PEN_PIN  # where SP sends the pen servo's pulses (g_servo2_RPn)
+        here = servo_min if self.pen_rpn == PEN_PIN else 0  # the boot's pen-up, on RP4
+        self._servo = ServoSegment(t, here, here, 0, self._servo_period(), t)
         self.recorder.servo.append(self._servo)
         self.sl_storage = [0] * 32
         self.node_count = 0
@@ -475,8 +488,9 @@ class SimulatedEBB:
         elif job.kind == "servo":
             assert job.servo is not None
             pin, position, rate = job.servo
-            if pin == PEN_PIN:
+            if pin == self.pen_rpn:
                 self._servo_to(t, position, rate)
+            if pin == self.servo_rpn:  # the firmware's pen state follows SP's output
                 self.pen_up = position == self.servo_min
         elif job.kind == "enable":
             assert job.enable is not None
@@ -667,9 +681,7 @@ class SimulatedEBB:
         position = params[0] if params else 0
         pin = params[1] if len(params) > 1 else PEN_PIN
         if position == 0:
-            if pin == PEN_PIN:
-                self._servo = ServoSegment(t, 0, 0, 0, self._servo_period(), self._boot_time)
-                self.recorder.servo.append(self._servo)
+            self._servo_off(t, pin)
             self._answer(t, command)
             return None
         rate = params[2] if len(params) > 2 else 0
@@ -679,17 +691,31 @@ class SimulatedEBB:
         ticks = TICK_HZ // 1000 * delay
         return _Job(self._next_number(), text, "servo", ticks=ticks, servo=(pin, position, rate))
 
+    def _servo_off(self, t: float, rpn: int) -> None:
+        """The output on ``rpn`` stops at once (its channel freed): no pulse, the servo limp."""
+        if rpn == self.pen_rpn:
+            self._servo = ServoSegment(t, 0, 0, 0, self._servo_period(), self._boot_time)
+            self.recorder.servo.append(self._servo)
+
     def _pen_job(self, command: Command, text: bytes, t: float) -> _Job | None:
         value = command.params[0]
         duration = command.params[1] if len(command.params) > 1 else 0
+        pin = command.params[2] if len(command.params) > 2 else DEFAULT_SP_PIN
+        if pin > 7:  # the firmware falls back to its default pin
+            pin = DEFAULT_SP_PIN
+        if pin + 3 != self.servo_rpn:  # the pen output moves: the old one stops at once
+            self._servo_off(t, self.servo_rpn)
+            self.servo_rpn = pin + 3
+        rpn = self.servo_rpn
         if value in (2, 3):  # at once, bypassing the FIFO
             if value == 3:
                 self.servo_max = self.servo_min
                 for job in self._fifo:
-                    if job.servo is not None and job.servo[0] == PEN_PIN:
-                        job.servo = (PEN_PIN, self.servo_min, job.servo[2])
+                    if job.servo is not None and job.servo[0] == rpn:
+                        job.servo = (rpn, self.servo_min, job.servo[2])
             self._power_servo(t)
-            self._servo_to(t, self.servo_min, self.servo_rate_up)
+            if rpn == self.pen_rpn:
+                self._servo_to(t, self.servo_min, self.servo_rate_up)
             self.pen_up = True
             self._answer(t, command)
             return None
@@ -698,9 +724,7 @@ class SimulatedEBB:
         rate = self.servo_rate_up if up else self.servo_rate_down
         self._power_servo(t)
         ticks = TICK_HZ // 1000 * duration
-        return _Job(
-            self._next_number(), text, "servo", ticks=ticks, servo=(PEN_PIN, position, rate)
-        )
+        return _Job(self._next_number(), text, "servo", ticks=ticks, servo=(rpn, position, rate))
 
     def _power_servo(self, t: float) -> None:
         timeout = self.servo_timeout_ms

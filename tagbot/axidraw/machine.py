@@ -152,7 +152,7 @@ class AxiDrawJob:
             from sim.ebb.device import SimulatedEBB
             from sim.ebb.transport import attach_device
 
-            device = SimulatedEBB()
+            device = SimulatedEBB(pen_pin=profile["pen.pin"])  # wired as the profile says
             url = attach_device(device, f"draw{os.getpid()}_{next(_names)}")
         else:
             url = self.port

@@ -1,7 +1,8 @@
 """AxiDraw profiles: the keys an AxiDraw's TOML profile holds, and their checks.
 
 :func:`load_profile` layers the packaged ``profiles/default.toml`` (AxiDraw V3), a packaged
-model by name (``v3a3``, ``sea3``, ``minikit``) or a user file by path, then overrides such as
+model by name (``v3a3``, ``sea3``, ``minikit``, ``nextdraw8511``, ``nextdraw1117``,
+``nextdraw2234``) or a user file by path, then overrides such as
 ``"motors.microstepping=8"`` (see :mod:`tagbot.config`); every problem is one line naming the
 file and the field, e.g. ``minikit.toml: bed.x_max: must be > bed.x_min``.
 
@@ -14,6 +15,7 @@ the bed, trimming, retiming by run to these limits).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -26,6 +28,7 @@ from tagbot.config import (
     NON_NEGATIVE,
     NUMBER,
     POSITIVE,
+    TEXT,
     load_layered,
     packaged_names,
 )
@@ -44,16 +47,33 @@ __all__ = [
     "packaged_profiles",
 ]
 
-MODELS = ("AxiDraw V3", "AxiDraw V3/A3", "AxiDraw SE/A3", "AxiDraw MiniKit", "other")
+MODELS = (
+    "AxiDraw V3",
+    "AxiDraw V3/A3",
+    "AxiDraw SE/A3",
+    "AxiDraw MiniKit",
+    "NextDraw 8511",
+    "NextDraw 1117",
+    "NextDraw 2234",
+    "other",
+)
 MICROSTEPPING = {16: 1, 8: 2, 4: 3, 2: 4, 1: 5}
 """Microstepping → the ``EM`` command's mode number."""
 MOTOR_AXES = np.array([[1.0, 1.0], [1.0, -1.0]])
 """Machine ``(x, y)`` mm → mm along motor 1's and motor 2's axes (``x + y``, ``x - y``)."""
 TICK_S = 40e-6
 """The EBB's motion interrupt period."""
+SERVO_SLOT_S = 0.003
+"""s of one RC servo channel's slot (the firmware's boot default, ``SC,9,3``): a servo's
+pulse repeats every ``channels`` slots (``SC,8``)."""
+MAX_SERVO_CHANNELS = 8
+"""The most RC servo channels the EBB cycles through (``SC,8``; 8 at boot)."""
+MIN_FIRMWARE = (3, 0, 1)
+"""The oldest firmware tagbot drives at all (LT/T3, the FIFO set with CU,4, QU,6)."""
+_VERSION_TEXT = re.compile(r"(\d+)\.(\d+)\.(\d+)")
 
 SCHEMA: dict[str, dict[str, Any]] = {
-    "machine": {"model": MODELS},
+    "machine": {"model": MODELS, "min_firmware": TEXT},
     "bed": PLOTTER_SCHEMA["bed"],
     "motors": {"steps_per_mm_16x": POSITIVE, "microstepping": INT, "max_step_rate": POSITIVE},
     "limits": {
@@ -107,6 +127,19 @@ class Profile(BedProfile):
     def step_mode(self) -> int:
         """The ``EM`` mode number of the microstepping (1 = 16x ... 5 = full steps)."""
         return MICROSTEPPING[self["motors.microstepping"]]
+
+    @property
+    def min_firmware(self) -> tuple[int, int, int]:
+        """The oldest EBB firmware this machine is driven with (``machine.min_firmware``)."""
+        found = _VERSION_TEXT.fullmatch(self["machine.min_firmware"].strip())
+        if found is None:
+            return (0, 0, 0)
+        return int(found[1]), int(found[2]), int(found[3])
+
+    @property
+    def servo_channels(self) -> int:
+        """The RC servo channels (``SC,8``) that give the pen servo its ``pen.period``."""
+        return round(self["pen.period"] / SERVO_SLOT_S)
 
     def servo_position(self, percent: float) -> int:
         """The servo pulse width (1/12 MHz units, ``SC,4``/``SC,5``) at ``percent`` height."""
@@ -222,6 +255,17 @@ def _check(p: Profile) -> None:
     )
     need(p["pen.servo_max"] <= 65535, ("pen.servo_max",), "must be <= 65535 (SC,4/SC,5)")
     need(p["pen.pin"] <= 7, ("pen.pin",), "must be <= 7 (a port B pin)")
+    need(
+        1 <= p.servo_channels <= MAX_SERVO_CHANNELS
+        and abs(p.servo_channels * SERVO_SLOT_S - p["pen.period"]) < 1e-9,
+        ("pen.period",),
+        "must be 1 to 8 servo slots of 0.003 s (SC,8): 0.003, 0.006 ... 0.024",
+    )
+    need(
+        p.min_firmware >= MIN_FIRMWARE,
+        ("machine.min_firmware",),
+        'must be a version like "3.0.2", at least 3.0.1 (the oldest tagbot drives)',
+    )
     for key in ("pen.rate_raise", "pen.rate_lower"):
         need(0 < p.servo_rate(p[key]) <= 65535, (key,), "gives an SC,11/12 rate outside 1-65535")
     for down in (True, False):

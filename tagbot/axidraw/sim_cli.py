@@ -29,7 +29,14 @@ def _wait_for_interrupt() -> None:
     default=None,
     help="The firmware version the board reports to V (default: the simulator's 3.x).",
 )
-def sim_axidraw_command(firmware: str | None) -> None:
+@click.option(
+    "--pen-pin",
+    type=click.IntRange(0, 7),
+    default=1,
+    show_default=True,
+    help="The port B pin of the pen-lift motor (1: the AxiDraw's servo; 2: the NextDraw's).",
+)
+def sim_axidraw_command(firmware: str | None, pen_pin: int) -> None:
     """Serve a simulated EiBotBoard (the AxiDraw's controller) on a pseudo-terminal until Ctrl-C.
 
     Prints the device path (e.g. /dev/pts/3) on stdout: point the AxiDraw software, or
@@ -40,7 +47,9 @@ def sim_axidraw_command(firmware: str | None) -> None:
     from sim.ebb.device import SimulatedEBB
     from tagbot.signals import label, signal_of
 
-    options = {} if firmware is None else {"version": firmware}
+    options: dict[str, Any] = {"pen_pin": pen_pin}
+    if firmware is not None:
+        options["version"] = firmware
     try:
         device = SimulatedEBB(clock="real", **options)
     except ValueError as exc:

@@ -4,7 +4,9 @@
 before any motion command (``LT``/``T3``, the settable FIFO and ``QU,6`` need 3.0.1). Then
 ``QU,2`` (the largest FIFO the firmware has) and ``CU,4,n`` (the depth asked, capped there),
 ``EM`` (motors on, the profile's microstepping; it also zeroes the step counters),
-``SC,4``/``SC,5``/``SC,11``/``SC,12`` (pen positions and rates) and a pen-up ``SP,1``.
+``SC,8`` (servo channels: the pen servo's pulse period), ``SC,4``/``SC,5``/``SC,11``/``SC,12``
+(pen positions and rates) and a pen-up ``SP,1``. A profile may ask a later firmware
+(``machine.min_firmware``: 3.0.2 for the NextDraws, as the makers' NextDraw software does).
 
 **Stream.** A motion command is sent only while the board has room for it (one executing, ``n``
 in the FIFO), so the board answers it at once and its queries stay answered: every
@@ -37,7 +39,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from firmware_protocols.ebb.motion import TICK_HZ
-from tagbot.axidraw.profile import Profile
+from tagbot.axidraw.profile import MIN_FIRMWARE, Profile
 from tagbot.clock import port_clock
 from tagbot.control import RunControl
 from tagbot.errors import ConnectionLost, DeviceError, DeviceFault, DeviceTimeout
@@ -46,9 +48,6 @@ if TYPE_CHECKING:
     from tagbot.axidraw.moves import Job
 
 __all__ = ["MIN_FIRMWARE", "EBBStreamer", "StreamReport", "parse_version"]
-
-MIN_FIRMWARE = (3, 0, 1)
-"""The oldest EBB firmware tagbot drives: LT/T3, the FIFO set with CU,4 and QU,6 (3.0.1)."""
 
 REPLY_TIMEOUT = 2.0
 """s a reply may take (the board answers every command at once: tagbot never fills its FIFO)."""
@@ -186,12 +185,14 @@ class EBBStreamer:
         p = self.profile
         version = parse_version(self.ask("V", data=True, ok=False))
         self.report.firmware = version
-        if version < MIN_FIRMWARE:
+        oldest = max(MIN_FIRMWARE, p.min_firmware)
+        if version < oldest:
             have = ".".join(map(str, version))
-            need = ".".join(map(str, MIN_FIRMWARE))
+            need = ".".join(map(str, oldest))
+            why = "LT/T3 moves, a deep FIFO" if oldest == MIN_FIRMWARE else p["machine.model"]
             raise DeviceError(
-                f"EBB firmware {have} is not supported: tagbot needs {need} or later (LT/T3 "
-                "moves, a deep FIFO); update it with the makers' EBB firmware updater"
+                f"EBB firmware {have} is not supported: tagbot needs {need} or later ({why}); "
+                "update it with the makers' EBB firmware updater"
             )
         largest = int(self.ask("QU,2", data=True).split(b",")[-1])
         depth = max(1, min(int(p["serial.fifo"]), largest))
@@ -200,6 +201,7 @@ class EBBStreamer:
         before = self.position()
         self.ask(f"EM,{p.step_mode},{p.step_mode}")
         self.origin = before if keep_position else (0, 0)
+        self.ask(f"SC,8,{p.servo_channels}")
         self.ask(f"SC,4,{p.servo_position(p['pen.up'])}")
         self.ask(f"SC,5,{p.servo_position(p['pen.down'])}")
         self.ask(f"SC,11,{p.servo_rate(p['pen.rate_raise'])}")

@@ -13,7 +13,15 @@ from tests.axidraw.conftest import CAE
 
 
 def test_packaged_models_have_their_travel():
-    assert packaged_profiles() == ["default", "minikit", "sea3", "v3a3"]
+    assert packaged_profiles() == [
+        "default",
+        "minikit",
+        "nextdraw1117",
+        "nextdraw2234",
+        "nextdraw8511",
+        "sea3",
+        "v3a3",
+    ]
     travel = {name: load_profile(name).bed for name in packaged_profiles()}
     assert travel["default"] == (0.0, 300.0, 0.0, 218.0)  # 11.81 in x 8.58 in
     assert travel["v3a3"] == travel["sea3"] == (0.0, 430.0, 0.0, 297.0)
