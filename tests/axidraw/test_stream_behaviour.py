@@ -1,0 +1,158 @@
+"""What a user meets when the EBB answers badly or not at all, and the edges of an AxiDraw run's
+report: an error reply, a reply that is not ``OK``, a board gone silent at a stop, a fault
+before the first move, Ctrl-C once every move has run, a resumed run's plan, ``--port auto``."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import replace
+from itertools import count
+
+import pytest
+import serial
+
+from sim.ebb.device import SimulatedEBB
+from sim.ebb.transport import attach_device
+from tagbot.axidraw.machine import find_port, prepare
+from tagbot.axidraw.profile import load_profile
+from tagbot.axidraw.stream import RESYNC_TIMEOUT, EBBStreamer
+from tagbot.draw import draw
+from tagbot.errors import ConnectionLost, DeviceError, DeviceFault, Interrupted
+from tagbot.io.planfile import load_plan
+
+from .conftest import LETTER_B
+
+_names = count()
+
+
+def _url(device: SimulatedEBB) -> str:
+    return attach_device(device, f"a3edge{os.getpid()}_{next(_names)}")
+
+
+@pytest.fixture
+def streamer():
+    """A streamer on a new simulated board (in-process, simulated time); its port closed after."""
+    link = serial.serial_for_url(_url(SimulatedEBB()), timeout=0.01)
+    yield EBBStreamer(link, load_profile(), {})
+    link.close()
+
+
+def test_an_error_reply_is_a_fault_naming_the_command_and_kept_in_the_report(streamer):
+    with pytest.raises(DeviceFault, match=r"^XY: the EBB replied !8 Err: Unknown command 'XY"):
+        streamer.ask("XY")
+    (error,) = streamer.report.errors
+    assert error.startswith("!8 Err: Unknown command 'XY")
+
+
+def test_a_reply_that_is_not_ok_names_the_command_alone(streamer):
+    """``QU,2`` answers a data line before its ``OK``: read as the end, it is not ``OK``."""
+    with pytest.raises(DeviceError, match=r"^QU: expected OK from the EBB, got b'QU,32'$"):
+        streamer.ask("QU,2")
+
+
+class _Clock:
+    """A simulated clock starting at 100 s (far from 0, where a sum and a difference of two
+    instants could agree)."""
+
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep_until(self, t: float) -> None:
+        self.t = max(self.t, t)
+
+
+class _SilentLink:
+    """A board that never answers again: each read waits out the port's 10 ms timeout."""
+
+    def __init__(self) -> None:
+        self.clock = _Clock()
+        self.written: list[bytes] = []
+
+    def write(self, data: bytes) -> int:
+        self.written.append(bytes(data))
+        return len(data)
+
+    def read(self, n: int = 1) -> bytes:
+        self.clock.t += 0.01
+        return b""
+
+
+def test_a_stop_on_a_silent_board_gives_up_after_the_resync_timeout():
+    link = _SilentLink()
+    streamer = EBBStreamer(link, load_profile(), {})
+    assert streamer.stop() is None  # the stopped position is unknown
+    assert streamer.report.stopped_at is None
+    assert link.written == [b"ES\r", b"V\r"]
+    # It waited RESYNC_TIMEOUT s (on the port's clock) for the board, and no longer.
+    assert RESYNC_TIMEOUT <= link.clock.t - 100.0 <= RESYNC_TIMEOUT + 0.05
+
+
+def test_a_board_lost_at_connect_says_nothing_of_the_job_was_executed(tmp_path):
+    tag = load_plan(LETTER_B)
+    device = SimulatedEBB()
+    device.reset_board(0.001)  # before the version reply: the USB drops
+    job = prepare(tag, port=_url(device))
+    expected = r"^before move 1 \(nothing of the job was executed\): the EBB's line failed"
+    with pytest.raises(ConnectionLost, match=expected):
+        draw(tag, tmp_path / "lost", prepared=job, pictures=False)
+    report = json.loads((tmp_path / "lost" / "report.json").read_text())
+    assert not report["completed"] and report["executed"] == 0 and report["sent"] == 0
+    assert report["error"].startswith("before move 1 (nothing of the job was executed)")
+    assert report["comparison_error"] == "nothing was executed"
+
+
+def test_ctrl_c_once_every_move_has_run_reports_the_whole_drawing(tmp_path):
+    """The last progress call comes after the last move: Ctrl-C there stops nothing more, and
+    the report holds every move and the comparison of the whole job."""
+    tag = load_plan(LETTER_B)
+    job = prepare(tag)
+
+    def progress(done: int, total: int) -> None:
+        if done == total:
+            raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted, match=r"^after move (\d+) of \1 \(moves.txt\): interrupted"):
+        draw(tag, tmp_path / "end", prepared=job, pictures=False, progress=progress)
+    report = json.loads((tmp_path / "end" / "report.json").read_text())
+    assert not report["completed"]
+    assert report["executed"] == report["total"] == len(job.job.entries)
+    assert report["resume_from"] is None  # nothing is left to resume
+    whole = draw(tag, tmp_path / "whole", prepared=job, pictures=False).report
+    assert report["planned_drawing_s"] == whole["planned_drawing_s"]
+    assert report["speed_snr_db"] >= 35.0 and report["path_deviation_max_mm"] <= 0.02
+
+
+def test_a_resumed_runs_plan_starts_at_the_resumed_move(tmp_path):
+    """A run resumed in its middle is compared from the resumed move on: its plan starts
+    there, not before (the moves before it were drawn by the first run)."""
+    tag = load_plan(LETTER_B)
+    base = prepare(tag)
+    entries = base.job.entries
+    device = SimulatedEBB()
+
+    def progress(done: int, total: int) -> None:
+        if done >= total // 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted):
+        draw(tag, tmp_path / "a", prepared=replace(base, port=_url(device)), progress=progress,
+             pictures=False)  # fmt: skip
+    first = json.loads((tmp_path / "a" / "report.json").read_text())
+    resume_from = first["resume_from"]
+    start = entries[resume_from - 1].start
+    assert start - base.job.run_start[0] > 2.0  # well into the one run
+    again = replace(base, port=_url(device), resume_from=resume_from)
+    second = draw(tag, tmp_path / "b", prepared=again, pictures=False).report
+    (run,) = second["runs"]
+    assert start - 1e-6 <= run["planned_start"] <= start + 0.002
+
+
+def test_port_auto_takes_the_board_the_makers_finder_names(monkeypatch):
+    from plotink import ebb_serial
+
+    monkeypatch.setattr(ebb_serial, "findPort", lambda: "/dev/ttyACM7")
+    assert find_port() == "/dev/ttyACM7"
