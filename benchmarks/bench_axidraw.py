@@ -499,10 +499,27 @@ def lower_bound(tag: tagbot.Tag, setpoints: Any, profile: Profile) -> tuple[floa
 
 def step_ceiling(t: np.ndarray, xy: np.ndarray, k: float) -> float:
     """The speed SNR, dB, of a planned run ``(t, xy)`` against itself rounded to whole motor
-    steps (``k`` per mm along x ± y): what any motion on those motors can reach at best."""
+    steps (``k`` per mm along x ± y): what a motion following the plan exactly scores."""
     rounded = steps_to_xy(np.floor(xy @ MOTOR_AXES.T * k + 0.5), k)
     c = compare_execution([(t, xy)], np.column_stack([t, rounded, np.ones(len(t))]))
     return math.inf if c.speed_snr_db is None else c.speed_snr_db
+
+
+STEP_OFFSETS = np.linspace(0.0, 0.75, 4)
+"""Fractions of a motor step the run is moved by, on each motor, for :func:`step_band`."""
+
+
+def step_band(t: np.ndarray, xy: np.ndarray, k: float) -> tuple[float, float]:
+    """The least and the most :func:`step_ceiling` of the run moved by a fraction of a motor
+    step on each motor (:data:`STEP_OFFSETS`): where a run starts on the step grid is chance
+    (its placement), and on a short slow run it alone moves an exact follower's score by a few
+    dB. An executed run inside the band is as good as any motion on these motors."""
+    scores = [
+        step_ceiling(t, xy + steps_to_xy(np.array([a, b]), k), k)
+        for a in STEP_OFFSETS
+        for b in STEP_OFFSETS
+    ]
+    return min(scores), max(scores)
 
 
 STRETCH_COARSE = np.linspace(-0.08, 0.08, 9)
@@ -582,7 +599,8 @@ def measure(name: str, tag: tagbot.Tag, profile_name: str, scratch: Path) -> dic
     worst = min(report["runs"], key=lambda r: r["speed_snr_db"] or math.inf, default=None)
     if worst is not None and worst["plan"] in plans:
         t, xy = planned[plans.index(worst["plan"])]
-        row["worst_run_step_ceiling_db"] = step_ceiling(t, xy, profile.steps_per_mm)
+        low, high = step_band(t, xy, profile.steps_per_mm)
+        row.update(worst_run_step_band_low_db=low, worst_run_step_band_high_db=high)
     executed = np.loadtxt(out / "executed.csv", delimiter=",", skiprows=1, ndmin=2)
     row.update({f"tagbot_{k}": v for k, v in against_writer(planned, plans, executed).items()})
     bound, scales = lower_bound(tag, job.setpoints, profile)
@@ -605,7 +623,7 @@ def measure(name: str, tag: tagbot.Tag, profile_name: str, scratch: Path) -> dic
 
 def print_rows(rows: list[dict[str, Any]]) -> None:
     print(
-        "| tag | runs | tagbot: worst run SNR dB (≥ 35) [its steps' ceiling] |"
+        "| tag | runs | tagbot: worst run SNR dB (≥ 35) [an exact follower on its steps] |"
         " deviation mean / max mm (≤ 0.02) |"
         " job s / bound s (≤ 1.1) | classic: job s (moves) |"
         " vs writer, SNR as drawn dB: tagbot / classic | shape SNR dB: tagbot / classic |"
@@ -617,7 +635,8 @@ def print_rows(rows: list[dict[str, Any]]) -> None:
         print(
             f"| {r['tag']} | {r['runs']} |"
             f" {r['report_run_snr_min_db']:.1f} {mark(r['report_run_snr_min_db'] >= SNR_GOAL)}"
-            f" [{r.get('worst_run_step_ceiling_db', math.nan):.1f}] |"
+            f" [{r.get('worst_run_step_band_low_db', math.nan):.1f}"
+            f" to {r.get('worst_run_step_band_high_db', math.nan):.1f}] |"
             f" {r['report_dev_mean_mm']:.4f} / {r['report_dev_max_mm']:.4f}"
             f" {mark(r['report_dev_max_mm'] <= DEVIATION_GOAL)} |"
             f" {r['executed_s']:.2f} / {r['bound_s']:.2f} = {ratio:.3f}"

@@ -245,3 +245,21 @@ def test_the_step_ceiling_is_the_rounding_to_motor_steps() -> None:
     assert 10.0 < slow < 20.0 and 27.0 < fast < 37.0 and fast - slow > 15.0
     on_steps = np.column_stack([np.round(t * 1000) / 80.0, np.zeros_like(t)])
     assert step_ceiling(t, on_steps, 80.0) > 200.0  # float rounding only
+
+
+def test_where_a_slow_run_sits_on_the_step_grid_moves_an_exact_followers_score() -> None:
+    """The same slow run (1 mm/s along x, varying) moved by fractions of a step: an exact
+    follower's score spans a band of dB; the band holds the unmoved run's, and on a fast run
+    (more steps per 10 ms) it is narrower."""
+    from bench_axidraw import step_band, step_ceiling
+
+    t = np.arange(0.0, 1.0005, 0.001)
+
+    def run(v: float) -> np.ndarray:
+        return np.column_stack([v * t + 0.3 * np.sin(3 * t), 0 * t])
+
+    low, high = step_band(t, run(1.0), 80.0)
+    assert low <= step_ceiling(t, run(1.0), 80.0) <= high
+    assert high - low > 0.5
+    fast_low, fast_high = step_band(t, run(10.0), 80.0)
+    assert fast_low > high and fast_high - fast_low < high - low
