@@ -668,7 +668,9 @@ class ArmDriver:
         self.models: dict[int, int] = {}
         self.stopped = False
         self.lifted = False
-        """Whether a serial arm's safe stop lifted the pen by the arm."""
+        """Whether a serial arm's safe stop lifted the pen by the arm (or found it up)."""
+        self.lift_failure: str | None = None
+        """Why a serial arm's safe stop did not lift the pen, when it failed."""
 
     # -- context -----------------------------------------------------------------------------
 
@@ -1248,9 +1250,11 @@ class ArmDriver:
         """A serial arm's safe stop: once the last goal is reached, the arm itself lifts the pen
         along the paper's normal to the pen-up height and holds; after an error, torque off only
         if ``servo.torque_off_after_error`` (the arm then falls). Best effort, as
-        :meth:`safe_stop`."""
+        :meth:`safe_stop`: :attr:`lifted` says whether the pen is up, :attr:`lift_failure` why
+        not (also when a second interrupt cut the lift short, which is re-raised)."""
         p = self.profile
         assert self.lifter is not None
+        self.lift_failure = "interrupted before the pen was up"  # until the lift is done
         try:
             if result is not None and result.scheduler is not None and result.scheduler.sends:
                 self.clock.sleep_until(result.scheduler.sends[-1] + p.lead)
@@ -1258,7 +1262,7 @@ class ArmDriver:
                 rows = self.lifter.up(np.asarray(self.last_row, dtype=np.int64))
                 if len(rows):
                     self._rows(rows, None, "stop")
-            self.lifted = True
+            self.lifted, self.lift_failure = True, None
             if error and p["servo.torque_off_after_error"]:
                 self.set_torque(list(self.ids), False, "stop")
             log.info(
@@ -1266,4 +1270,6 @@ class ArmDriver:
                 ", torque off" if error and p["servo.torque_off_after_error"] else "",
             )
         except (DeviceError, OSError, serial.SerialException, ValueError) as e:
+            if not self.lifted:
+                self.lift_failure = str(e) or type(e).__name__
             log.error("safe stop failed: %s", e)

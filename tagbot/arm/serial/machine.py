@@ -228,6 +228,8 @@ class _SerialOutcome(_Outcome):
     force: Array = field(default_factory=lambda: np.zeros((0, 2)))
     """``t, N`` on the executed clock (the simulator's nib force), empty on a real arm."""
     lifted: bool = False
+    lift_failure: str | None = None
+    """Why the safe stop did not lift the pen, when it did not."""
     contact_steps: float = math.nan
 
 
@@ -303,7 +305,7 @@ def _stream(
             except BaseException as e:
                 driver.safe_stop(error=True)
                 outcome.error = e
-            outcome.lifted = driver.lifted
+            outcome.lifted, outcome.lift_failure = driver.lifted, driver.lift_failure
             outcome.result = result = getattr(driver, "result", None)
             if result is not None:
                 outcome.where = f"tick {result.first + result.ticks_sent}"
@@ -472,6 +474,12 @@ class SerialJob:
         first = 0 if self.resume_from is None else self.resume_from - 1
         outcome = _stream(program, profile, self.port, progress, control, first, self.fault)
 
+        stopped = "the arm stopped, pen lifted by the arm"
+        if outcome.error is not None and not outcome.lifted:
+            why = outcome.lift_failure or "no connection to the arm"
+            stopped = f"the arm stopped, but the pen was not lifted by the arm ({why})"
+            outcome.warnings.append(f"{stopped}: it may still be on the paper")
+
         def judge(figures: dict[str, Any], runs: list, pauses: list, stalls: list) -> SerialBudget:
             figures["lifted_by_arm_at_stop"] = outcome.lifted
             contacts = contact_figures(runs, outcome.executed, outcome.force, pauses)
@@ -482,7 +490,7 @@ class SerialJob:
 
         return finish_run(
             outcome, program, profile, self.port, first, self.device, self.planned,
-            len(self.tag.plans), "the arm stopped, pen lifted by the arm",
+            len(self.tag.plans), stopped,
             "physics simulator: the nib's contact with the paper, 1 ms", judge,
         )  # fmt: skip
 

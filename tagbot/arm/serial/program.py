@@ -340,12 +340,13 @@ def feedforward(angles: Array, pen: NDArray[np.bool_], profile: SerialProfile) -
     ``robot.press`` into it (in proportion above that, none above the paper), and the drag
     ``robot.pen_friction`` times that against the point's motion along the paper (eased in
     below :data:`FRICTION_SPEED`). ``pen`` is
-    unused beyond its length: the force follows the planned height."""
+    unused beyond its length: the force follows the planned height. A single row is a pose
+    standing still."""
     arm, T = profile.arm, profile.period
     model = arm.model
     data = mujoco.MjData(model)
-    rate = np.gradient(angles, T, axis=0)
-    acc = np.gradient(rate, T, axis=0)
+    rate = _rate(angles, T)
+    acc = _rate(rate, T)
     site = model.site(PEN_SITE).id
     jac = np.zeros((3, model.nv))
     paper = profile.paper
@@ -353,7 +354,7 @@ def feedforward(angles: Array, pen: NDArray[np.bool_], profile: SerialProfile) -
     press = max(profile["robot.press"], 1e-3) / 1000.0
     force, mu = profile["robot.pen_force"], profile["robot.pen_friction"]
     tips, _ = arm.fk(angles)
-    velocity = np.gradient(tips, T, axis=0)
+    velocity = _rate(tips, T)
     torque = np.empty_like(angles)
     for i in range(len(angles)):
         data.qpos[:] = angles[i]
@@ -374,6 +375,14 @@ def feedforward(angles: Array, pen: NDArray[np.bool_], profile: SerialProfile) -
     torque += profile.back_emf * rate
     del pen
     return torque / profile.stiffness
+
+
+def _rate(rows: Array, period: float) -> Array:
+    """Rates of change of rows one ``period`` apart (central differences); zero for a single row
+    (a pose standing)."""
+    if len(rows) < 2:
+        return np.zeros_like(rows)
+    return np.gradient(rows, period, axis=0)
 
 
 def _pen_up_rows(

@@ -16,6 +16,7 @@ import pytest
 import tagbot
 from tagbot.arm.serial.machine import (
     FORCE_RANGE,
+    ArmLift,
     SerialBudget,
     bridge_hops,
     prepare,
@@ -25,7 +26,14 @@ from tagbot.arm.serial.profile import is_serial_profile, load_serial_profile
 from tagbot.arm.serial.program import build_serial_program, check_serial_program
 from tagbot.control import RunControl
 from tagbot.draw import draw
-from tagbot.errors import DeviceError, Interrupted, PlacementError, ProfileError, ReachError
+from tagbot.errors import (
+    ConnectionLost,
+    DeviceError,
+    Interrupted,
+    PlacementError,
+    ProfileError,
+    ReachError,
+)
 
 EXAMPLES = Path(tagbot.__file__).parent / "examples"
 
@@ -243,14 +251,15 @@ def test_a_hop_shorter_than_the_nib_is_no_gap_in_the_line() -> None:
 # -- faults ---------------------------------------------------------------------------------
 
 
-def _faulted(letter_b, tmp_path, fire):
+def _faulted(letter_b, tmp_path, fire, kind="draw"):
     """Draw letter-b on the simulated arm, calling ``fire(chain)`` once mid-run (the middle of
-    the pen-down run); returns the error, the report and the physics."""
+    the first segment of ``kind``: the pen-down run, or ``travel`` pen up); returns the error,
+    the report and the physics."""
     job = prepare(letter_b, profile="openmanipulator-x")
     held = {}
     job.fault = lambda chain: held.setdefault("chain", chain)
-    draw_rows = next(s for s in job.program.segments if s[0] == "draw")
-    middle = (draw_rows[2] + draw_rows[3]) // 2
+    rows = next(s for s in job.program.segments if s[0] == kind)
+    middle = (rows[2] + rows[3]) // 2
 
     def progress(done: int, total: int) -> None:
         if done >= middle and "fired" not in held:
@@ -290,6 +299,46 @@ def test_ctrl_c_mid_run_lifts_the_pen_by_the_arm(letter_b, tmp_path) -> None:
     assert isinstance(error, Interrupted) and "pen lifted by the arm" in str(error)
     assert report["resume_from"] == report["executed"] + 1
     assert physics.pen_trace()[-50:, 4].max() == 0.0
+
+
+def _height(physics, profile) -> float:
+    """The pen's point above the paper in the physics, m."""
+    tip = physics.data.site_xpos[physics._tip]
+    return float((tip - np.asarray(profile.paper.origin)) @ profile.paper.normal)
+
+
+def test_ctrl_c_on_pen_up_travel_is_reported_as_lifted(letter_b, tmp_path) -> None:
+    # the pen is up already: the stop holds it there, and the report says it is up (it said
+    # False, the safe stop failing on the standing pose's feedforward, on 2 of 7 Ctrl-C)
+    error, report, physics, job, fired = _faulted(letter_b, tmp_path, _interrupt, "travel")
+    assert isinstance(error, Interrupted) and "pen lifted by the arm" in str(error)
+    assert report["details"]["lifted_by_arm_at_stop"] is True
+    assert fired <= report["executed"] < job.program.segments[0][3]
+    assert _height(physics, job.profile) > job.profile["robot.pen_up"] / 2000.0
+    assert physics.pen_trace()[:, 3].max() == 0.0  # no ink: it never went down
+
+
+def test_a_job_resumed_on_pen_up_travel_goes_on_from_there(letter_b, tmp_path) -> None:
+    travel = 40  # a tick of the travel to the first run, the pen up
+    job = prepare(letter_b, profile="openmanipulator-x", resume_from=travel)
+    report = draw(letter_b, tmp_path / "rest", prepared=job, pictures=False).report
+    assert report["completed"] and report["executed"] == len(job.program)
+    (run,) = report["runs"]
+    assert run["contact_kept_pct"] == 100.0
+
+
+def test_a_lift_that_fails_is_said_so_in_the_message_and_the_report(
+    letter_b, tmp_path, monkeypatch
+) -> None:
+    def broken(self, row):
+        raise ConnectionLost("the adapter went away", "stop")
+
+    monkeypatch.setattr(ArmLift, "up", broken)
+    error, report, _, _, _ = _faulted(letter_b, tmp_path, _interrupt)
+    assert report["details"]["lifted_by_arm_at_stop"] is False
+    assert isinstance(error, Interrupted) and "pen lifted by the arm" not in str(error)
+    assert "the pen was not lifted by the arm (stop: the adapter went away)" in str(error)
+    assert any("not lifted" in w for w in report["warnings"])
 
 
 def test_a_resumed_job_lowers_the_pen_where_it_stopped_and_draws_the_rest(
