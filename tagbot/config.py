@@ -54,6 +54,8 @@ FIT_OR_POSITIVE = "fit or positive"
 TEXT = "text"
 
 Schema = Mapping[str, Mapping[str, Any]]
+Layers = list[tuple[str, Mapping[str, Any]]]
+"""The layers of a profile, first to last: ``(source, data)`` (a file's name or ``--set``)."""
 
 
 @dataclass(frozen=True)
@@ -94,19 +96,20 @@ def packaged_names(package: str) -> list[str]:
 def load_layered(
     cls: type[P],
     package: str,
-    schema: Schema,
+    schema: Schema | Callable[[Layers], tuple[Schema, Layers]],
     profile: str | Path | None = None,
     overrides: Iterable[str] = (),
     check: Callable[[P], None] | None = None,
 ) -> P:
     """``default.toml`` of ``package``, then ``profile`` (packaged name or path), then overrides.
 
+    ``schema`` may depend on the layers (a serial arm's joints are its description's): a
+    function of the layers giving the schema and the layers to merge.
     Raises ProfileError naming the file and the field for unreadable files, unknown keys, values
     of the wrong kind, missing keys and (through ``check``) inconsistent values.
     """
-    values: dict[str, dict[str, Any]] = {section: {} for section in schema}
     sources: dict[str, str] = {}
-    layers = [_read_packaged(package, "default")]
+    layers: Layers = [_read_packaged(package, "default")]
     if profile is not None and str(profile) != "default":
         text = str(profile)
         if text in packaged_names(package) and not Path(text).exists():
@@ -114,6 +117,9 @@ def load_layered(
         else:
             layers.append(_read_file(package, Path(text)))
     layers.append(("--set", _parse_overrides(overrides)))
+    if callable(schema):
+        schema, layers = schema(layers)
+    values: dict[str, dict[str, Any]] = {section: {} for section in schema}
     for source, data in layers:
         _merge(schema, source, data, values, sources)
     for section, keys in schema.items():

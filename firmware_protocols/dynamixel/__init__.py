@@ -10,8 +10,8 @@ transport; the tests use it as an independent oracle for every byte produced her
   parameters, and the status error byte (:class:`ErrorCode`, :func:`describe_error`);
 - :mod:`.decoder`: :class:`PacketDecoder`, which turns a byte stream fed in any chunks into
   packets and :class:`DecodeError` reports, resynchronising after garbage and bad CRCs;
-- :mod:`.control_table`: the XL430-W250 (model 1060) and XM430-W350 (model 1020) control tables,
-  value encoding and units.
+- :mod:`.control_table`: the XL430-W250 (1060), XM430-W350 (1020) and XL330-M288 (1200)
+  control tables, value encoding and units.
 
 Example, host side::
 
@@ -32,6 +32,7 @@ from .control_table import (
     RPM2_PER_ACCELERATION_UNIT,
     RPM_PER_VELOCITY_UNIT,
     TICKS_PER_REV,
+    XL330_M288,
     XL430_W250,
     XM430_W350,
     ControlTable,
@@ -136,6 +137,7 @@ __all__ = [
     "SYNC_WRITE",
     "TICKS_PER_REV",
     "WRITE",
+    "XL330_M288",
     "XL430_W250",
     "XM430_W350",
     "BulkRead",

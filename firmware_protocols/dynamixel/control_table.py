@@ -1,4 +1,5 @@
-"""Control tables of the DYNAMIXEL X-series servos tagbot drives: XL430-W250 and XM430-W350.
+"""Control tables of the DYNAMIXEL X-series servos tagbot drives: XL430-W250, XM430-W350 and
+XL330-M288.
 
 A servo is programmed by reading and writing its control table, a byte array whose items have
 an address and a size of 1, 2 or 4 bytes (little-endian; signed items in two's complement).
@@ -7,8 +8,13 @@ Enable (64) is 0; the others are in RAM.
 
 Sources (ROBOTIS e-Manual, read in its public source repository ROBOTIS-GIT/emanual):
 
-- ``docs/en/dxl/x/xl430-w250.md`` (model 1060) and ``docs/en/dxl/x/xm430-w350.md`` (model 1020):
-  address, size, name, access, default ("initial value") and range of every item below.
+- ``docs/en/dxl/x/xl430-w250.md`` (model 1060), ``docs/en/dxl/x/xm430-w350.md`` (model 1020) and
+  ``docs/en/dxl/x/xl330-m288.md`` (model 1200): address, size, name, access, default ("initial
+  value") and range of every item below. The XL330-M288 shares the X430 layout and differs in
+  the EEPROM: baud rates 0..6, Drive Mode 0..5, Protocol Type 2..22, a 5 V supply (voltage
+  limits 31..70), Current Limit 1750 in 1 mA units (Goal and Present Current too), Velocity
+  Limit 445 of 0..2047, Startup Configuration (60), PWM Slope (62), Shutdown 53, and its own
+  gains (velocity I/P 1600/180, position D/I/P 0/0/400).
 - Where the XM430-W350 table is visibly stale or inconsistent, the description pages it
   includes and the table of its sibling XM430-W210 (``xm430-w210.md``, same firmware family):
   voltage limits 95..160 (the W350 table prints 110..300, outside its own defaults 95 and 160);
@@ -55,7 +61,8 @@ RPM2_PER_ACCELERATION_UNIT = 214.577
 """Profile Acceleration (velocity-based profile): rev/min² per unit."""
 
 MA_PER_CURRENT_UNIT = 2.69
-"""Current Limit, Goal Current, Present Current (XM430-W350): about 2.69 mA per unit."""
+"""Current Limit, Goal Current, Present Current (XM430-W350): about 2.69 mA per unit (the
+XL330-M288's is 1 mA: :attr:`ControlTable.ma_per_current_unit`)."""
 
 PERCENT_PER_PWM_UNIT = 0.113
 """PWM Limit, Goal PWM: percent of full duty per unit (885 is 100 %)."""
@@ -216,6 +223,8 @@ class ControlTable(Mapping[str, ControlTableEntry]):
     model_number: int
     entries: tuple[ControlTableEntry, ...]
     operating_modes: frozenset[int]
+    ma_per_current_unit: float = MA_PER_CURRENT_UNIT
+    """Current Limit, Goal Current, Present Current: mA per unit (1 on the XL330s)."""
     _by_key: dict[str, ControlTableEntry] = field(init=False, repr=False, compare=False)
     _by_address: dict[int, ControlTableEntry] = field(init=False, repr=False, compare=False)
 
@@ -420,8 +429,45 @@ XM430_W350 = ControlTable(
 )
 """XM430-W350 (model 1020): with Current Limit, Goal Current and Present Current."""
 
+
+def _xl330_m288() -> tuple[ControlTableEntry, ...]:
+    """The XL330-M288's table: the X430 layout with its own EEPROM items (see the module
+    docstring)."""
+    entries = {
+        entry.key: entry
+        for entry in _x430(
+            model_number=1200,
+            temperature_limit=70,
+            voltage=(70, 35, (31, 70)),
+            velocity_limit=445,
+            gains=(1600, 180, 0, 0, 400),
+            current=True,
+        )
+    }
+    # fmt: off
+    for entry in (
+        _e("baud_rate", "Baud Rate", 8, 1, "RW", 1, (0, 6)),
+        _e("drive_mode", "Drive Mode", 10, 1, "RW", 0, (0, 5)),
+        _e("protocol_type", "Protocol Type", 13, 1, "RW", 2, (2, 22)),
+        _e("current_limit", "Current Limit", 38, 2, "RW", 1750, (0, 1750), unit="1 mA"),
+        _e("velocity_limit", "Velocity Limit", 44, 4, "RW", 445, (0, 2047), unit=_RPM),
+        _e("startup_configuration", "Startup Configuration", 60, 1, "RW", 0, (0, 3)),
+        _e("pwm_slope", "PWM Slope", 62, 1, "RW", 140, (1, 255), unit="1.977 mV/ms"),
+        _e("shutdown", "Shutdown", 63, 1, "RW", 53),
+        _e("goal_current", "Goal Current", 102, 2, "RW", signed=True, unit="1 mA",
+           limited_by=("current_limit",)),
+        _e("present_current", "Present Current", 126, 2, "R", signed=True, unit="1 mA"),
+    ):
+        entries[entry.key] = entry
+    # fmt: on
+    return tuple(sorted(entries.values(), key=lambda entry: entry.address))
+
+
+XL330_M288 = ControlTable("XL330-M288", 1200, _xl330_m288(), frozenset(OperatingMode), 1.0)
+"""XL330-M288 (model 1200): the X430 layout on a 5 V supply, current in 1 mA units."""
+
 MODELS: Mapping[int, ControlTable] = {
-    table.model_number: table for table in (XL430_W250, XM430_W350)
+    table.model_number: table for table in (XL430_W250, XM430_W350, XL330_M288)
 }
 """The known control tables by model number (what PING and address 0 report)."""
 

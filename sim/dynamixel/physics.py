@@ -27,15 +27,16 @@ publish the period; this is an assumption), the PWM clamped to ±min(PWM Limit, 
 (anti-windup; the firmware's Ka is unpublished). The feedforward gains (88, 90) are not modelled
 (0 by default and in ROBOTIS's OpenManipulator-X settings, P/I/D 800/100/100). The motor is a
 DC motor through its gearbox, from the e-Manual's stall torque ``τs``, stall current ``Is`` and
-no-load speed ``ω0`` at 12 V (:data:`MOTORS`)::
+no-load speed ``ω0`` at 12 V (5 V for the XL330-M288; :data:`MOTORS`)::
 
-    torque = τs · (PWM/885 · V/12 − ω/ω0)       current = Is · torque / τs
+    torque = τs · (PWM/885 · V/Vr − ω/ω0)       current = Is · torque / τs
 
-(``V`` the servo's Present Input Voltage). In MuJoCo this is one position-servo actuator per
-joint (a general actuator, ``force = ctrl − kp·q − kv·q̇``, so the P and D act on the joint state
-inside the implicit integrator) with ``kp = a·KPP·4096/2π``, ``kv = a·KPD·Δt_c·4096/2π`` (``a``
-the torque of one PWM unit), ``ctrl = kp·q_ref + kv·q̇_ref + a·KPI·Σe``, and ``forcerange`` the
-PWM limit's torque; the back-EMF term is joint damping ``τs/ω0`` while the torque is on (no
+(``V`` the servo's Present Input Voltage, ``Vr`` the figures' voltage). In MuJoCo this is one
+position-servo actuator per joint (a general actuator, ``force = ctrl − kp·q − kv·q̇``, so the
+P and D act on the joint state inside the implicit integrator) with ``kp = a·KPP·4096/2π``,
+``kv = a·KPD·Δt_c·4096/2π`` (``a`` the torque of one PWM unit),
+``ctrl = kp·q_ref + kv·q̇_ref + a·KPI·Σe``, and ``forcerange`` the PWM limit's torque;
+the back-EMF term is joint damping ``τs/ω0`` while the torque is on (no
 current flows with the bridge off). So ROBOTIS's 800/100/100 on an XM430-W350 is
 ``kp`` ≈ 18.9 N·m/rad, ``kv`` ≈ 0.019 N·m·s/rad beside a back-EMF damping of 0.85 N·m·s/rad,
 and a torque limit of 4.1 N·m at 12 V. Current-based Position mode adds Goal Current's torque as
@@ -80,7 +81,6 @@ import mujoco
 import numpy as np
 
 from firmware_protocols.dynamixel import (
-    MA_PER_CURRENT_UNIT,
     TICKS_PER_REV,
     OperatingMode,
 )
@@ -118,12 +118,13 @@ OPEN_MANIPULATOR_X_JOINTS: Mapping[int, str] = {
 
 @dataclass(frozen=True)
 class Motor:
-    """A servo's motor and gearbox at :data:`RATED_VOLTAGE`: stall torque (N·m), stall current
-    (A), no-load speed (rad/s)."""
+    """A servo's motor and gearbox at its rated ``voltage`` (V, :data:`RATED_VOLTAGE` unless
+    given): stall torque (N·m), stall current (A), no-load speed (rad/s)."""
 
     stall_torque: float
     stall_current: float
     no_load_speed: float
+    voltage: float = RATED_VOLTAGE
 
     @property
     def back_emf_damping(self) -> float:
@@ -135,6 +136,7 @@ _RPM = 2.0 * math.pi / 60.0
 MOTORS: Mapping[int, Motor] = {
     1020: Motor(4.1, 2.3, 46.0 * _RPM),  # XM430-W350-T/R at 12.0 V (e-Manual)
     1060: Motor(1.5, 1.4, 61.0 * _RPM),  # XL430-W250-T at 12.0 V (e-Manual)
+    1200: Motor(0.52, 1.47, 103.0 * _RPM, 5.0),  # XL330-M288-T at 5.0 V (e-Manual)
 }
 """Model number → motor figures from the e-Manual's specifications."""
 
@@ -363,7 +365,7 @@ class _Drive:
     def _pwm_torque(self) -> float:
         """N·m of one PWM unit at the servo's present supply voltage."""
         volts = self.servo.input_voltage / 10.0
-        return self.motor.stall_torque * volts / RATED_VOLTAGE / PWM_FULL_SCALE
+        return self.motor.stall_torque * volts / self.motor.voltage / PWM_FULL_SCALE
 
     def control(self, t: float, dt: float) -> None:
         """Set the actuator for the step that starts at ``t`` (``dt`` long)."""
@@ -421,8 +423,8 @@ class _Drive:
         d.ctrl[self.act] = ctrl
 
     def _current_torque(self, units: int) -> float:
-        """N·m the motor gives at ``units`` of current (2.69 mA each)."""
-        amps = units * MA_PER_CURRENT_UNIT / 1000.0
+        """N·m the motor gives at ``units`` of current (2.69 mA each, 1 mA on an XL330)."""
+        amps = units * self.servo.table.ma_per_current_unit / 1000.0
         return self.motor.stall_torque * amps / self.motor.stall_current
 
     def after_step(self) -> None:

@@ -1,8 +1,9 @@
 """One simulated DYNAMIXEL X-series servo: control table, write rules, motion profiles.
 
-:class:`SimulatedServo` holds the control-table memory of an XL430-W250 (model 1060) or
-XM430-W350 (model 1020) from :mod:`firmware_protocols.dynamixel.control_table`, applies the rules
-the firmware applies to WRITE and READ, and moves along the profile a Goal Position starts. It is
+:class:`SimulatedServo` holds the control-table memory of an XL430-W250 (model 1060),
+XM430-W350 (model 1020) or XL330-M288 (model 1200) from
+:mod:`firmware_protocols.dynamixel.control_table`, applies the rules the firmware applies to WRITE
+and READ, and moves along the profile a Goal Position starts. It is
 driven by :class:`~sim.dynamixel.chain.SimulatedChain`, which owns the bus and the clock; every
 method that depends on time takes the simulated time ``t`` in seconds.
 
@@ -67,7 +68,6 @@ import numpy as np
 
 from firmware_protocols.dynamixel import (
     EEPROM_END,
-    MA_PER_CURRENT_UNIT,
     MODELS,
     RPM2_PER_ACCELERATION_UNIT,
     RPM_PER_VELOCITY_UNIT,
@@ -87,6 +87,10 @@ from firmware_protocols.dynamixel.control_table import (
 
 DEFAULT_FIRMWARE_VERSION = 46
 """Firmware version reported by PING and address 6 (time-based profiles need ≥ 42)."""
+
+SUPPLY = {1060: 111, 1020: 120, 1200: 50}
+"""Model number → Present Input Voltage (0.1 V) of a fresh servo: the e-Manual's recommended
+supply (XL430 11.1 V, XM430 12 V, XL330 5 V); 12 V for a model not listed."""
 
 DEFAULT_POSITION = 2048.0
 """Where the horn of a new servo sits, in ticks (the middle of a turn)."""
@@ -382,7 +386,7 @@ class SimulatedServo:
         self.registered: tuple[int, bytes] | None = None
         self.booted_at = t
         self.deaf_until = -math.inf
-        self.input_voltage = 111 if self.table.model_number == 1060 else 120
+        self.input_voltage = SUPPLY.get(self.table.model_number, 120)
         """Present Input Voltage, 0.1 V units (set it to simulate a supply)."""
         self.temperature = 30
         """Present Temperature, °C."""
@@ -563,7 +567,7 @@ class SimulatedServo:
         pwm, current = (0.0, 0.0) if self.plant is None else self.plant.output()
         self._put("present_pwm", round(pwm))
         if "present_current" in self._layout:
-            self._put("present_current", round(current * 1000.0 / MA_PER_CURRENT_UNIT))
+            self._put("present_current", round(current * 1000.0 / self.table.ma_per_current_unit))
         self._put("present_velocity", round(speed / TICKS_PER_S_PER_VELOCITY_UNIT))
         self._put("present_position", round(present))
         self._put("velocity_trajectory", round(v / TICKS_PER_S_PER_VELOCITY_UNIT))

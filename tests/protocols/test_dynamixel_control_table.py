@@ -1,4 +1,4 @@
-"""X-series control tables (XL430-W250, XM430-W350), value encoding and units.
+"""X-series control tables (XL430-W250, XM430-W350, XL330-M288), value encoding and units.
 
 Expected addresses, sizes and defaults are the e-Manual's control tables, copied as literals.
 """
@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from firmware_protocols.dynamixel import (
     BAUD_RATES,
     MODELS,
+    XL330_M288,
     XL430_W250,
     XM430_W350,
     ControlTable,
@@ -130,7 +131,7 @@ DEFAULTS = {
 }
 
 
-@pytest.mark.parametrize("table", [XL430_W250, XM430_W350], ids=lambda t: t.model_name)
+@pytest.mark.parametrize("table", [XL430_W250, XM430_W350, XL330_M288], ids=lambda t: t.model_name)
 def test_shared_layout(table: ControlTable) -> None:
     for key, (address, size, access) in LAYOUT.items():
         entry = table[key]
@@ -179,7 +180,8 @@ def test_signed_items() -> None:
 def test_lookup() -> None:
     assert control_table(1060) is XL430_W250
     assert control_table(1020) is XM430_W350
-    assert set(MODELS) == {1060, 1020}
+    assert set(MODELS) == {1060, 1020, 1200}
+    assert control_table(1200) is XL330_M288
     with pytest.raises(ValueError, match="model_number: unknown 1030"):
         control_table(1030)
     with pytest.raises(KeyError, match="goal_current"):
@@ -187,6 +189,46 @@ def test_lookup() -> None:
     assert XM430_W350.at(116) is XM430_W350["goal_position"]
     assert XM430_W350.at(117) is None
     assert len(XM430_W350) == len(XL430_W250) + 2
+
+
+def test_the_xl330_m288_table_is_its_e_manual_page() -> None:
+    # docs/en/dxl/x/xl330-m288.md: the X430 layout, its own EEPROM items, limits and defaults
+    t = XL330_M288
+    expected = {
+        # key: (address, size, default, minimum, maximum)
+        "model_number": (0, 2, 1200, None, None),
+        "baud_rate": (8, 1, 1, 0, 6),
+        "drive_mode": (10, 1, 0, 0, 5),
+        "protocol_type": (13, 1, 2, 2, 22),
+        "temperature_limit": (31, 1, 70, 0, 100),
+        "max_voltage_limit": (32, 2, 70, 31, 70),
+        "min_voltage_limit": (34, 2, 35, 31, 70),
+        "current_limit": (38, 2, 1750, 0, 1750),
+        "velocity_limit": (44, 4, 445, 0, 2047),
+        "startup_configuration": (60, 1, 0, 0, 3),
+        "pwm_slope": (62, 1, 140, 1, 255),
+        "shutdown": (63, 1, 53, None, None),
+        "velocity_i_gain": (76, 2, 1600, 0, 16383),
+        "velocity_p_gain": (78, 2, 180, 0, 16383),
+        "position_d_gain": (80, 2, 0, 0, 16383),
+        "position_p_gain": (84, 2, 400, 0, 16383),
+        "goal_current": (102, 2, None, None, None),
+        "goal_position": (116, 4, None, -1_048_575, 1_048_575),
+        "present_current": (126, 2, None, None, None),
+        "present_position": (132, 4, None, None, None),
+    }
+    for key, (address, size, default, low, high) in expected.items():
+        e = t[key]
+        assert (e.address, e.size, e.default, e.minimum, e.maximum) == (
+            address,
+            size,
+            default,
+            low,
+            high,
+        ), key
+    assert t.ma_per_current_unit == 1.0 and XM430_W350.ma_per_current_unit == 2.69
+    assert set(t.operating_modes) == set(OperatingMode)
+    assert "present_load" not in t
 
 
 def test_tables_refuse_overlaps() -> None:

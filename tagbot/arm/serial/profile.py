@@ -1,10 +1,17 @@
 """Serial-arm profiles: the keys of a DYNAMIXEL serial arm's TOML profile, and their checks.
 
 :func:`load_serial_profile` layers the packaged ``profiles/default.toml`` (the OpenManipulator-X),
-a packaged profile by name (``openmanipulator-x``) or a user file by path, then overrides such as
-``"paper.pitch=-60"`` (see :mod:`tagbot.config`); every problem is one line naming the file and
-the field. The robot description is loaded with the profile, so a joint the description lacks, a
-park pose outside a joint's range or a tick range beyond the servo's is refused here.
+a packaged profile by name (``openmanipulator-x``, ``koch-v1.1``) or a user file by path, then
+overrides such as ``"paper.pitch=-60"`` (see :mod:`tagbot.config`); every problem is one line
+naming the file and the field. The robot description is loaded with the profile.
+
+**Joints.** A profile has one section per joint of its robot description, named as there, in
+the description's order (base first): the OpenManipulator-X's ``[joint1]`` … ``[joint4]``, the
+Koch v1.1's ``[shoulder_pan]`` … ``[wrist_roll]``; any number of joints. The joints come with the
+description: a layer that names another ``robot.description`` drops the joint sections of the
+layers before it (a Koch profile on top of the OpenManipulator-X defaults has no ``joint1``). A
+joint section the description lacks, a joint without a section, a park pose outside a joint's
+range or a tick range beyond the servo's is refused here.
 
 Joint convention: ``angle_rad = sign·(ticks − zero)·2π/4096``, the angle the description's
 joint of the same name takes. Lengths are mm in the profile, m in the description.
@@ -42,26 +49,27 @@ from tagbot.config import (
     NUMBER,
     POSITIVE,
     TEXT,
+    Layers,
+    Schema,
+    convert,
     load_layered,
     packaged_names,
 )
 from tagbot.errors import ProfileError
 
 __all__ = [
-    "JOINT_SECTIONS",
+    "JOINT_KEYS",
     "SCHEMA",
     "SerialProfile",
     "is_serial_profile",
     "load_serial_profile",
+    "schema_for",
     "serial_profiles",
 ]
 
 PACKAGE = "tagbot.arm.serial"
 
-JOINT_SECTIONS = ("joint1", "joint2", "joint3", "joint4")
-"""The joints a serial profile drives, named as in its robot description, base first."""
-
-_JOINT = {
+JOINT_KEYS: dict[str, Any] = {
     "id": INT,
     "model": MODEL_NAMES,
     "zero": INTEGER,
@@ -69,7 +77,10 @@ _JOINT = {
     "max_speed": POSITIVE,
     "max_acceleration": POSITIVE,
     "park_deg": NUMBER,
+    "stall_torque": POSITIVE,
+    "no_load_speed": POSITIVE,
 }
+"""The keys of each joint's section (one per joint of the robot description)."""
 
 SCHEMA: dict[str, dict[str, Any]] = {
     "robot": {
@@ -81,7 +92,6 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "pen_force": NON_NEGATIVE,
         "pen_friction": NON_NEGATIVE,
     },
-    **{name: dict(_JOINT) for name in JOINT_SECTIONS},
     "paper": {
         "x": NUMBER,
         "y": NUMBER,
@@ -108,15 +118,44 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "position_i_gain": INTEGER,
         "position_d_gain": INTEGER,
         "feedforward": BOOL,
-        "stall_torque": POSITIVE,
-        "no_load_speed": POSITIVE,
         "write_limits": BOOL,
         "torque_off_at_end": BOOL,
         "torque_off_after_error": BOOL,
     },
     "bus": BUS_SCHEMA,
 }
-"""Every section and key a serial profile may hold, with the kind of value it takes."""
+"""Every section and key a serial profile holds besides its joints' (:data:`JOINT_KEYS`), with
+the kind of value it takes."""
+
+
+def _description_path(name: str) -> Path:
+    """A shipped robot description by name, or a path."""
+    shipped = MODELS / name
+    return shipped if shipped.is_file() else Path(name)
+
+
+def schema_for(layers: Layers) -> tuple[Schema, Layers]:
+    """The schema of a serial profile made of ``layers``: :data:`SCHEMA` and a section per joint
+    of the robot description the last layer naming one names; the layers without the joint
+    sections of those before that one (their joints were another description's)."""
+    owner = max(i for i, (_, data) in enumerate(layers) if "description" in data.get("robot", {}))
+    source, data = layers[owner]
+    name = convert(source, "robot.description", TEXT, data["robot"]["description"])
+    try:
+        joints = SerialArm.load(_description_path(name)).joint_names
+    except ProfileError as e:
+        raise ProfileError(f"{source}: robot.description: {e}") from None
+    kept: Layers = []
+    for i, (src, table) in enumerate(layers):
+        kept.append((src, {k: v for k, v in table.items() if k in SCHEMA or i >= owner}))
+        for section in kept[-1][1]:
+            if section not in SCHEMA and section not in joints:
+                raise ProfileError(
+                    f"{src}: {section}: unknown section (the joints of {Path(name).name}:"
+                    f" {', '.join(joints)})"
+                )
+    sections = {"robot": SCHEMA["robot"], **{j: JOINT_KEYS for j in joints}, **SCHEMA}
+    return sections, kept
 
 
 class SerialProfile(ServoLoopProfile):
@@ -136,9 +175,12 @@ class SerialProfile(ServoLoopProfile):
     @property
     def description(self) -> Path:
         """The robot description's file: a shipped model by name, or a path."""
-        name = self["robot.description"]
-        shipped = MODELS / name
-        return shipped if shipped.is_file() else Path(name)
+        return _description_path(self["robot.description"])
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The joints the profile drives: its description's, base first."""
+        return tuple(self.arm.joint_names)
 
     def joint(self, name: str) -> Joint:
         """A joint's servo and limits, radians: the description's range within the servo's
@@ -161,12 +203,12 @@ class SerialProfile(ServoLoopProfile):
 
     @property
     def joints(self) -> tuple[Joint, ...]:
-        return tuple(self.joint(name) for name in JOINT_SECTIONS)
+        return tuple(self.joint(name) for name in self.joint_names)
 
     @property
     def bus_ids(self) -> list[int]:
         """The servo IDs the driver talks to, in joint order."""
-        return [self[f"{name}.id"] for name in JOINT_SECTIONS]
+        return [self[f"{name}.id"] for name in self.joint_names]
 
     @property
     def arm_ids(self) -> list[int]:
@@ -176,12 +218,12 @@ class SerialProfile(ServoLoopProfile):
     @property
     def servos(self) -> dict[int, str]:
         """Servo ID → model name, in bus order."""
-        return {self[f"{name}.id"]: self[f"{name}.model"] for name in JOINT_SECTIONS}
+        return {self[f"{name}.id"]: self[f"{name}.model"] for name in self.joint_names}
 
     @property
     def names(self) -> dict[int, str]:
         """Servo ID → joint name."""
-        return {self[f"{name}.id"]: name for name in JOINT_SECTIONS}
+        return {self[f"{name}.id"]: name for name in self.joint_names}
 
     @property
     def paper(self) -> Paper:
@@ -193,7 +235,7 @@ class SerialProfile(ServoLoopProfile):
     @property
     def park(self) -> np.ndarray:
         """The rest pose, radians per joint."""
-        return np.radians([self[f"{name}.park_deg"] for name in JOINT_SECTIONS])
+        return np.radians([self[f"{name}.park_deg"] for name in self.joint_names])
 
     @property
     def max_tilt(self) -> float:
@@ -208,21 +250,27 @@ class SerialProfile(ServoLoopProfile):
             int(self["servo.position_d_gain"]),
         )
 
+    def _per_joint(self, key: str) -> np.ndarray:
+        return np.array([self[f"{name}.{key}"] for name in self.joint_names], dtype=float)
+
     @property
-    def stiffness(self) -> float:
-        """N·m/rad of the position loop's P term: ``P/128`` PWM units per tick, each
-        ``stall_torque/885`` N·m (at 12 V)."""
-        per_pwm = self["servo.stall_torque"] / 885.0
+    def stiffness(self) -> np.ndarray:
+        """N·m/rad of each joint's position loop P term: ``P/128`` PWM units per tick, each
+        ``stall_torque/885`` N·m (the joint's servo at its supply)."""
+        per_pwm = self._per_joint("stall_torque") / 885.0
         return per_pwm * self["servo.position_p_gain"] / 128.0 * TICKS_PER_REV / (2 * math.pi)
 
     @property
-    def back_emf(self) -> float:
-        """N·m·s/rad the motor loses per rad/s of speed (stall torque ÷ no-load speed)."""
-        return self["servo.stall_torque"] / (self["servo.no_load_speed"] * 2 * math.pi / 60)
+    def back_emf(self) -> np.ndarray:
+        """N·m·s/rad each joint's motor loses per rad/s of speed (stall torque ÷ no-load
+        speed)."""
+        speed = self._per_joint("no_load_speed") * 2 * math.pi / 60
+        return self._per_joint("stall_torque") / speed
 
 
 def serial_profiles() -> list[str]:
-    """Names of the serial-arm profiles shipped with tagbot (``default``, ``openmanipulator-x``)."""
+    """Names of the serial-arm profiles shipped with tagbot (``default``, ``koch-v1.1``,
+    ``openmanipulator-x``)."""
     return packaged_names(PACKAGE)
 
 
@@ -250,33 +298,20 @@ def load_serial_profile(
     """Packaged defaults (the OpenManipulator-X), then ``profile`` (a packaged name or a TOML
     path), then ``overrides``; the robot description loaded. Raises ProfileError naming the
     file and the field."""
-    return load_layered(SerialProfile, PACKAGE, SCHEMA, profile, overrides, _check)
+    return load_layered(SerialProfile, PACKAGE, schema_for, profile, overrides, _check)
 
 
 def _check(p: SerialProfile) -> None:
     """Checks across fields; the error names the source that last set one of them."""
     need = p.need
-    ids = p.bus_ids
-    for name, id in zip(JOINT_SECTIONS, ids, strict=True):
-        need(id <= 252, (f"{name}.id",), f"must be a DYNAMIXEL ID 0..252, got {id}")
-    need(len(set(ids)) == len(ids), tuple(f"{n}.id" for n in JOINT_SECTIONS), "IDs must differ")
     try:
-        arm = p.arm
+        names = p.joint_names  # the description with the pen's point
     except ProfileError as e:
         raise ProfileError(f"{p.where('robot.description')}: robot.description: {e}") from None
-    for name in JOINT_SECTIONS:
-        need(
-            name in arm.joint_names,
-            (f"{name}.id",),
-            f"the robot description {p.description.name} has no joint {name!r}"
-            f" (it has {', '.join(arm.joint_names)})",
-        )
-    need(
-        len(arm.joint_names) == len(JOINT_SECTIONS),
-        ("robot.description",),
-        f"the description has {len(arm.joint_names)} joints, the profile drives"
-        f" {len(JOINT_SECTIONS)}",
-    )
+    ids = p.bus_ids
+    for name, id in zip(names, ids, strict=True):
+        need(id <= 252, (f"{name}.id",), f"must be a DYNAMIXEL ID 0..252, got {id}")
+    need(len(set(ids)) == len(ids), tuple(f"{n}.id" for n in names), "IDs must differ")
     for joint in p.joints:
         name = joint.name
         need(joint.sign in (1, -1), (f"{name}.sign",), f"must be 1 or -1, got {joint.sign}")

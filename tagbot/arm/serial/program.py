@@ -143,7 +143,7 @@ def _excess(q: Array, T: float, speed: Array, acceleration: Array) -> float:
 
 def _stroke_at(tag: Tag, k: int, tau: float) -> int:
     """The stroke of plan ``k`` under way at tag time ``tau`` (the last one begun)."""
-    onsets = tag.plans[k].onsets()
+    onsets = tag.plans[k].onsets
     return max(0, int(np.searchsorted(onsets, tau, side="right")) - 1)
 
 
