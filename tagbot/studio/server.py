@@ -37,8 +37,11 @@ errors ``4xx`` with ``{"error": "<field>: <problem>"}``):
   (:func:`tagbot.render.render_array`).
 - ``GET /api/export?format=png|svg|gif|gcode|json``: the file ``tagbot render``, ``tagbot
   gcode`` or ``tagbot fit`` writes (``&drips=1&seed=N`` for pictures).
-- ``POST /api/draw`` ``{"device": "grbl"|"dynamixel"|"axidraw"}``: draw on the simulator, or on
-  the port named with ``tagbot studio --machine-port``; the run folder is ``tagbot draw``'s.
+- ``POST /api/draw`` ``{"device": "grbl"|"dynamixel"|"axidraw", "profile": …}``: draw on the
+  simulator, or on the port named with ``tagbot studio --machine-port``; the run folder is
+  ``tagbot draw``'s. With ``"device": "dynamixel"``, ``"profile"`` picks a serial arm
+  (:data:`SERIAL_ARMS`: ``openmanipulator-x``, ``koch-v1.1``; simulated with its physics) instead
+  of the planar arm.
   ``POST /api/draw/pause``, ``/resume``, ``/stop``; ``GET /api/draw``: its status.
 - ``GET /ws``: a WebSocket. The server sends events: ``{"type": "draw", "state", "done",
   "total", "points": [[x, y, pen], ...]}`` while a draw runs (points in tag units, as
@@ -116,6 +119,8 @@ EVENT_INTERVAL = 0.04
 """Seconds between draw progress events at most (25 a second)."""
 DEVICES = ("grbl", "dynamixel", "axidraw")
 """The machines the Draw button offers (``tagbot draw --device``)."""
+SERIAL_ARMS = ("openmanipulator-x", "koch-v1.1")
+"""The serial arms the Draw button offers (``tagbot draw --device dynamixel --profile``)."""
 STATIC = Path(__file__).with_name("static")
 AUTOSAVE_FORMAT = "tagbot-studio"
 
@@ -182,6 +187,8 @@ class DrawState:
     device: str | None = None
     port: str | None = None
     folder: str | None = None
+    profile: str | None = None
+    """A serial arm's profile (None: the device's default machine)."""
     done: int = 0
     total: int = 0
     error: str | None = None
@@ -191,6 +198,7 @@ class DrawState:
         return {
             "state": self.state,
             "device": self.device,
+            "profile": self.profile,
             "port": self.port,
             "folder": self.folder,
             "done": self.done,
@@ -504,23 +512,29 @@ def create_app(studio: Studio, port: int) -> Starlette:
         device = data.get("device", "grbl")
         if device not in DEVICES:
             raise StudioError(f"device: unknown {device!r} (grbl, dynamixel or axidraw)")
+        profile = data.get("profile")
+        if profile is not None and (device != "dynamixel" or profile not in SERIAL_ARMS):
+            arms = " or ".join(SERIAL_ARMS)
+            raise StudioError(f"profile: {profile!r} is not a serial arm of dynamixel ({arms})")
         if studio.draw.state in ("running", "paused", "preparing", "stopping"):
             raise HTTPError(409, "draw: a run is already going (stop it first)")
         tag = _tag(studio)
-        studio.draw = DrawState(state="preparing", device=device, port=studio.machine_port)
+        port = studio.machine_port
+        studio.draw = DrawState("preparing", device, port, profile=profile)
         try:
-            job = await _in_worker(studio, _prepare, tag, device, studio.machine_port)
+            job = await _in_worker(studio, _prepare, tag, device, port, profile)
         except BaseException:
             studio.draw = DrawState()
             raise
         stamp = time.strftime("%Y%m%d-%H%M%S")
-        folder = studio.runs / f"{studio.name}-{device}-{stamp}"
+        machine = profile or device
+        folder = studio.runs / f"{studio.name}-{machine}-{stamp}"
         n = 1
         while folder.exists():
             n += 1
-            folder = studio.runs / f"{studio.name}-{device}-{stamp}-{n}"
+            folder = studio.runs / f"{studio.name}-{machine}-{stamp}-{n}"
         studio.control = StopControl()
-        studio.draw = DrawState("running", device, studio.machine_port, str(folder))
+        studio.draw = DrawState("running", device, port, str(folder), profile=profile)
         studio.machine.submit(_run_draw, studio, tag, job, folder, studio.control)
         return JSONResponse(studio.draw.as_dict(), status_code=202)
 
@@ -860,10 +874,10 @@ def _export_bytes(tag: Tag, fmt: str, drips: bool, seed: int | None) -> bytes:
         return path.read_bytes()
 
 
-def _prepare(tag: Tag, device: str, port: str | None) -> Any:
+def _prepare(tag: Tag, device: str, port: str | None, profile: str | None = None) -> Any:
     from tagbot.draw import prepare
 
-    return prepare(tag, device=device, port=port)
+    return prepare(tag, device=device, port=port, profile=profile)
 
 
 def _machine_frame(job: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -333,6 +333,59 @@ def test_draw_refuses_an_unknown_device(running: Running) -> None:
     assert response.status_code == 400 and "device" in response.json()["error"]
 
 
+def test_draw_on_the_simulated_openmanipulator_x(running: Running) -> None:
+    running.load(PLAN)
+    started = running.client.post(
+        "/api/draw", json={"device": "dynamixel", "profile": "openmanipulator-x"}
+    )
+    assert started.status_code == 202 and started.json()["profile"] == "openmanipulator-x"
+    status = wait_for(running, ("done", "stopped", "failed"))
+    assert status["state"] == "done", status
+    folder = Path(status["folder"])
+    assert "-openmanipulator-x-" in folder.name
+    report = json.loads((folder / "report.json").read_text())
+    assert report["completed"] and report["simulated"] and report["device"] == "dynamixel"
+    assert report["executed_source"].startswith("physics simulator")  # the serial arm's
+    header = (folder / "joints.csv").read_text().splitlines()[0]
+    assert header == "t,joint1,joint2,joint3,joint4"
+    assert status["done"] == status["total"] == report["total"]
+
+
+def test_draw_on_a_serial_arm_named_on_the_command_line(running: Running) -> None:
+    from sim.dynamixel import attach_chain, detach_chain
+    from tagbot.arm.serial.machine import simulated_arm
+    from tagbot.arm.serial.profile import load_serial_profile
+
+    chain, physics = simulated_arm(load_serial_profile("koch-v1.1"))
+    url = attach_chain(chain, "studio_koch")
+    running.load(PLAN)
+    running.studio.machine_port = url  # as `tagbot studio --machine-port URL` sets it
+    try:
+        body = {"device": "dynamixel", "profile": "koch-v1.1"}
+        assert running.client.post("/api/draw", json=body).status_code == 202
+        status = wait_for(running, ("done", "stopped", "failed"))
+    finally:
+        running.studio.machine_port = None
+        detach_chain("studio_koch")
+    assert status["state"] == "done", status
+    report = json.loads((Path(status["folder"]) / "report.json").read_text())
+    assert report["port"] == url and report["simulated"] is False and report["completed"]
+    header = (Path(status["folder"]) / "joints.csv").read_text().splitlines()[0]
+    assert header == "t,shoulder_pan,shoulder_lift,elbow_flex,wrist_flex,wrist_roll"
+    assert physics.pen_trace()[:, 3].any()  # the arm behind the URL inked the paper
+
+
+def test_draw_refuses_a_profile_that_is_no_serial_arm(running: Running) -> None:
+    for body in (
+        {"device": "grbl", "profile": "openmanipulator-x"},
+        {"device": "dynamixel", "profile": "default"},
+    ):
+        response = running.client.post("/api/draw", json=body)
+        assert response.status_code == 400
+        assert response.json()["error"].startswith("profile: ")
+    assert running.client.get("/api/draw").json()["state"] != "preparing"
+
+
 def test_draw_on_the_port_named_on_the_command_line(running: Running) -> None:
     from sim.grbl import SimulatedGrbl
     from sim.grbl.transport import attach_device

@@ -265,6 +265,25 @@ def test_draw_on_the_simulated_axidraw(page: Any, running: Running) -> None:
     assert page.evaluate("window.studio.stats.livePoints") > 0  # the trace came in as it ran
 
 
+def test_draw_on_the_simulated_openmanipulator_x(page: Any, running: Running) -> None:
+    option = "#device option[value='dynamixel:openmanipulator-x']"
+    assert "OpenManipulator-X" in page.locator(option).inner_text()
+    page.select_option("#device", "dynamixel:openmanipulator-x")
+    page.click("#draw")
+    page.wait_for_function(
+        "document.getElementById('draw-status').textContent.startsWith('done')", timeout=180_000
+    )
+    status = running.client.get("/api/draw").json()
+    assert status["state"] == "done" and status["device"] == "dynamixel"
+    assert status["profile"] == "openmanipulator-x" and status["done"] == status["total"] > 0
+    folder = Path(status["folder"])
+    assert folder.parent == running.runs and "-openmanipulator-x-" in folder.name
+    report = json.loads((folder / "report.json").read_text())
+    assert report["completed"] and report["simulated"]
+    assert report["executed_source"].startswith("physics simulator")
+    assert page.evaluate("window.studio.stats.livePoints") > 0  # the trace came in as it ran
+
+
 def test_another_origin_cannot_drive_the_studio(browser: Any, running: Running) -> None:
     running.load(PLAN)
     version = running.state()["version"]

@@ -690,7 +690,8 @@ $("draw").onclick = async () => {
   studio.executed = []; studio.live = [];
   drawButtons("preparing");
   try {
-    const r = await api("POST", "/api/draw", { device: $("device").value });
+    const [device, profile] = $("device").value.split(":");  // a serial arm: its profile
+    const r = await api("POST", "/api/draw", profile ? { device, profile } : { device });
     $("draw-status").textContent = `drawing into ${r.folder}`;
     drawButtons(r.state);
   } catch (e) {
