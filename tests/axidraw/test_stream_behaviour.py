@@ -14,9 +14,9 @@ import serial
 
 from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device
-from tagbot.axidraw.machine import find_port, prepare
+from tagbot.axidraw.machine import find_port, prepare, timeline
 from tagbot.axidraw.profile import load_profile
-from tagbot.axidraw.stream import RESYNC_TIMEOUT, EBBStreamer
+from tagbot.axidraw.stream import RESYNC_TIMEOUT, EBBStreamer, StreamReport
 from tagbot.draw import draw
 from tagbot.errors import ConnectionLost, DeviceError, DeviceFault, Interrupted
 from tagbot.io.planfile import load_plan
@@ -156,3 +156,32 @@ def test_port_auto_takes_the_board_the_makers_finder_names(monkeypatch):
 
     monkeypatch.setattr(ebb_serial, "findPort", lambda: "/dev/ttyACM7")
     assert find_port() == "/dev/ttyACM7"
+
+
+def test_a_fault_on_a_garbled_command_still_names_it(streamer):
+    """A byte that is not ASCII in a command (a corrupted line) is shown replaced, not a crash."""
+    with pytest.raises(DeviceFault, match=r"^\ufffdX: the EBB replied !8 Err"):
+        streamer.ask(b"\xe9X")
+
+
+def test_the_planned_pen_is_down_from_the_instant_it_is_lowered():
+    """motion.csv's pen column: 1 at a sample taken the instant the pen command starts."""
+    job = prepare(load_plan(LETTER_B)).job
+    when = next(t for t, down in job.pen_at if down)
+    dt = when / 4  # a power of two: the fourth sample falls on the instant exactly
+    table = timeline(job, dt)
+    assert table.t[4] == when
+    assert list(table.pen[3:6]) == [0, 1, 1]
+
+
+def test_a_stop_before_the_motors_left_home_resumes_from_move_1():
+    """Nothing executed, the first move sent but not one step taken: nothing was cut short,
+    so the resume starts with move 1 (on a profile that parks away from home as well)."""
+    tag = load_plan(LETTER_B)
+    for overrides in ((), ("motion.park=false",)):
+        job = prepare(tag, overrides=overrides)
+        assert job.job.entries[0].move is not None  # the first move travels
+        report = StreamReport(first=0, sent=1, executed=0, stopped_at=(0, 0))
+        assert job._executed_moves(report) == (0, 0)
+        report = StreamReport(first=0, sent=1, executed=0, stopped_at=(3, 1))
+        assert job._executed_moves(report) == (0, 1)  # under way: cut short
