@@ -30,7 +30,8 @@ plus, in a run's first 2 ms, up to a step more. A move that strays more than
 velocity there, down to 4 ms halves, and the run built again. Measured on ``cae.json``
 (AxiDraw V3): at ``motion.dt`` = 10, 30, 50, 100 ms 0.0062, 0.0063, 0.0072, 0.0118 mm with
 ``T3`` (1467, 511, 313, 191 moves; 100 ms setpoints need 34 splits); 0.011, 0.0115, 0.0116,
-0.012 mm with ``LT`` (0.022 and 0.044 mm at 100 ms before splitting).
+0.012 mm with ``LT`` (0.022 and 0.044 mm at 100 ms before splitting); at the default 25 ms
+0.0063 mm with ``T3`` (608 moves), 0.0116 mm with ``LT``.
 
 **Travel** (``LM``, pen up): a trapezoid along the longer motor axis at ``limits.travel_speed``
 and ``limits.travel_acceleration`` (accelerate, cruise, decelerate: three ``LM``, step-exact per

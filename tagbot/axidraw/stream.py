@@ -15,9 +15,11 @@ waiting) and ``QS`` (global step position) say what has executed:
 ``executed = sent − waiting − executing`` (read in that order, a race can only count one move
 fewer, never one more), and ``QB`` (the PRG button) asks for a pause.
 
-A **stall** is the board found idle when the host sends again while the job has more: the
-host was late (descheduled, a stalled USB); it lasts from when the last command sent should
-have ended until then (:attr:`StreamReport.stalls`, the report's ``stalls``).
+A **stall** is the board found idle when the host sends again while the job has more, or a
+send held up past when the board's queue should have ended, after which that line alone is on
+the board: the host was late (descheduled, a stalled USB); it lasts from when the last command
+sent should have ended until then (:attr:`StreamReport.stalls`, the report's ``stalls``). A
+line is not counted to start before the board has answered it.
 
 **Pause** (the button or :class:`~tagbot.control.RunControl`): nothing more is sent, the FIFO
 drains, the pen lifts (``SP,1``) and waits; on resume the pen lowers and the stream goes on from
@@ -252,18 +254,24 @@ class EBBStreamer:
         while sent < total or self._outstanding:
             now = self.clock.now()
             if sent < total and self._outstanding < depth:
+                due = last  # when the board runs out of what it holds
                 if last is not None and now > last + _RECHECK:  # late: did the board run dry?
                     self._count(sent)
                     if not self._outstanding:
                         r.stalls.append((last, now - last))
-                    last = now  # the board is at least this far behind the estimate
+                    last, due = now, None  # the board is at least this far behind the estimate
                 self.ask(lines[sent])
-                last = max(now, last if last is not None else now) + durations[sent]
+                after = self.clock.now()
+                last = max(after, last if last is not None else after) + durations[sent]
                 finish.append(last)
                 sent += 1
                 r.sent = sent - first
                 self._outstanding += 1
                 r.most_on_board = max(r.most_on_board, self._outstanding)
+                if due is not None and after > due + _RECHECK:  # held up in the send itself
+                    self._count(sent)
+                    if self._outstanding <= 1:  # only this line: the board had run dry
+                        r.stalls.append((due, after - due))
                 continue
             if now >= next_poll:
                 next_poll = now + poll
