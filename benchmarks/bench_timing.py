@@ -4,7 +4,7 @@ Run from the repository root, with the shared data beside it (``../shared/data``
 
     python benchmarks/bench_timing.py [--data ../shared/data] [--model gamma] [--jobs 2]
                                       [--datasets gml,unipen,mocap] [--limit N]
-                                      [--csv timing.csv] [--quiet]
+                                      [--csv timing.csv] [--quiet] [--rerecord]
     python benchmarks/bench_timing.py --calibrate     # the reference against synthetic truth
 
 Datasets as in ``bench_fit.py``, timed captures only: the GML files ``index.csv`` marks as
@@ -26,6 +26,9 @@ letters (120 Hz). Per file, the default fit (``timing="auto"``,
   stamps (a motion whose velocity is known exactly), put through the same reference, against
   the plan's exact velocity at the reference's instants (energy-weighted over traces, as the
   other figures);
+- with ``--rerecord``, the fitter against a motion it can represent: the default fit sampled
+  at the capture's own instants (noise-free, :func:`rerecorded`) and fitted again, its
+  per-trace SNR and ceiling at 10 Hz (the gap there is the fitter's, not the data's);
 - strokes per second of writing (the default fit's strokes over the traces' total pen-down span,
   :func:`tagbot.gesture.timing.pen_down_span`) and strokes default / geometric;
 - fit time of each (best of 2 runs, after a warm-up fit in each worker);
@@ -62,6 +65,8 @@ from bench_fit import case_traces, gml_cases, mocap_cases, unipen_cases
 
 from tagbot.gesture import reconstruction
 from tagbot.gesture.timing import SHAPE_MARGIN_MAX, SHAPE_MARGIN_MEAN, pen_down_span
+from tagbot.inputs import Trace
+from tagbot.inputs.stamps import sample_instants
 from tagbot.metrics import clock_velocity_snr, fit_report, recorded_velocity, tag_clock_snr
 from tagbot.model.motion import evaluate_plan, sample_plan
 from tagbot.model.plan import Tag
@@ -107,6 +112,11 @@ class Row:
     ceiling_raw_db: float = math.nan
     best_mapping_db: float = math.nan
     """The default fit's ``velocity_snr_db`` (best time scale and offset per trace, 15 Hz)."""
+    rerecorded_10hz_db: float = math.nan
+    """Per-trace SNR (10 Hz) of the default fit of :func:`rerecorded` traces (the default fit
+    sampled at the capture's own instants): the fitter against a motion it can represent..."""
+    rerecorded_ceiling_10hz_db: float = math.nan
+    """... and that fit's ceiling: their gap is the fitter's own, with no noise in the data."""
     fit_geometric_s: float = math.nan
     fit_s: float = math.nan
     matched: int = 0
@@ -147,8 +157,23 @@ def ceiling_db(traces: Sequence[Any], tag: Tag, cutoff: float | None) -> float:
     return 10 * math.log10(signal / noise) if noise > 0 else math.inf
 
 
-def run_case(case: tuple[str, str, object], model: str) -> Row:
-    """Both fits of one file and every figure of :class:`Row`."""
+def rerecorded(traces: Sequence[Any], tag: Tag) -> list[Trace]:
+    """``tag`` (one plan per trace) sampled at the instants each trace's samples were most
+    likely taken at (:func:`tagbot.inputs.stamps.sample_instants`, as the fit and the reference
+    place them): a recording with the capture's own sampling whose motion a plan can follow
+    exactly, with no noise in positions or stamps."""
+    out = []
+    for plan, trace in zip(tag.plans, traces, strict=True):
+        t, _ = sample_instants(np.asarray(trace.t, float), np.asarray(trace.xy, float))
+        t = np.maximum.accumulate(t)
+        xy, _ = evaluate_plan(plan, t, tag.size)
+        out.append(Trace(xy, t))
+    return out
+
+
+def run_case(case: tuple[str, str, object], model: str, rerecord: bool = False) -> Row:
+    """Both fits of one file and every figure of :class:`Row` (the re-recorded ones only with
+    ``rerecord``)."""
     dataset, name, _ = case
     row = Row(dataset, name)
     try:
@@ -174,6 +199,13 @@ def run_case(case: tuple[str, str, object], model: str) -> Row:
             setattr(row, f"ceiling_{label}_db", ceiling_db(traces, chosen.tag, cutoff))
         if report.velocity_snr_db is not None:
             row.best_mapping_db = report.velocity_snr_db
+        if rerecord and chosen.timings is not None:
+            again = rerecorded(traces, chosen.tag)
+            refit = reconstruction(again, model, "auto").tag
+            snr = tag_clock_snr(again, refit, CUTOFFS["10hz"])
+            if snr is not None:
+                row.rerecorded_10hz_db = snr[1]
+            row.rerecorded_ceiling_10hz_db = ceiling_db(again, refit, CUTOFFS["10hz"])
         kinds = Counter(t.kind for t in chosen.timings or ())
         for kind in KINDS:
             setattr(row, kind, kinds[kind])
@@ -293,6 +325,15 @@ def summarise(dataset: str, rows: list[Row]) -> list[str]:
         f" {falling} files with a trace not matched; {len(refused)} files' whole clock refused",
     ]
     lines += [f"    refused {r.name}: {r.refused}" for r in refused]
+    again = [r for r in done if not math.isnan(r.rerecorded_10hz_db)]
+    if again:
+        trace, ceiling = (_median(again, f"rerecorded{k}_10hz_db") for k in ("", "_ceiling"))
+        lines.append(
+            f"  re-recorded (the default fit sampled at the capture's instants, fitted again),"
+            f" 10 Hz, {len(again)} files: per trace {_stat(again, 'rerecorded_10hz_db', 10)},"
+            f" ceiling {_stat(again, 'rerecorded_ceiling_10hz_db', 10)}; per trace - ceiling"
+            f" {trace - ceiling:+.1f} (the fitter's own gap)"
+        )
     return lines
 
 
@@ -371,6 +412,11 @@ def _arguments() -> argparse.Namespace:
     parser.add_argument("--csv", type=Path, help="write every row to this CSV file")
     parser.add_argument("--quiet", action="store_true", help="summaries only")
     parser.add_argument(
+        "--rerecord",
+        action="store_true",
+        help="also fit each default fit again, sampled at the capture's instants (noise-free)",
+    )
+    parser.add_argument(
         "--calibrate",
         action="store_true",
         help="only the reference's calibration on synthetic digitisers (no data needed)",
@@ -412,7 +458,9 @@ def main() -> None:
     with ProcessPoolExecutor(
         args.jobs, mp_context=spawn, initializer=_warm_up, initargs=(args.model,)
     ) as pool:
-        rows = list(pool.map(run_case, cases, [args.model] * len(cases)))
+        rows = list(
+            pool.map(run_case, cases, [args.model] * len(cases), [args.rerecord] * len(cases))
+        )
     print(f"wall time {time.perf_counter() - started:.1f} s")
     if not args.quiet:
         print(

@@ -13,7 +13,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 
-from bench_timing import KINDS, Row, ceiling_db, run_case, shape_excess, summarise
+from bench_timing import KINDS, Row, ceiling_db, rerecorded, run_case, shape_excess, summarise
 
 from tagbot.gesture import reconstruction
 from tagbot.inputs import Trace
@@ -107,6 +107,32 @@ def test_run_case_gives_the_fits_figures() -> None:
     assert row.fit_s > 0 and row.fit_geometric_s > 0
 
 
+def test_rerecorded_traces_are_the_fit_at_the_captures_instants() -> None:
+    """A capture with noisy stamps (a steady 50 Hz sampler, delivery noise): the re-recorded
+    trace samples the fit at the instants the reference places the samples at, so a plan
+    sampled there is followed exactly; run_case fits it again and scores it against its ceiling."""
+    rng = np.random.default_rng(3)
+    plan = random_timed_plan(rng)
+    instants = np.arange(plan.start, plan.end(100.0), 0.02)
+    stamps = np.maximum.accumulate(instants + rng.uniform(0.0, 0.008, len(instants)))
+    xy, _ = evaluate_plan(plan, instants, 100.0)
+    traces = [Trace(xy, stamps)]
+    tag = Tag((plan,))
+    (again,) = rerecorded(traces, tag)
+    assert len(again.t) == len(stamps) and np.all(np.diff(again.t) >= 0)
+    expected, _ = evaluate_plan(plan, again.t, tag.size)
+    np.testing.assert_allclose(again.xy, expected)
+    # The instants are the regressed ones (a steady sampler's), not the noisy stamps.
+    assert np.ptp(np.diff(again.t)) < 0.001 < 0.004 < np.ptp(np.diff(stamps))
+    row = run_case(("unipen", "noisy", traces), "gamma", rerecord=True)
+    refit = reconstruction(rerecorded(traces, reconstruction(traces, "gamma", "auto").tag),
+                           "gamma", "auto").tag  # fmt: skip
+    again = rerecorded(traces, reconstruction(traces, "gamma", "auto").tag)
+    assert row.rerecorded_10hz_db == pytest.approx(tag_clock_snr(again, refit, 10.0)[1])
+    assert row.rerecorded_ceiling_10hz_db == pytest.approx(ceiling_db(again, refit, 10.0))
+    assert math.isnan(run_case(("unipen", "noisy", traces), "gamma").rerecorded_10hz_db)
+
+
 def test_run_case_reports_a_refused_clock_and_a_failure() -> None:
     t = np.linspace(0.0, 0.05, 40)  # 40 stamps in 50 ms: a scribble no hand draws that fast
     angle = 2 * np.pi * 60 * t  # three turns, six half turns: 120 per second
@@ -126,6 +152,19 @@ def _row(name: str, **figures: float) -> Row:
     for label in ("10hz", "15hz", "raw"):
         base |= {f"clock_{label}_db": 17.0, f"trace_{label}_db": 18.0, f"ceiling_{label}_db": 19.5}
     return Row("gml", name, **(base | figures))
+
+
+def test_summary_gives_the_fitters_own_gap_when_rerecorded() -> None:
+    plain = summarise("gml", [_row("a.gml")])
+    assert not any("re-recorded" in line for line in plain)
+    rows = [
+        _row("a.gml", rerecorded_10hz_db=20.0, rerecorded_ceiling_10hz_db=23.0),
+        _row("b.gml", rerecorded_10hz_db=22.0, rerecorded_ceiling_10hz_db=23.5),
+        _row("c.gml"),  # not re-recorded (e.g. its clock refused): left out
+    ]
+    (line,) = [x for x in summarise("gml", rows) if "re-recorded" in x]
+    assert "2 files" in line and "per trace 21.0 / " in line and "ceiling 23.2 / " in line
+    assert line.endswith("per trace - ceiling -2.2 (the fitter's own gap)")
 
 
 def test_summary_names_the_worst_file_and_marks_the_goals() -> None:
