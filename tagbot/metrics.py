@@ -487,8 +487,16 @@ def recorded_velocity(
     speed by a zero-phase Butterworth at 15 Hz. A grid too coarse for the cut-off (Nyquist at
     or below it) is not filtered.
     """
+    if t is None:
+        raise ValueError("velocity: the recording has no time stamps")
+    t, xy = _kernel_array(t), _kernel_array(xy)
+    if t.ndim != 1 or xy.shape != (t.size, 2):
+        raise ValueError(
+            f"velocity: positions of shape {xy.shape} for time stamps of shape {t.shape}"
+            " (expected (N, 2) and (N,))"
+        )
     grid, v, ok = kernels.recording_velocity(
-        _kernel_array(t), _kernel_array(xy), float(dt), float(cutoff or 0.0), cutoff is not None,
+        t, xy, float(dt), float(cutoff or 0.0), cutoff is not None,
         *_RECORDING,
     )  # fmt: skip
     if not ok:

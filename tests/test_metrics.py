@@ -217,6 +217,21 @@ def test_reference_velocity_spreads_repeated_stamps() -> None:
     assert np.abs(v[inside, 0]).max() < 2.0  # 1 px per 2.5 s, not 3 px per 10 ms
 
 
+@pytest.mark.parametrize(
+    ("t", "xy", "message"),
+    [
+        (None, np.zeros((5, 2)), "velocity: the recording has no time stamps"),
+        (np.arange(5.0), np.zeros((4, 2)), "shape (4, 2) for time stamps of shape (5,)"),
+        (np.arange(5.0), np.zeros((5, 3)), "positions of shape (5, 3) for time stamps"),
+        (np.zeros((5, 1)), np.zeros((5, 2)), "of shape (5, 1) (expected (N, 2) and (N,))"),
+    ],
+)  # fmt: skip
+def test_reference_velocity_refuses_a_recording_it_cannot_read(t, xy, message) -> None:
+    with pytest.raises(ValueError) as refused:
+        recorded_velocity(t, xy, cutoff=VELOCITY_CUTOFF)
+    assert message in str(refused.value)
+
+
 def test_reference_velocity_cost_is_linear() -> None:
     """Four times the samples (up to 200 000, about an hour at 60 Hz) cost about four times
     as much, not sixteen: the ratio of the best of three timings each, which holds on a busy
