@@ -1,0 +1,120 @@
+"""The serial arm's job as the user's profile sets it: the fitted tag fills the area less its
+margin, a tag under one unit long still fits, travel between runs at the profile's speed, short
+joint moves at their floor, and the program check's refusals at and just beyond each limit."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import tagbot
+from tagbot.arm.serial.profile import load_serial_profile
+from tagbot.arm.serial.program import (
+    MIN_JERK_PEAK_RATE,
+    _joint_move,
+    build_serial_program,
+    check_serial_program,
+    place_on_paper,
+)
+from tagbot.errors import PlacementError
+from tagbot.io.planfile import load_plan
+
+from ..conftest import small_tag
+
+EXAMPLES = Path(tagbot.__file__).parent / "examples"
+
+
+@pytest.mark.parametrize(("name", "binding"), [("cae", 0), ("letter-b", 1)])
+def test_a_fitted_tag_fills_the_area_less_its_margin(name, binding):
+    """cae is wide (the paper's width binds), letter-b tall (its height binds)."""
+    profile = load_serial_profile("openmanipulator-x")
+    x_min, x_max, y_min, y_max = profile.area
+    m = profile["area.margin"]
+    box = place_on_paper(load_plan(EXAMPLES / f"{name}.json"), profile).box
+    room = [(x_min + m, x_max - m), (y_min + m, y_max - m)]
+    for axis in (0, 1):
+        low, high = box[2 * axis], box[2 * axis + 1]
+        assert room[axis][0] - 1e-9 <= low and high <= room[axis][1] + 1e-9
+    assert box[2 * binding] == pytest.approx(room[binding][0], abs=1e-9)
+    assert box[2 * binding + 1] == pytest.approx(room[binding][1], abs=1e-9)
+
+
+def test_a_tag_under_one_unit_long_is_placed_to_fit():
+    profile = load_serial_profile("openmanipulator-x")
+    placement = place_on_paper(small_tag(0.8), profile)
+    x_min, x_max, y_min, y_max = profile.area
+    m = profile["area.margin"]
+    box = placement.box
+    assert box[0] >= x_min + m - 1e-9 and box[1] <= x_max - m + 1e-9
+    assert box[2] >= y_min + m - 1e-9 and box[3] <= y_max - m + 1e-9
+    # the tag's width binds: it spans the width less the margins
+    assert box[1] - box[0] == pytest.approx(x_max - x_min - 2 * m, rel=1e-9)
+
+
+def test_travel_between_runs_is_no_faster_than_the_profiles_travel_speed():
+    """cae's three runs: each travel lasts at least what the straight line between the pen's
+    points takes at ``motion.travel_speed`` (a minimum-jerk move peaks at 1.875× its mean)."""
+    profile = load_serial_profile("openmanipulator-x", ["motion.travel_speed=40"])
+    program = build_serial_program(load_plan(EXAMPLES / "cae.json"), profile)
+    travels = [s for s in program.segments if s[0] == "travel" and s[1] > 0]
+    assert len(travels) == 2
+    for _kind, _plan, first, stop in travels:
+        # the pen's point over the paper, mm, where the travel starts and ends
+        a, b = program.setpoints.xy[first - 1], program.setpoints.xy[stop]
+        distance = float(np.hypot(*(b - a)))
+        assert distance > 5.0
+        took = (stop - first) * profile.period
+        assert took >= MIN_JERK_PEAK_RATE * distance / 40.0 - profile.period
+
+
+def test_a_short_joint_move_takes_its_fifth_of_a_second_and_no_tick_more():
+    """0.2 s at 100 Hz is 20 ticks: 21 samples, both ends included."""
+    a = np.zeros(4)
+    b = np.full(4, 1e-4)
+    limits = np.full(4, 10.0)
+    q = _joint_move(a, b, 0.01, limits, limits)
+    assert len(q) == 21
+    np.testing.assert_allclose(q[[0, -1]], [a, b])
+
+
+def _standing(profile, ticks: int = 40):
+    """A program standing at its first pose for ``ticks``: every rate and acceleration 0."""
+    program = build_serial_program(load_plan(EXAMPLES / "letter-b.json"), profile)
+    angles = np.repeat(program.angles[:1], ticks, axis=0)
+    joints = np.repeat(program.joints[:1], ticks, axis=0)
+    return replace(program, angles=angles, joints=joints)
+
+
+def test_the_check_refuses_a_joint_just_beyond_its_acceleration_and_speed_not_at_them():
+    profile = load_serial_profile("openmanipulator-x")
+    standing = _standing(profile)
+    joint, T, k = profile.joints[1], profile.period, 20
+    # a step of d at tick k: the acceleration there is d/T² then -2d/T²... peak 2d/T²
+    for factor, refused in ((0.999, False), (1.001, True)):
+        d = factor * joint.max_acceleration * T**2 / 2
+        bumped = standing.angles.copy()
+        bumped[k, 1] += d
+        program = replace(standing, angles=bumped)
+        if refused:
+            with pytest.raises(PlacementError, match=rf"{joint.name} acceleration .* above"):
+                check_serial_program(program, profile)
+        else:
+            check_serial_program(program, profile)
+    # a ramp at the joint's speed: accepted at it, refused just beyond (acceleration allowed)
+    fast = load_serial_profile(
+        "openmanipulator-x", [f"{j.name}.max_acceleration=1e9" for j in profile.joints]
+    )
+    for factor, refused in ((0.999, False), (1.001, True)):
+        ramp = standing.angles.copy()
+        rate = factor * joint.max_speed * T
+        ramp[k:, 1] += rate * np.arange(1, len(ramp) - k + 1)
+        ramp[k + 5 :, 1] = ramp[k + 4, 1]
+        program = replace(standing, angles=ramp)
+        if refused:
+            with pytest.raises(PlacementError, match=rf"{joint.name} speed .* above"):
+                check_serial_program(program, fast)
+        else:
+            check_serial_program(program, fast)

@@ -1,0 +1,102 @@
+"""The arm driver's words and clocks as a user meets them: which servos fell silent, the
+SDK's packet timeout on the port's clock, a hardware error's remedy, and a serial arm's safe
+stop whose lift cannot be written."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import pytest
+
+import tagbot
+from tagbot.arm import load_profile, prepare
+from tagbot.arm.driver import UrlPortHandler
+from tagbot.arm.run import simulated_chain
+from tagbot.errors import DeviceError, DeviceTimeout, Interrupted
+from tagbot.io.planfile import load_plan
+
+from .conftest import two_plan_tag
+from .serial.test_serial_machine import _faulted, _interrupt
+
+LETTER_B = Path(tagbot.__file__).parent / "examples" / "letter-b.json"
+
+PATIENT = ("bus.max_missed=100000",)
+"""Misses in a row never count: a silent servo is found by its silence alone."""
+
+
+@pytest.mark.parametrize(
+    ("silent", "named"),
+    [((2,), "servo 2 (elbow)"), ((1, 2), "servo 1 (shoulder) and servo 2 (elbow)")],
+)
+def test_the_servos_that_fell_silent_are_named_and_no_other(record, tmp_path, silent, named):
+    profile = load_profile(overrides=PATIENT)
+    sim = record(simulated_chain(profile))
+    job = prepare(two_plan_tag(), port=sim.url, overrides=PATIENT)
+
+    def progress(done: int, total: int) -> None:
+        if done == 301:
+            for id in silent:
+                sim.chain.silence(id)
+
+    error = job.run(tmp_path, progress=progress).error
+    assert isinstance(error, DeviceTimeout)
+    assert str(error).startswith(
+        f"{error.where}: {named} did not answer SYNC_READ of present positions for 0.2"
+    )
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def now(self) -> float:
+        return self.t
+
+    def sleep_until(self, t: float) -> None:
+        self.t = max(self.t, t)
+
+
+def test_the_sdks_packet_timeout_runs_on_the_ports_clock():
+    """The SDK's 34 ms (twice its 16 ms latency timer, and 2) pass on the simulated clock."""
+    port = UrlPortHandler("dxlsim://unused")
+    port.clock = _Clock()
+    port.tx_time_per_byte = 0.0
+    assert port.getCurrentTime() == 100_000.0
+    port.setPacketTimeout(10)
+    port.clock.t += 0.03398
+    assert not port.isPacketTimeout()
+    port.clock.t += 0.0001
+    assert port.isPacketTimeout()
+
+
+def test_a_hardware_error_says_how_to_clear_it(tmp_path):
+    error, *_ = _faulted(
+        load_plan(LETTER_B), tmp_path, lambda chain: chain.set_hardware_error(13, 4)
+    )
+    assert isinstance(error, DeviceError)
+    assert str(error).endswith(
+        "hardware error: overheating (Hardware Error Status 0x04); remove the cause, then reboot"
+        " the servo (REBOOT or a power cycle) to clear it"
+    )
+
+
+def test_a_lift_that_cannot_be_written_is_named_in_the_message_and_the_log(
+    tmp_path, monkeypatch, caplog
+):
+    """Ctrl-C mid-run, and from then on the adapter takes no byte: the lift's goals are not
+    written, and the message and the log say which packet failed."""
+
+    def interrupt_and_break(chain) -> None:
+        monkeypatch.setattr(UrlPortHandler, "writePort", lambda self, packet: 0)
+        _interrupt(chain)
+
+    with caplog.at_level(logging.ERROR):
+        error, report, *_ = _faulted(load_plan(LETTER_B), tmp_path, interrupt_and_break)
+    assert isinstance(error, Interrupted)
+    assert report["details"]["lifted_by_arm_at_stop"] is False
+    assert "the pen was not lifted by the arm (stop: could not write SYNC_WRITE of goal" in str(
+        error
+    )
+    failed = "safe stop failed: stop: could not write SYNC_WRITE of goal positions to dxlsim"
+    assert any(r.getMessage().startswith(failed) for r in caplog.records)
