@@ -394,7 +394,7 @@ def run_classic(job: ClassicJob, profile: Profile, name: str) -> tuple[np.ndarra
     from sim.ebb.device import SimulatedEBB
     from sim.ebb.transport import attach_device
 
-    device = SimulatedEBB()
+    device = SimulatedEBB(pen_pin=profile["pen.pin"])  # wired as the profile says
     link = serial.serial_for_url(attach_device(device, name), timeout=0.01)
     pens = {
         True: next(

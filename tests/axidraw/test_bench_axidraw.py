@@ -170,8 +170,9 @@ def test_run_scale_holds_speed_and_acceleration_along_the_motors() -> None:
     assert run_scale(p, du, 1e9, 1e9) == 1.0
 
 
-def test_a_classic_job_runs_on_the_simulated_board() -> None:
-    profile = load_profile()
+@pytest.mark.parametrize("name", ["default", "nextdraw8511"])  # the pen on RB1, on RB2
+def test_a_classic_job_runs_on_the_simulated_board(name: str) -> None:
+    profile = load_profile(name)
     path = np.column_stack([np.linspace(20, 60, 400), 30 + 5 * np.sin(np.linspace(0, 6, 400))])
     job = classic_job([path], profile)
     assert job.lines[0].startswith(b"SM,") and not job.pen_down[0]
