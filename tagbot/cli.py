@@ -677,14 +677,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     from tagbot.signals import stop_signals
 
     args = list(sys.argv[1:] if argv is None else argv)
-    fit_log = logging.getLogger("tagbot.fit")
-    handler = _Warnings()
-    fit_log.addHandler(handler)
+    # Every tagbot module's warnings (the fit's, a machine's, the studio's) as one kind of line;
+    # not passed on to the root logger, whose handlers (e.g. a progress bar's) would repeat them.
+    package_log = logging.getLogger(PROG)
+    handler = _Warnings(logging.WARNING)
+    package_log.addHandler(handler)
+    propagate, package_log.propagate = package_log.propagate, False
     try:
         with stop_signals(PROG):
             return _main(args)
     finally:
-        fit_log.removeHandler(handler)
+        package_log.removeHandler(handler)
+        package_log.propagate = propagate
 
 
 def _since_start(fallback: float) -> float:
@@ -701,11 +705,20 @@ def _since_start(fallback: float) -> float:
 
 
 class _Warnings(logging.Handler):
-    """A library's warnings (:data:`tagbot.source.log`) as ``tagbot: warning: …`` lines on
-    stderr."""
+    """tagbot's log records of ``WARNING`` and above as ``tagbot: warning: …`` (``error:``)
+    lines on stderr: one line each, an exception by its message, never a traceback; above a
+    progress bar when one is shown."""
 
     def emit(self, record: logging.LogRecord) -> None:
-        click.echo(f"{PROG}: warning: {record.getMessage()}", err=True)
+        kind = "error" if record.levelno >= logging.ERROR else "warning"
+        line = f"{PROG}: {kind}: {_one_line(record.getMessage())}"
+        if record.exc_info and record.exc_info[1] is not None:
+            line += f": {_one_line(str(record.exc_info[1]) or type(record.exc_info[1]).__name__)}"
+        tqdm = sys.modules.get("tqdm")  # a bar may be showing only if tqdm was imported
+        if tqdm is not None:
+            tqdm.tqdm.write(line, file=sys.stderr)
+        else:
+            click.echo(line, err=True)
 
 
 def _main(args: list[str]) -> int:

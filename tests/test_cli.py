@@ -218,3 +218,46 @@ def test_fit_times_the_whole_command_from_process_start():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert float(out.stdout) >= 0.3
+
+
+def test_every_modules_warnings_are_one_tagbot_line_each(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A machine's, the studio's and the fit's log records print as ``tagbot: warning:`` (or
+    ``error:``) lines, once each (not again through the root logger's handlers, e.g. a progress
+    bar's), an exception by its message without a traceback; the logging set-up is restored."""
+    import logging
+
+    import tagbot.cli
+
+    seen: list[logging.LogRecord] = []
+
+    class Root(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            seen.append(record)
+
+    def command(args: list[str]) -> int:
+        logging.getLogger("tagbot.arm.run").warning("run 2 (plan 1): path deviation %s", "0.4 mm")
+        logging.getLogger("tagbot.fit").warning("tag.gml: trace 3: scaled\n(the clock)")
+        logging.getLogger("tagbot.arm.driver").info("opened the port")  # below a warning
+        try:
+            raise OSError("the port is gone")
+        except OSError:
+            logging.getLogger("tagbot.studio.server").exception("studio: draw failed")
+        return 0
+
+    root = Root()
+    logging.getLogger().addHandler(root)
+    monkeypatch.setattr(tagbot.cli, "_main", command)
+    try:
+        assert main([]) == 0
+    finally:
+        logging.getLogger().removeHandler(root)
+    assert capsys.readouterr().err.splitlines() == [
+        "tagbot: warning: run 2 (plan 1): path deviation 0.4 mm",
+        "tagbot: warning: tag.gml: trace 3: scaled (the clock)",
+        "tagbot: error: studio: draw failed: the port is gone",
+    ]
+    assert seen == []  # nothing repeated by the root logger's handlers
+    package = logging.getLogger("tagbot")
+    assert package.propagate and package.handlers == []
