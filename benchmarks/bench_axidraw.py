@@ -497,11 +497,14 @@ def lower_bound(tag: tagbot.Tag, setpoints: Any, profile: Profile) -> tuple[floa
 # -- the comparisons --------------------------------------------------------------------------
 
 
-def step_ceiling(t: np.ndarray, xy: np.ndarray, k: float) -> float:
+def step_ceiling(t: np.ndarray, xy: np.ndarray, k: float, at: np.ndarray | None = None) -> float:
     """The speed SNR, dB, of a planned run ``(t, xy)`` against itself rounded to whole motor
-    steps (``k`` per mm along x ± y): what a motion following the plan exactly scores."""
-    rounded = steps_to_xy(np.floor(xy @ MOTOR_AXES.T * k + 0.5), k)
-    c = compare_execution([(t, xy)], np.column_stack([t, rounded, np.ones(len(t))]))
+    steps (``k`` per mm along x ± y) at the instants ``at`` (plan clock; default ``t``): what
+    a motion following the plan exactly scores, over the span it was drawn in."""
+    at = t if at is None else at
+    exact = np.column_stack([np.interp(at, t, xy[:, 0]), np.interp(at, t, xy[:, 1])])
+    rounded = steps_to_xy(np.floor(exact @ MOTOR_AXES.T * k + 0.5), k)
+    c = compare_execution([(t, xy)], np.column_stack([at, rounded, np.ones(len(at))]))
     return math.inf if c.speed_snr_db is None else c.speed_snr_db
 
 
@@ -509,13 +512,16 @@ STEP_OFFSETS = np.linspace(0.0, 0.75, 4)
 """Fractions of a motor step the run is moved by, on each motor, for :func:`step_band`."""
 
 
-def step_band(t: np.ndarray, xy: np.ndarray, k: float) -> tuple[float, float]:
+def step_band(
+    t: np.ndarray, xy: np.ndarray, k: float, at: np.ndarray | None = None
+) -> tuple[float, float]:
     """The least and the most :func:`step_ceiling` of the run moved by a fraction of a motor
     step on each motor (:data:`STEP_OFFSETS`): where a run starts on the step grid is chance
     (its placement), and on a short slow run it alone moves an exact follower's score by a few
-    dB. An executed run inside the band is as good as any motion on these motors."""
+    dB. ``at``: the executed run's instants on the plan's clock (its pen-down span), so that
+    the band and the run are judged over the same samples."""
     scores = [
-        step_ceiling(t, xy + steps_to_xy(np.array([a, b]), k), k)
+        step_ceiling(t, xy + steps_to_xy(np.array([a, b]), k), k, at)
         for a in STEP_OFFSETS
         for b in STEP_OFFSETS
     ]
@@ -599,7 +605,10 @@ def measure(name: str, tag: tagbot.Tag, profile_name: str, scratch: Path) -> dic
     worst = min(report["runs"], key=lambda r: r["speed_snr_db"] or math.inf, default=None)
     if worst is not None and worst["plan"] in plans:
         t, xy = planned[plans.index(worst["plan"])]
-        low, high = step_band(t, xy, profile.steps_per_mm)
+        drawn = executed_runs(np.loadtxt(out / "executed.csv", delimiter=",", skiprows=1, ndmin=2))
+        k = report["runs"].index(worst)
+        at = drawn[k][:, 0] - (worst["executed_start"] - worst["planned_start"])
+        low, high = step_band(t, xy, profile.steps_per_mm, at[(at >= t[0]) & (at <= t[-1])])
         row.update(worst_run_step_band_low_db=low, worst_run_step_band_high_db=high)
     executed = np.loadtxt(out / "executed.csv", delimiter=",", skiprows=1, ndmin=2)
     row.update({f"tagbot_{k}": v for k, v in against_writer(planned, plans, executed).items()})

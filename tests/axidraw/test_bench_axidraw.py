@@ -264,3 +264,15 @@ def test_where_a_slow_run_sits_on_the_step_grid_moves_an_exact_followers_score()
     assert high - low > 0.5
     fast_low, fast_high = step_band(t, run(10.0), 80.0)
     assert fast_low > high and fast_high - fast_low < high - low
+
+
+def test_the_band_is_judged_over_the_span_that_was_drawn() -> None:
+    """A run that starts and ends at rest: over its middle alone (a pen-down span that left its
+    slow ends out) an exact follower's steps lose less of its speed than over all of it."""
+    from bench_axidraw import step_band
+
+    t = np.arange(0.0, 0.6005, 0.001)
+    xy = np.column_stack([2.0 * (1 - np.cos(np.pi * t / 0.6)), 0.5 * (1 - np.cos(np.pi * t / 0.6))])
+    whole = step_band(t, xy, 80.0)
+    middle = step_band(t, xy, 80.0, t[(t > 0.15) & (t < 0.45)])
+    assert middle[0] > whole[0] and middle[1] > whole[1]
