@@ -528,6 +528,21 @@ def step_band(
     return min(scores), max(scores)
 
 
+def drawn_band(
+    report: dict[str, Any],
+    run: dict[str, Any],
+    plan: tuple[np.ndarray, np.ndarray],
+    executed: np.ndarray,
+    k: float,
+) -> tuple[float, float]:
+    """:func:`step_band` of the report's ``run`` (one of ``report["runs"]``, planned as
+    ``plan``) over the instants its pen was down in ``executed``, on the plan's clock: the
+    samples the run's own figure is taken over (beyond the plan's ends the plan is at rest)."""
+    drawn = executed_runs(executed)[report["runs"].index(run)]
+    at = drawn[:, 0] - (run["executed_start"] - run["planned_start"])
+    return step_band(*plan, k, at)
+
+
 STRETCH_COARSE = np.linspace(-0.08, 0.08, 9)
 STRETCH_FINE = np.linspace(-0.015, 0.015, 7)
 STRETCH_FINEST = np.linspace(-0.003, 0.003, 7)
@@ -605,10 +620,8 @@ def measure(name: str, tag: tagbot.Tag, profile_name: str, scratch: Path) -> dic
     worst = min(report["runs"], key=lambda r: r["speed_snr_db"] or math.inf, default=None)
     if worst is not None and worst["plan"] in plans:
         t, xy = planned[plans.index(worst["plan"])]
-        drawn = executed_runs(np.loadtxt(out / "executed.csv", delimiter=",", skiprows=1, ndmin=2))
-        k = report["runs"].index(worst)
-        at = drawn[k][:, 0] - (worst["executed_start"] - worst["planned_start"])
-        low, high = step_band(t, xy, profile.steps_per_mm, at[(at >= t[0]) & (at <= t[-1])])
+        executed = np.loadtxt(out / "executed.csv", delimiter=",", skiprows=1, ndmin=2)
+        low, high = drawn_band(report, worst, (t, xy), executed, profile.steps_per_mm)
         row.update(worst_run_step_band_low_db=low, worst_run_step_band_high_db=high)
     executed = np.loadtxt(out / "executed.csv", delimiter=",", skiprows=1, ndmin=2)
     row.update({f"tagbot_{k}": v for k, v in against_writer(planned, plans, executed).items()})

@@ -276,3 +276,20 @@ def test_the_band_is_judged_over_the_span_that_was_drawn() -> None:
     whole = step_band(t, xy, 80.0)
     middle = step_band(t, xy, 80.0, t[(t > 0.15) & (t < 0.45)])
     assert middle[0] > whole[0] and middle[1] > whole[1]
+
+
+def test_the_worst_runs_band_is_over_its_pen_down_span_on_the_plans_clock() -> None:
+    """The pen went down 50 ms before a (trimmed, already moving) run's plan starts and lifted
+    50 ms after it ends, on an executed clock 2 s later: the band takes those instants too,
+    on the plan's clock, as the run's own comparison does."""
+    from bench_axidraw import drawn_band, step_band
+
+    t = np.arange(0.0, 0.3005, 0.001)
+    xy = np.column_stack([1.0 + 3.0 * t + 0.2 * np.sin(9 * t), 0.5 * t])
+    te = np.arange(-0.05, 0.3505, 0.001)
+    held = np.column_stack([np.interp(te, t, xy[:, 0]), np.interp(te, t, xy[:, 1])])
+    executed = np.column_stack([te + 2.0, np.round(held * 80) / 80, np.ones(len(te))])
+    run = {"planned_start": 0.0, "executed_start": 2.0}
+    band = drawn_band({"runs": [run]}, run, (t, xy), executed, 80.0)
+    np.testing.assert_allclose(band, step_band(t, xy, 80.0, (te + 2.0) - 2.0), atol=1e-9)
+    assert band != step_band(t, xy, 80.0)
