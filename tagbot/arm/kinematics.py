@@ -23,6 +23,7 @@ __all__ = [
     "RAD_PER_TICK",
     "Arm",
     "angles_to_ticks",
+    "exact_ticks",
     "ticks_to_angles",
     "unwrap_into",
     "wrap_into",
@@ -151,10 +152,14 @@ def unwrap_into(a: ArrayLike, lower: float, upper: float) -> Array:
     return run + (float(first) - run[0])
 
 
+def exact_ticks(a: ArrayLike, joint: Joint) -> Array:
+    """Joint angles in ticks, not rounded: ``zero + sign·a/(2π/4096)``."""
+    return joint.zero + joint.sign * np.asarray(a, dtype=float) / RAD_PER_TICK
+
+
 def angles_to_ticks(a: ArrayLike, joint: Joint) -> NDArray[np.int64]:
-    """Goal positions (integer ticks) of joint angles: ``zero + sign·a/(2π/4096)``, rounded."""
-    ticks = joint.zero + joint.sign * np.asarray(a, dtype=float) / RAD_PER_TICK
-    return np.rint(ticks).astype(np.int64)
+    """Goal positions (integer ticks) of joint angles: :func:`exact_ticks`, rounded."""
+    return np.rint(exact_ticks(a, joint)).astype(np.int64)
 
 
 def ticks_to_angles(ticks: ArrayLike, joint: Joint) -> Array:

@@ -58,6 +58,8 @@ from tagbot.arm.serial.program import (
     build_serial_program,
     feedforward,
     min_jerk,
+    move_excess,
+    own_window,
 )
 from tagbot.control import RunControl
 from tagbot.draw import MachineRun
@@ -66,7 +68,16 @@ from tagbot.io.motionfile import MotionTable
 from tagbot.model import Tag
 from tagbot.ports import check_port
 
-__all__ = ["FORCE_RANGE", "ArmLift", "SerialJob", "contact_figures", "prepare", "simulated_arm"]
+__all__ = [
+    "FORCE_RANGE",
+    "ArmLift",
+    "SerialJob",
+    "contact_figures",
+    "move_bounds",
+    "prepare",
+    "simulated_arm",
+    "time_bound",
+]
 
 log = logging.getLogger(__name__)
 
@@ -496,31 +507,39 @@ class SerialJob:
 
 
 def time_bound(program: ArmProgram, profile: SerialProfile) -> float:
-    """The shortest time the joints allow for this job's moves, s: each move (a run, an
-    approach, a retreat, travel, the moves from and to park) with its own shape, sped up until
-    a joint meets its ``max_speed`` or ``max_acceleration`` (its duration ÷ its excess:
-    rates scale with 1/duration, accelerations with 1/duration²), a run never faster than the
-    tag's own timing. The program's duration over this is what the Cartesian speed caps
+    """The shortest time the joints allow for this job's moves, s: the sum of
+    :func:`move_bounds`. The program's duration over this is what the Cartesian speed caps
     (``motion.travel_speed``, ``motion.approach_speed``) and the sampling cost."""
+    return float(sum(move_bounds(program, profile)))
+
+
+def move_bounds(program: ArmProgram, profile: SerialProfile) -> list[float]:
+    """Per segment of the program (a run, an approach, a retreat, travel, the moves from and
+    to park), the shortest time the joints allow it, s: the move with its own shape sped up
+    until a joint meets its ``max_speed`` or ``max_acceleration`` (its duration ÷ its excess:
+    rates scale with 1/duration, accelerations with 1/duration²; with the neighbours' samples
+    it owns, :func:`~tagbot.arm.serial.program.own_window`), a run never faster than the tag's
+    own timing."""
     T = profile.period
     speed = np.array([j.max_speed for j in profile.joints])
     acceleration = np.array([j.max_acceleration for j in profile.joints])
     scales = iter(program.setpoints.run_scales)
-    total = 0.0
-    for kind, _, first, stop in program.segments:
-        q = program.angles[max(0, first - 1) : stop + 1]
+    q, segments = program.angles, program.segments
+    out = []
+    for i, (kind, _, first, stop) in enumerate(segments):
         duration = (stop - first) * T
-        if len(q) < 2 or duration <= 0:
-            continue
-        steps = np.concatenate([q[:1], q, q[-1:]])
-        rate = np.max(np.abs(np.diff(steps, axis=0)), axis=0) / T / speed
-        acc = np.max(np.abs(np.diff(steps, 2, axis=0)), axis=0) / T**2 / acceleration
-        excess = max(float(rate.max()), math.sqrt(float(acc.max())))
-        fastest = duration * excess
+        owns = own_window(
+            kind,
+            segments[i - 1][0] if i else None,
+            segments[i + 1][0] if i + 1 < len(segments) else None,
+        )
+        fastest = 0.0
+        if duration > 0 and stop + owns[1] - (first - owns[0]) >= 2:
+            fastest = duration * move_excess(q, first, stop, owns, T, speed, acceleration)
         if kind == "draw":
             fastest = max(fastest, duration / next(scales))
-        total += fastest
-    return total
+        out.append(fastest)
+    return out
 
 
 def _write_joints(joints: Array, profile: SerialProfile, path: Path) -> None:

@@ -90,6 +90,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "pen_up": POSITIVE,
         "press": NON_NEGATIVE,
         "pen_force": NON_NEGATIVE,
+        "pen_preload": NON_NEGATIVE,
         "pen_friction": NON_NEGATIVE,
     },
     "paper": {

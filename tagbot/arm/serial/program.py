@@ -20,10 +20,13 @@ that fits, centred. :func:`build_serial_program` then lays out the job at the lo
 
 Each run's samples (approach, ink, retreat) are solved by :meth:`SerialArm.solve_path` in one
 pass from where the last run ended (continuous joints: no branch flip); then each move's joints
-are checked by differences at the loop period (the arm standing still before and after it),
-and a move that exceeds a joint's ``max_speed`` or ``max_acceleration`` is slowed by the excess and
-the job solved again (a run
-keeps its shape: its scale grows; a pen-up move takes longer), until none does. A point out of
+are checked by differences at the loop period, the move's own shape with the neighbours'
+samples it owns (:func:`own_window`: where it starts or ends at rest, or a run's joins), and a
+move that exceeds a joint's ``max_speed`` or ``max_acceleration`` is slowed by the excess and
+the job solved again (a run keeps its shape: its scale grows; a pen-up move takes longer),
+until none does; then the joins between moves, both moves beside one too fast together
+slowing down. The goals are whole ticks chosen for the servos' time-based profile
+(:func:`profile_goals`). A point out of
 reach, beyond a joint limit, tilted beyond ``robot.max_tilt_deg`` or a run that must be slowed
 more than ``motion.max_time_scale`` is a :class:`~tagbot.errors.PlacementError` naming the
 plan, the stroke and the time, before anything is sent.
@@ -38,7 +41,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from tagbot.arm.kinematics import angles_to_ticks
+from tagbot.arm.kinematics import angles_to_ticks, exact_ticks
 from tagbot.arm.place import ArmProgram, Placement, Setpoints
 from tagbot.arm.serial.kinematics import PEN_SITE
 from tagbot.arm.serial.profile import SerialProfile
@@ -48,7 +51,7 @@ from tagbot.model import Tag
 from tagbot.model.easing import RunClock, run_clock
 from tagbot.model.motion import evaluate_plan, sample_ink
 
-__all__ = ["build_serial_program", "min_jerk", "place_on_paper"]
+__all__ = ["build_serial_program", "min_jerk", "place_on_paper", "profile_goals"]
 
 Array = NDArray[np.float64]
 
@@ -141,6 +144,48 @@ def _excess(q: Array, T: float, speed: Array, acceleration: Array) -> float:
     return float(max(rate.max(), math.sqrt(acc.max())))
 
 
+PEN_MOVES = ("approach", "retreat", "pen")
+"""Kinds of the touch-down and lift-off moves (``pen`` in a program's segments)."""
+JOINT_MOVES = ("travel", "park")
+"""Kinds of the minimum-jerk moves in joint space."""
+
+
+def own_window(kind: str, before: str | None, after: str | None) -> tuple[bool, bool]:
+    """Whether a move of ``kind`` between moves of kinds ``before`` and ``after`` (None: none)
+    owns the neighbour's sample on each side, that is whether that sample is where its own
+    shape starts (ends) at rest, or, for a run, where it joins a pen move (a run may start and
+    end moving: the joins are its own). A pen move's end beside travel or park is its own last
+    sample, at rest: the next step is the joint-space move's, whose shape alone can slow it."""
+    if kind not in PEN_MOVES:
+        return before is not None, after is not None
+    return (
+        before is not None and before not in JOINT_MOVES,
+        after is not None and after not in JOINT_MOVES,
+    )
+
+
+def move_excess(
+    q: Array,
+    first: int,
+    stop: int,
+    owns: tuple[bool, bool],
+    T: float,
+    speed: Array,
+    acceleration: Array,
+) -> float:
+    """:func:`_excess` of the move at rows ``first:stop`` of the job's angles ``q``, with the
+    neighbours' samples it owns (:func:`own_window`), standing still beyond them."""
+    return _excess(q[first - owns[0] : stop + owns[1]], T, speed, acceleration)
+
+
+def _owned(kinds: list[str]) -> list[tuple[bool, bool]]:
+    """:func:`own_window` of each move of a sequence of kinds."""
+    return [
+        own_window(kind, kinds[i - 1] if i else None, kinds[i + 1] if i + 1 < len(kinds) else None)
+        for i, kind in enumerate(kinds)
+    ]
+
+
 def _stroke_at(tag: Tag, k: int, tau: float) -> int:
     """The stroke of plan ``k`` under way at tag time ``tau`` (the last one begun)."""
     onsets = tag.plans[k].onsets
@@ -185,14 +230,24 @@ def build_serial_program(
         moves.append(_Move("draw", k))
         moves.append(_Move("retreat", k, duration=approach, a=end, b=end + lift))
     cap = profile["motion.max_time_scale"]
+    kinds = [m.kind for m in moves]
     for _ in range(ROUNDS):
         parts, q = _solve_job(moves, tag, clocks, placement, profile)
+        starts = np.cumsum([0] + [len(p) for p, _, _ in parts])
+        # Each move's own shape first (with the samples it owns beside it); only once every
+        # move is within the limits on its own, the joins: both moves beside a join too fast
+        # together (neither's own shape alone) slow down.
+        own = [
+            move_excess(q, starts[i], starts[i + 1], owns, T, speed, acceleration)
+            for i, owns in enumerate(_owned(kinds))
+        ]
+        if max(own) <= 1.0:
+            own = [
+                _excess(q[max(0, starts[i] - 1) : starts[i + 1] + 1], T, speed, acceleration)
+                for i in range(len(moves))
+            ]
         slowed = False
-        at = 0
-        for m, (p, _, _) in zip(moves, parts, strict=True):
-            # with the points before and after it: the joins are the moves' too
-            excess = _excess(q[max(0, at - 1) : at + len(p) + 1], T, speed, acceleration)
-            at += len(p)
+        for m, (p, _, _), excess in zip(moves, parts, own, strict=True):
             if excess <= 1.0:
                 continue
             slowed = True
@@ -237,7 +292,7 @@ def build_serial_program(
     t = np.arange(N) * T
     pen = np.concatenate([r[2] for r in rows])
     aimed = angles + feedforward(angles, pen, profile) if profile["servo.feedforward"] else angles
-    goals = np.column_stack([angles_to_ticks(aimed[:, i], j) for i, j in enumerate(joints)])
+    goals = profile_goals(aimed, profile)
     setpoints = Setpoints(
         t=t,
         xy=np.concatenate([r[0] for r in rows]),
@@ -308,6 +363,41 @@ def _solve_job(
     return [p for p in parts if p is not None], np.concatenate([a for a in angles if a is not None])
 
 
+def profile_goals(angles: Array, profile: SerialProfile) -> NDArray[np.int64]:
+    """Whole-tick goals for the joint angles ``(N, joints)`` planned one period apart.
+
+    Each goal is a straight move of ``servo.profile_ms`` from where the servo's profile is,
+    cut short by the next goal one period ``T`` later (the time-based profile with
+    ``servo.acceleration_fraction = 0``; sent ``profile_ms`` ahead of its time): after one
+    period the profile is ``p + α·(goal − p)``, ``α = T / profile_ms``. Rounding each goal
+    alone puts the profile up to half a tick off the plan and lags it where the motion
+    bends (on the simulated OpenManipulator-X half a tick of each joint is 0.15-0.2 mm at the
+    pen); here each goal is the whole tick that brings the profile nearest the plan's angle at
+    that instant, from where the earlier goals left it: within ``α/2`` tick (a quarter at a
+    20 ms profile and 100 Hz), its lag undone. Steady motion gets the same goals as rounding.
+    Goals stay within the joints' ranges (the servos' position limits); with a ramped profile
+    (``acceleration_fraction > 0``) each goal is the angle rounded."""
+    joints = profile.joints
+    exact = np.column_stack([exact_ticks(angles[:, i], j) for i, j in enumerate(joints)])
+    if profile["servo.acceleration_fraction"] > 0.0 or not len(exact):
+        return np.rint(exact).astype(np.int64)
+    ends = np.array([angles_to_ticks([j.lower, j.upper], j) for j in joints])
+    low, high = ends.min(axis=1), ends.max(axis=1)
+    alpha = min(1.0, profile.period / profile.lead)
+    # the plan's angle one period after each goal is sent (fractional rows between samples)
+    rows = np.arange(len(exact)) + 1.0 - 1.0 / alpha
+    target = np.column_stack(
+        [np.interp(rows, np.arange(len(exact)), exact[:, i]) for i in range(len(joints))]
+    )
+    goals = np.empty(exact.shape, dtype=np.int64)
+    where = goals[0] = np.clip(np.rint(exact[0]), low, high)  # the arm stands at the first
+    for k in range(1, len(exact)):
+        goal = np.clip(np.rint(where + (target[k] - where) / alpha), low, high)
+        goals[k] = goal
+        where = where + alpha * (goal - where)
+    return goals
+
+
 def _check_clearance(q: Array, profile: SerialProfile, plan: int, kind: str, tick: int) -> None:
     """Refuse a joint-space move that brings the pen's point closer than half the pen-up
     height to the paper's plane."""
@@ -336,8 +426,10 @@ def feedforward(angles: Array, pen: NDArray[np.bool_], profile: SerialProfile) -
     the loop period), plus the motor's back-EMF at the planned rate, less the paper's force on
     the pen's point, all divided by the loop's stiffness (:attr:`SerialProfile.stiffness`).
 
-    The paper's force: ``robot.pen_force`` along its normal where the point is aimed
-    ``robot.press`` into it (in proportion above that, none above the paper), and the drag
+    The paper's force along its normal, as the pen holder's preloaded spring gives it:
+    ``robot.pen_preload`` (at most ``robot.pen_force``) as soon as the point is aimed into the
+    paper, growing in proportion to ``robot.pen_force`` where it is aimed ``robot.press`` in
+    (none above the paper), and the drag
     ``robot.pen_friction`` times that against the point's motion along the paper (eased in
     below :data:`FRICTION_SPEED`). ``pen`` is
     unused beyond its length: the force follows the planned height. A single row is a pose
@@ -353,6 +445,7 @@ def feedforward(angles: Array, pen: NDArray[np.bool_], profile: SerialProfile) -
     normal, origin = paper.normal, np.asarray(paper.origin)
     press = max(profile["robot.press"], 1e-3) / 1000.0
     force, mu = profile["robot.pen_force"], profile["robot.pen_friction"]
+    preload = min(profile["robot.pen_preload"], force)
     tips, _ = arm.fk(angles)
     velocity = _rate(tips, T)
     torque = np.empty_like(angles)
@@ -364,7 +457,7 @@ def feedforward(angles: Array, pen: NDArray[np.bool_], profile: SerialProfile) -
         torque[i] = data.qfrc_inverse
         depth = -float(normal @ (tips[i] - origin))
         if depth > 0.0 and force > 0.0:
-            push = force * min(1.0, depth / press) * normal
+            push = (preload + (force - preload) * min(1.0, depth / press)) * normal
             slide = velocity[i] - (velocity[i] @ normal) * normal
             speed = float(np.linalg.norm(slide))
             if speed > 0.0:  # Coulomb's drag, eased in below FRICTION_SPEED (sticking)
