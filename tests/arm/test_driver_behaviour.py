@@ -7,13 +7,16 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+import dynamixel_sdk as sdk
 import pytest
 
 import tagbot
 from tagbot.arm import load_profile, prepare
-from tagbot.arm.driver import UrlPortHandler
+from tagbot.arm.driver import ArmDriver, UrlPortHandler
 from tagbot.arm.run import simulated_chain
-from tagbot.errors import DeviceError, DeviceTimeout, Interrupted
+from tagbot.arm.serial.machine import prepare as serial_prepare
+from tagbot.draw import draw
+from tagbot.errors import ConnectionLost, DeviceError, DeviceTimeout, Interrupted
 from tagbot.io.planfile import load_plan
 
 from .conftest import two_plan_tag
@@ -100,3 +103,71 @@ def test_a_lift_that_cannot_be_written_is_named_in_the_message_and_the_log(
     )
     failed = "safe stop failed: stop: could not write SYNC_WRITE of goal positions to dxlsim"
     assert any(r.getMessage().startswith(failed) for r in caplog.records)
+
+
+def test_connecting_waits_for_a_reply_as_long_as_bus_silence_timeout(record):
+    """While connecting, the SDK's packet timeout allows ``bus.silence_timeout`` (not its own
+    34 ms): a servo slow to wake is not taken for a missing one."""
+    profile = load_profile(overrides=("bus.silence_timeout=0.4",))
+    sim = record(simulated_chain(profile))
+    with ArmDriver(sim.url, profile) as driver:
+        driver.open()
+        assert driver.port.reply_allowance_ms == pytest.approx(400.0, abs=1e-9)
+
+
+def test_a_second_safe_stop_sends_nothing(record, profile):
+    sim = record(simulated_chain(profile))
+    with ArmDriver(sim.url, profile) as driver:
+        driver.connect()
+        driver.safe_stop(error=False)
+        written = len(sim.writes)
+        driver.safe_stop(error=False)
+        assert len(sim.writes) == written
+
+
+def test_a_failed_read_while_draining_names_the_port_and_the_drain(record, profile):
+    sim = record(simulated_chain(profile))
+    with ArmDriver(sim.url, profile) as driver:
+        driver.connect()
+
+        class Broken:
+            in_waiting = 5
+
+            def read(self, n: int) -> bytes:
+                raise OSError("the adapter went away")
+
+        real, driver.port.ser = driver.port.ser, Broken()
+        try:
+            with pytest.raises(ConnectionLost) as caught:
+                driver.drain()
+        finally:
+            driver.port.ser = real
+    assert str(caught.value) == f"drain: {sim.url}: drain: the adapter went away"
+
+
+def test_a_missing_servo_and_a_failed_broadcast_ping_name_the_connect(record, profile, monkeypatch):
+    sim = record(simulated_chain(profile))
+    sim.chain.silence(2)
+
+    def gone(self, port):
+        raise OSError("the adapter went away")
+
+    monkeypatch.setattr(type(sdk.PacketHandler(2.0)), "broadcastPing", gone)
+    with ArmDriver(sim.url, profile) as driver, pytest.raises(ConnectionLost) as caught:
+        driver.connect()
+    assert str(caught.value) == f"connect: {sim.url}: broadcast ping: the adapter went away"
+
+
+def test_a_gain_that_cannot_be_written_is_named_at_configure(tmp_path, monkeypatch):
+    """The serial arm's position gains (2-byte RAM writes) are written at connect: a failed
+    write names the stage, the value and the address."""
+
+    def fails(self, port, id, address, value):
+        return sdk.COMM_TX_FAIL, 0
+
+    monkeypatch.setattr(type(sdk.PacketHandler(2.0)), "write2ByteTxRx", fails)
+    job = serial_prepare(load_plan(LETTER_B), profile="openmanipulator-x")
+    with pytest.raises(
+        ConnectionLost, match=r"^configure: could not write WRITE of \d+ to address"
+    ):
+        draw(load_plan(LETTER_B), tmp_path / "gain", prepared=job, pictures=False)

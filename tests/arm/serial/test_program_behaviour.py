@@ -118,3 +118,42 @@ def test_the_check_refuses_a_joint_just_beyond_its_acceleration_and_speed_not_at
                 check_serial_program(program, fast)
         else:
             check_serial_program(program, fast)
+
+
+@pytest.mark.parametrize("degrees", [90.0, 30.0])
+def test_place_rotation_turns_the_tag_counter_clockwise_without_a_mirror(degrees):
+    profile = load_serial_profile("openmanipulator-x", [f"place.rotation={degrees}"])
+    placement = place_on_paper(load_plan(EXAMPLES / "letter-b.json"), profile)
+    theta = np.radians(degrees)
+    turn = np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]])
+    np.testing.assert_allclose(placement.matrix, placement.mm_per_unit * turn, atol=1e-12)
+    # the tag's up (+y) points to the paper's left at 90°
+    assert np.linalg.det(placement.matrix) > 0
+
+
+def _drawn_length(program) -> float:
+    """mm of path drawn with the pen down."""
+    xy = program.setpoints.xy[program.setpoints.pen]
+    return float(np.hypot(*np.diff(xy, axis=0).T).sum())
+
+
+def test_a_run_is_trimmed_at_both_ends_until_its_path_is_twice_the_trim():
+    """letter-b's run with motion.trim_mm at 2/5 of its path: 2/5 off at either end, a fifth
+    of it drawn (the trim stops only at a path of two trims or less)."""
+    tag = load_plan(EXAMPLES / "letter-b.json")
+    whole = _drawn_length(
+        build_serial_program(tag, load_serial_profile("openmanipulator-x", ["motion.trim_mm=0"]))
+    )
+    trim = 0.4 * whole
+    profile = load_serial_profile("openmanipulator-x", [f"motion.trim_mm={trim}"])
+    drawn = _drawn_length(build_serial_program(tag, profile))
+    assert drawn == pytest.approx(whole - 2 * trim, rel=0.1)
+
+
+def test_pen_up_ticks_belong_to_no_plan():
+    program = build_serial_program(
+        load_plan(EXAMPLES / "cae.json"), load_serial_profile("openmanipulator-x")
+    )
+    setpoints = program.setpoints
+    assert set(setpoints.plan[~setpoints.pen].tolist()) == {-1}
+    assert set(setpoints.plan[setpoints.pen].tolist()) == {0, 1, 2}
