@@ -418,8 +418,10 @@ class SerialBudget:
     :data:`MIN_SPEED_SNR_DB`, contact kept through the planned ink and the nib's force within
     :data:`FORCE_RANGE`; a warning naming the run and the figure otherwise. A run whose SNR
     is low and whose planned path is shorter than :data:`SHORT_RUN_MM` is named as such: the
-    nib's chatter and sticking on the paper are as large as such a run's motion (measured:
-    BENCHMARKS.md, session 19)."""
+    arm's own response there, the nib's friction and its contact's chatter on the paper and the
+    servos' whole ticks, is as large as such a run's motion (measured: with sub-tick goals and
+    frictionless paper a 1.4 mm run still scores 14 dB on the simulator; BENCHMARKS.md,
+    session 20)."""
 
     contacts: list[dict[str, float]]
     lengths: list[float] = field(default_factory=list)
@@ -436,7 +438,9 @@ class SerialBudget:
                 why = ""
                 if i < len(self.lengths) and self.lengths[i] < SHORT_RUN_MM:
                     why = (
-                        f" (a short run, {self.lengths[i]:.1f} mm: the nib's chatter on the paper)"
+                        f" (a short run, {self.lengths[i]:.1f} mm: the nib's friction and"
+                        " chatter on the paper and the servos' whole ticks are as large as its"
+                        " motion)"
                     )
                 over.append(f"speed SNR {snr:.1f} dB below {MIN_SPEED_SNR_DB:g} dB{why}")
             if i < len(self.contacts):
