@@ -264,6 +264,20 @@ def test_errors_name_the_line(text: str, message: str) -> None:
     assert error(unp(text)).startswith(message)
 
 
+def test_bytes_without_a_name_are_named_as_unipen_in_errors() -> None:
+    for read in (parse_unipen, read_unipen):
+        with pytest.raises(InputError) as e:
+            read(unp(".COORD X Y\n.PEN_DOWN\n1 1\n.COORD X Y T\n"))
+        assert str(e.value).startswith("<unipen>: line 4: .COORD changes after pen data")
+
+
+@pytest.mark.parametrize("text", ["", "\n \n\t\n", "\ufeff\n", "\n" * 70 + ".PEN_DOWN\n"])
+def test_text_whose_first_64_lines_are_blank_is_not_taken_for_unipen(text: str) -> None:
+    """Only the first 64 lines are looked at (a bounded peek): blank ones say nothing."""
+    assert not unipen.looks_like_unipen(text)
+    assert unipen.looks_like_unipen("\n" * 63 + ".PEN_DOWN\n")
+
+
 def test_size_limit() -> None:
     data = unp(".PEN_DOWN\n") + b" " * (MAX_INPUT_BYTES - 10)
     assert error(data + b" ").startswith("file is 33 MB, more than the 32 MB limit")
