@@ -240,6 +240,24 @@ def print_fidelity(rows: list[dict[str, Any]]) -> None:
 
 # -- loop timing --------------------------------------------------------------------------------
 
+STOP_WAIT = 10.0
+"""s a simulator server is given to stop after each signal before the next, stronger one."""
+
+
+def stop_server(server: subprocess.Popen) -> None:
+    """Stop a ``tagbot sim`` server as Ctrl-C would (SIGINT), then, if it has not ended within
+    :data:`STOP_WAIT` (started from a background job of a non-interactive shell it inherits
+    SIGINT ignored), SIGTERM, then SIGKILL: no server outlives its benchmark."""
+    for stop in (lambda: server.send_signal(signal.SIGINT), server.terminate, server.kill):
+        if server.poll() is not None:
+            return
+        stop()
+        try:
+            server.wait(timeout=STOP_WAIT)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+
 
 @contextlib.contextmanager
 def hogs(count: int):
@@ -302,8 +320,7 @@ def _timed(
             run = job.run(Path(out))
             loadavg = os.getloadavg()[0]
     finally:
-        server.send_signal(signal.SIGINT)
-        server.wait(timeout=10)
+        stop_server(server)
     report = run_report(run)
     d = run.details
     return {
@@ -478,8 +495,7 @@ def serial_timing(tag: tagbot.Tag) -> dict[str, Any]:
             run = job.run(Path(out))
             loadavg = os.getloadavg()[0]
     finally:
-        server.send_signal(signal.SIGINT)
-        server.wait(timeout=10)
+        stop_server(server)
     report = run_report(run)
     d = run.details
     return {
