@@ -371,8 +371,8 @@ def profile_goals(angles: Array, profile: SerialProfile) -> NDArray[np.int64]:
     ``servo.acceleration_fraction = 0``; sent ``profile_ms`` ahead of its time): after one
     period the profile is ``p + α·(goal − p)``, ``α = T / profile_ms``. Rounding each goal
     alone puts the profile up to half a tick off the plan and lags it where the motion
-    bends (on the simulated OpenManipulator-X half a tick of each joint is 0.15-0.2 mm at the
-    pen); here each goal is the whole tick that brings the profile nearest the plan's angle at
+    bends (on the OpenManipulator-X half a tick of a joint moves the pen 0.05-0.17 mm along
+    the paper); here each goal is the whole tick that brings the profile nearest the plan's angle at
     that instant, from where the earlier goals left it: within ``α/2`` tick (a quarter at a
     20 ms profile and 100 Hz), its lag undone. Steady motion gets the same goals as rounding.
     Goals stay within the joints' ranges (the servos' position limits); with a ramped profile
