@@ -263,6 +263,12 @@ def build_scene(
     )
     # in the slider's frame (the tip site's orientation at the holder's origin)
     to_slider = _rotation_of(tip_quat).T
+    # The nib keeps MuJoCo's default solref (0.02, 1) and solimp (0.9, 0.95, ...): a contact
+    # takes the mean of its two geoms', so the nib on the paper is solref (0.011, 1), solimp
+    # (0.945, 0.9745, 0.001, 0.5, 2), not the paper's own (2 timesteps). The paper's own makes
+    # the 3 g nib leave the paper more often (845 one-step hops drawing dusttag-142 against
+    # 131) and spike to 1.5 N; softer (0.02-0.04 s) hops less but sinks 1.2-1.7 mm into it
+    # (BENCHMARKS.md, session 20).
     body.add_geom(
         name=nib,
         type=mujoco.mjtGeom.mjGEOM_CAPSULE,
