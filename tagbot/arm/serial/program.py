@@ -24,8 +24,7 @@ are checked by differences at the loop period, the move's own shape with the nei
 samples it owns (:func:`own_window`: where it starts or ends at rest, or a run's joins), and a
 move that exceeds a joint's ``max_speed`` or ``max_acceleration`` is slowed by the excess and
 the job solved again (a run keeps its shape: its scale grows; a pen-up move takes longer),
-until none does; then the joins between moves, both moves beside one too fast together
-slowing down. The goals are whole ticks chosen for the servos' time-based profile
+until none does. The goals are whole ticks chosen for the servos' time-based profile
 (:func:`profile_goals`). A point out of
 reach, beyond a joint limit, tilted beyond ``robot.max_tilt_deg`` or a run that must be slowed
 more than ``motion.max_time_scale`` is a :class:`~tagbot.errors.PlacementError` naming the
@@ -234,18 +233,14 @@ def build_serial_program(
     for _ in range(ROUNDS):
         parts, q = _solve_job(moves, tag, clocks, placement, profile)
         starts = np.cumsum([0] + [len(p) for p, _, _ in parts])
-        # Each move's own shape first (with the samples it owns beside it); only once every
-        # move is within the limits on its own, the joins: both moves beside a join too fast
-        # together (neither's own shape alone) slow down.
+        # Each move's own shape, with the samples it owns beside it: pen moves and travel
+        # start and end at rest (minimum-jerk), so the steps meeting where two of them join
+        # are their smallest; a run's joins are its own. check_serial_program checks the
+        # whole job at the end.
         own = [
             move_excess(q, starts[i], starts[i + 1], owns, T, speed, acceleration)
             for i, owns in enumerate(_owned(kinds))
         ]
-        if max(own) <= 1.0:
-            own = [
-                _excess(q[max(0, starts[i] - 1) : starts[i + 1] + 1], T, speed, acceleration)
-                for i in range(len(moves))
-            ]
         slowed = False
         for m, (p, _, _), excess in zip(moves, parts, own, strict=True):
             if excess <= 1.0:
