@@ -185,3 +185,37 @@ def test_a_stop_before_the_motors_left_home_resumes_from_move_1():
         assert job._executed_moves(report) == (0, 0)
         report = StreamReport(first=0, sent=1, executed=0, stopped_at=(3, 1))
         assert job._executed_moves(report) == (0, 1)  # under way: cut short
+
+
+def test_a_stop_waits_for_the_pen_to_be_all_the_way_up(tmp_path):
+    """A slow raise and a quick lowering: when the stop returns, the pen servo is at the
+    up position (the wait is the raise's, not the lowering's)."""
+    tag = load_plan(LETTER_B)
+    device = SimulatedEBB()
+    slow_raise = ("pen.rate_raise=5", "pen.rate_lower=100")
+    job = prepare(tag, port=_url(device), overrides=slow_raise)
+    profile = job.profile
+    assert profile.pen_time(False) > 2 * profile.pen_time(True)
+
+    def progress(done: int, total: int) -> None:
+        if done >= total // 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted):
+        run = job.run(tmp_path, progress=progress)
+        raise run.error
+    assert device.pen_position() == profile.servo_position(profile["pen.up"])
+
+
+def test_the_report_names_the_t3_moves_and_the_placement(tmp_path):
+    tag = load_plan(LETTER_B)
+    job = prepare(tag)
+    report = draw(tag, tmp_path / "r", prepared=job, pictures=False).report
+    draws = [e for e in job.job.entries if e.kind == "draw"]
+    t3 = sum(e.move.command == "T3" for e in draws)
+    assert report["details"]["t3_moves"] == t3 > 0
+    placement = report["placement"]
+    assert placement["mm_per_unit"] == pytest.approx(job.setpoints.size)
+    assert placement["matrix"] == job.setpoints.matrix.tolist()
+    (run,) = placement["runs"]
+    assert run["start"] == pytest.approx(job.job.run_start[0])

@@ -14,9 +14,12 @@ import tagbot
 from tagbot.arm.serial.profile import load_serial_profile
 from tagbot.arm.serial.program import (
     MIN_JERK_PEAK_RATE,
+    _excess,
     _joint_move,
+    _owned,
     build_serial_program,
     check_serial_program,
+    move_excess,
     place_on_paper,
 )
 from tagbot.errors import PlacementError
@@ -157,3 +160,41 @@ def test_pen_up_ticks_belong_to_no_plan():
     setpoints = program.setpoints
     assert set(setpoints.plan[~setpoints.pen].tolist()) == {-1}
     assert set(setpoints.plan[setpoints.pen].tolist()) == {0, 1, 2}
+
+
+def test_which_neighbouring_samples_a_move_answers_for():
+    """A run or a joint-space move owns the samples beside it; a pen move owns none on a side
+    where travel or park meets it (at rest there: the joint-space move's shape decides)."""
+    kinds = ["travel", "approach", "draw", "retreat", "park"]
+    assert _owned(kinds) == [
+        (False, True),  # travel: nothing before it; the approach's first sample is its
+        (False, True),
+        (True, True),
+        (True, False),
+        (True, False),  # park: the retreat's last sample, nothing after it
+    ]
+    assert _owned(["draw"]) == [(False, False)]
+
+
+def test_a_moves_excess_counts_the_samples_it_owns_and_no_others():
+    """A spike in the sample just after a move counts against it only if it owns that side."""
+    limits = np.full(2, 1.0)
+    q = np.zeros((10, 2))
+    q[6, 0] = 1e-4  # just after rows 2:6
+    T = 0.01
+    alone = move_excess(q, 2, 6, (False, False), T, limits, limits)
+    owned = move_excess(q, 2, 6, (False, True), T, limits, limits)
+    assert alone == 0.0
+    # the step into it, the arm standing still after: 1e-4 / T² = 1 rad/s², at the limit
+    assert owned == pytest.approx(1.0)
+
+
+def test_each_joint_is_held_to_its_own_acceleration():
+    """Two joints, one with ten times the other's acceleration limit: the excess is each
+    joint's own ratio, the larger of them (not the largest move against the smallest limit)."""
+    speed = np.full(2, 100.0)
+    acceleration = np.array([1.0, 10.0])
+    T = 0.01
+    q = np.zeros((5, 2))
+    q[2] = [0.5e-4, 4e-4]  # joint 0: 1 rad/s² peak; joint 1: 8 rad/s² against its 10
+    assert _excess(q, T, speed, acceleration) == pytest.approx(1.0)
