@@ -278,6 +278,17 @@ def test_text_whose_first_64_lines_are_blank_is_not_taken_for_unipen(text: str) 
     assert unipen.looks_like_unipen("\n" * 63 + ".PEN_DOWN\n")
 
 
+def test_only_a_byte_order_mark_is_skipped_before_the_first_keyword() -> None:
+    assert unipen.looks_like_unipen("\ufeff.PEN_DOWN\n1 1\n")
+    assert not unipen.looks_like_unipen("X.PEN_DOWN\n1 1\n")
+    assert not unipen.looks_like_unipen("X\ufeff.PEN_DOWN\n1 1\n")
+
+
+def test_a_unit_repeated_unchanged_after_pen_data_is_accepted() -> None:
+    text = ".X_POINTS_PER_MM 5\n.PEN_DOWN\n10 20\n20 20\n.X_POINTS_PER_MM 5\n.PEN_DOWN\n30 30\n"
+    assert [len(t) for t in read_unipen(unp(text))] == [2, 1]
+
+
 def test_size_limit() -> None:
     data = unp(".PEN_DOWN\n") + b" " * (MAX_INPUT_BYTES - 10)
     assert error(data + b" ").startswith("file is 33 MB, more than the 32 MB limit")
