@@ -171,3 +171,30 @@ def test_a_gain_that_cannot_be_written_is_named_at_configure(tmp_path, monkeypat
         ConnectionLost, match=r"^configure: could not write WRITE of \d+ to address"
     ):
         draw(load_plan(LETTER_B), tmp_path / "gain", prepared=job, pictures=False)
+
+
+def test_a_servo_whose_ping_replies_are_all_corrupt_is_named(record, profile):
+    sim = record(simulated_chain(profile))
+    sim.chain.corrupt_next(2, 10)  # more than the driver's tries
+    with ArmDriver(sim.url, profile) as driver, pytest.raises(DeviceError) as caught:
+        driver.connect()
+    assert str(caught.value).startswith("connect: servo 2 (elbow): PING: ")
+
+
+def test_a_port_that_fails_to_close_is_logged_not_raised(record, profile, caplog):
+    sim = record(simulated_chain(profile))
+    driver = ArmDriver(sim.url, profile)
+    driver.open()
+    real = driver.port.ser
+
+    class Failing:
+        def flush(self) -> None:
+            raise OSError("the adapter went away")
+
+    driver.port.ser = Failing()
+    with caplog.at_level(logging.DEBUG, logger="tagbot.arm.driver"):
+        driver.close()
+    real.close()
+    assert driver.port is None
+    closing = f"closing {sim.url}: the adapter went away"
+    assert any(r.getMessage() == closing for r in caplog.records)
