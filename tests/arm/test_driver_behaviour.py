@@ -198,3 +198,19 @@ def test_a_port_that_fails_to_close_is_logged_not_raised(record, profile, caplog
     assert driver.port is None
     closing = f"closing {sim.url}: the adapter went away"
     assert any(r.getMessage() == closing for r in caplog.records)
+
+
+def test_connecting_logs_the_profile_it_configured_and_names_unknown_ids(record, profile, caplog):
+    sim = record(simulated_chain(profile))
+    with ArmDriver(sim.url, profile) as driver:
+        with caplog.at_level(logging.INFO, logger="tagbot.arm.driver"):
+            driver.connect()
+        assert driver.who(99) == "servo 99 (?)"  # an ID the profile does not name
+    assert any(r.getMessage().startswith("configured: time-based profile ") for r in caplog.records)
+
+
+def test_a_hardware_error_names_every_bit_set(tmp_path):
+    error, *_ = _faulted(
+        load_plan(LETTER_B), tmp_path, lambda chain: chain.set_hardware_error(13, 0x24)
+    )
+    assert "hardware error: overheating, overload (Hardware Error Status 0x24)" in str(error)
