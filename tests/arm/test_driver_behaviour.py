@@ -19,7 +19,7 @@ from tagbot.draw import draw
 from tagbot.errors import ConnectionLost, DeviceError, DeviceTimeout, Interrupted
 from tagbot.io.planfile import load_plan
 
-from .conftest import two_plan_tag
+from .conftest import GOAL_POSITION, two_plan_tag
 from .serial.test_serial_machine import _faulted, _interrupt
 
 LETTER_B = Path(tagbot.__file__).parent / "examples" / "letter-b.json"
@@ -214,3 +214,19 @@ def test_a_hardware_error_names_every_bit_set(tmp_path):
         load_plan(LETTER_B), tmp_path, lambda chain: chain.set_hardware_error(13, 0x24)
     )
     assert "hardware error: overheating, overload (Hardware Error Status 0x24)" in str(error)
+
+
+@pytest.mark.parametrize(("move_time", "goals"), [(0.001, 1), (0.01, 1), (0.035, 4)])
+def test_lowering_the_pen_sends_one_goal_a_tick_for_pen_move_time(record, move_time, goals):
+    """A resume lowers the pen in pen.move_time at the loop period: one goal a tick, at least
+    one (a move quicker than a tick is one goal)."""
+    profile = load_profile(overrides=(f"pen.move_time={move_time}",))
+    sim = record(simulated_chain(profile))
+    pen = profile["pen.id"]
+    with ArmDriver(sim.url, profile) as driver:
+        driver.connect()
+        before = len(sim.values(pen, GOAL_POSITION))
+        down = profile["pen.down"]
+        driver.lower_pen(down)
+        sent = sim.values(pen, GOAL_POSITION)[before:]
+    assert len(sent) == goals and sent[-1] == down
