@@ -151,11 +151,16 @@ class Lifter(Protocol):
     """How a serial arm lifts its pen by itself: :meth:`up` gives the goal rows (one a period,
     every servo in bus order) from the pose ``row`` to the pen-up height above it along the
     paper's normal, empty when the pen is up already; :meth:`down` the way back, ending on the
-    pose of ``row`` held still."""
+    pose of ``row`` held still; :meth:`stand` the one row holding ``row``'s pose still;
+    :meth:`is_up` whether ``row``'s pose holds the pen off the paper."""
 
     def up(self, row: NDArray[np.int64]) -> NDArray[np.int64]: ...
 
     def down(self, row: NDArray[np.int64]) -> NDArray[np.int64]: ...
+
+    def stand(self, row: NDArray[np.int64]) -> NDArray[np.int64]: ...
+
+    def is_up(self, row: NDArray[np.int64]) -> bool: ...
 
 
 class Scheduler:
@@ -959,11 +964,16 @@ class ArmDriver:
                 f" {goals[i]} (blocked, or torque off?)",
                 where,
             )
+        self._streaming_profile(where)
+        self.last_row = [int(g) for g in goals]
+
+    def _streaming_profile(self, where: str) -> None:
+        """Every servo back on the streaming profile (``profile_ms``) after a move of its own."""
+        p = self.profile
         streaming = time_based_profile(
             p.profile_ms, int(p["servo.acceleration_fraction"] * p.profile_ms)
         )
         self._profile_all({id: streaming for id in self.ids}, where)
-        self.last_row = [int(g) for g in goals]
 
     @property
     def pen_id(self) -> int | None:
@@ -1249,19 +1259,37 @@ class ArmDriver:
     def _lift_by_arm(self, error: bool, result: StreamResult | None) -> None:
         """A serial arm's safe stop: once the last goal is reached, the arm itself lifts the pen
         along the paper's normal to the pen-up height and holds; after an error, torque off only
-        if ``servo.torque_off_after_error`` (the arm then falls). Best effort, as
-        :meth:`safe_stop`: :attr:`lifted` says whether the pen is up, :attr:`lift_failure` why
-        not (also when a second interrupt cut the lift short, which is re-raised)."""
+        if ``servo.torque_off_after_error`` (the arm then falls). Stopped before the stream
+        sent anything (connecting, the approach, a resume's touch-down) the arm is where its
+        present positions say, not at a goal: it is held there and lifted from there, or, with
+        its torque not on yet, left as it is. Best effort, as :meth:`safe_stop`: :attr:`lifted`
+        says whether the pen is up, :attr:`lift_failure` why not (also when a second interrupt
+        cut the lift short, which is re-raised)."""
         p = self.profile
-        assert self.lifter is not None
+        lifter = self.lifter
+        assert lifter is not None
         self.lift_failure = "interrupted before the pen was up"  # until the lift is done
         try:
             if result is not None and result.scheduler is not None and result.scheduler.sends:
                 self.clock.sleep_until(result.scheduler.sends[-1] + p.lead)
-            if self.last_row is not None:
-                rows = self.lifter.up(np.asarray(self.last_row, dtype=np.int64))
-                if len(rows):
-                    self._rows(rows, None, "stop")
+                pose = np.asarray(self.last_row, dtype=np.int64)
+                rows = lifter.up(pose)
+            else:
+                self.drain(DRAIN_QUIET)  # a reply to an interrupted request is no pose
+                pose = self.read_present("stop")
+                if not self.torque_on:
+                    if not lifter.is_up(pose):
+                        self.lift_failure = (
+                            "stopped before the arm was under torque, with the pen on the paper"
+                        )
+                        log.error("safe stop: %s", self.lift_failure)
+                        return
+                    rows = pose[:0]
+                else:  # the approach's own move cut where the arm is, then the lift
+                    self._streaming_profile("stop")
+                    rows = np.concatenate([lifter.stand(pose), lifter.up(pose)])
+            if len(rows):
+                self._rows(rows, None, "stop")
             self.lifted, self.lift_failure = True, None
             if error and p["servo.torque_off_after_error"]:
                 self.set_torque(list(self.ids), False, "stop")

@@ -128,6 +128,15 @@ class ArmLift:
         tip, _ = self.arm.fk(q)
         return float(self.paper.normal @ (tip - np.asarray(self.paper.origin)))
 
+    def is_up(self, row: NDArray[np.int64]) -> bool:
+        """Whether the pose of ``row`` (ticks, e.g. present positions) holds the pen off the
+        paper: its point at least half the pen-up height above it."""
+        return self.height(self._pose(row)) >= self.profile["robot.pen_up"] / 2000.0
+
+    def stand(self, row: NDArray[np.int64]) -> NDArray[np.int64]:
+        """The goal row holding ``row``'s pose still (its feedforward without the motion's)."""
+        return self._goals(self._pose(row)[None, :])
+
     def up(self, row: NDArray[np.int64]) -> NDArray[np.int64]:
         """Goal rows from ``row`` up to the pen-up height (empty when already there)."""
         return self._path(row)[1:]
@@ -141,27 +150,22 @@ class ArmLift:
         """Goal rows from ``row``'s planned pose (standing: the first row) to the pen-up height
         above it; just that first row when the pen is up already."""
         p = self.profile
-        key = tuple(int(v) for v in np.asarray(row).tolist())
-        q = self.planned.get(key)
-        if q is None:
-            q = self.angles(np.asarray(row))
+        q = self._pose(row)
         tip, _ = self.arm.fk(q)
         n = self.paper.normal
         rise = p["robot.pen_up"] / 1000.0 - self.height(q)
         if rise <= 1e-4:
-            path = q[None, :]
-            if p["servo.feedforward"]:
-                path = path + feedforward(path, np.zeros(1, dtype=bool), p)
-            return np.column_stack(
-                [angles_to_ticks(path[:, i], j) for i, j in enumerate(self.joints)]
-            ).astype(np.int64)
+            return self._goals(q[None, :])
         T = p.period
         duration = MIN_JERK_PEAK_RATE * rise * 1000.0 / p["motion.approach_speed"]
         for _ in range(8):
             count = max(2, math.ceil(duration / T - 1e-9))
             points = tip + min_jerk(count)[:, None] * rise * n
             path = self.arm.solve_path(points, n, p.max_tilt, q)
-            path[0] = q
+            # from the pose itself: a pose the IK would hold otherwise (a present position
+            # found by hand or sagged, its wrist at another tilt) keeps its own joints' offset
+            # up the lift, not a jump to the IK's in one tick
+            path += q - path[0]
             steps = np.concatenate([path[:1], path, path[-1:]])
             rate = np.max(np.abs(np.diff(steps, axis=0)), axis=0) / T / self.speed
             acc = np.max(np.abs(np.diff(steps, 2, axis=0)), axis=0) / T**2 / self.acceleration
@@ -169,7 +173,18 @@ class ArmLift:
             if excess <= 1.0:
                 break
             duration = min(duration * excess * 1.01, LIFT_LONGEST)
-        if p["servo.feedforward"]:  # as the program's goals: the torque each pose needs
+        return self._goals(path)
+
+    def _pose(self, row: NDArray[np.int64]) -> Array:
+        """The angles of ``row``: the planned pose of a program's goal row, else the ticks'."""
+        q = self.planned.get(tuple(int(v) for v in np.asarray(row).tolist()))
+        return self.angles(np.asarray(row)) if q is None else q
+
+    def _goals(self, path: Array) -> NDArray[np.int64]:
+        """Goal rows (ticks) of poses held in turn, pen up: with the torque each pose needs when
+        ``servo.feedforward`` (as the program's goals)."""
+        p = self.profile
+        if p["servo.feedforward"]:
             path = path + feedforward(path, np.zeros(len(path), dtype=bool), p)
         goals = [angles_to_ticks(path[:, i], j) for i, j in enumerate(self.joints)]
         return np.column_stack(goals).astype(np.int64)
