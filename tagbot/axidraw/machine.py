@@ -16,11 +16,12 @@ pen-down run of the move executing then.
 **Resume** (``resume_from``: a move of ``moves.txt``): the board's ``QS`` says where the
 motors are; tagbot lifts the pen, travels to where that move starts (``LM``), lowers the pen if
 it was down there, and streams from it. After a stop, ``resume_from`` is the first move that had
-not started: a move cut short is not drawn again (what is left of it, at most ``motion.dt`` s
-of drawing, is skipped), so nothing is drawn twice. ``EM`` at connect clears the board's step
-accumulators, which the job's moves carry from one to the next: the resumed moves take the same
-steps from a different fraction of a step, so every position after the resume is the plan's
-within one step per motor (0.0125 mm at 16x), not exactly.
+not started (none when nothing of the job ran: it is drawn again as it is, as on the other
+machines; :func:`resume_point`): a move cut short is not drawn again (what is left of it, at
+most ``motion.dt`` s of drawing, is skipped), so nothing is drawn twice. ``EM`` at connect
+clears the board's step accumulators, which the job's moves carry from one to the next: the
+resumed moves take the same steps from a different fraction of a step, so every position after
+the resume is the plan's within one step per motor (0.0125 mm at 16x), not exactly.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ from tagbot.plotter.place import Setpoints, place
 from tagbot.ports import check_port
 from tagbot.signals import label, signal_of
 
-__all__ = ["AxiDrawJob", "find_port", "prepare", "timeline"]
+__all__ = ["AxiDrawJob", "find_port", "prepare", "resumable", "resume_point", "timeline"]
 
 _names = itertools.count()
 
@@ -98,11 +99,26 @@ def prepare(
         check_port(port)
     setpoints = place(tag, machine.placement())
     job = build_job(tag, setpoints, machine)
-    if resume_from is not None and not 2 <= resume_from <= len(job.entries):
+    if resume_from is not None and not resumable(job, resume_from):
         raise InputError(
             f"--resume-from: move {resume_from} is not in the job (moves 2 to {len(job.entries)})"
         )
     return AxiDrawJob(tag, machine, setpoints, job, port, resume_from)
+
+
+def resumable(job: Job, move: int) -> bool:
+    """Whether ``--resume-from move`` can resume ``job``: moves 2 to the last (move 1 is the
+    job's start: a job stopped before anything of it ran is drawn again without it)."""
+    return 2 <= move <= len(job.entries)
+
+
+def resume_point(job: Job, done: int, partial: int) -> int | None:
+    """The move a stopped job resumes from (the report's ``resume_from``): the first that had
+    not started, after ``done`` moves executed in full and ``partial`` (0 or 1) cut short. None
+    when ``--resume-from`` has nothing to take: nothing of the job ran (draw it again as it is),
+    or everything left was cut short (the last move, a pen-up travel)."""
+    move = done + 1 + partial
+    return move if resumable(job, move) else None
 
 
 def timeline(job: Job, dt: float) -> MotionTable:
@@ -213,9 +229,7 @@ class AxiDrawJob:
             total=total,
             sent=first + report.sent,
             executed_steps=done,
-            resume_from=(done + 1 + partial)
-            if error is not None and done < len(job.entries)
-            else None,
+            resume_from=resume_point(job, done, partial) if error is not None else None,
             planned_duration=job.duration,
             executed_duration=report.duration,
             placement=placement_of(

@@ -174,9 +174,10 @@ def test_the_planned_pen_is_down_from_the_instant_it_is_lowered():
     assert list(table.pen[3:6]) == [0, 1, 1]
 
 
-def test_a_stop_before_the_motors_left_home_resumes_from_move_1():
-    """Nothing executed, the first move sent but not one step taken: nothing was cut short,
-    so the resume starts with move 1 (on a profile that parks away from home as well)."""
+def test_a_stop_before_the_motors_left_home_cuts_no_move_short():
+    """Nothing executed, the first move sent but not one step taken: nothing was cut short
+    (there is nothing to resume: the job is drawn again as it is); a step taken cuts move 1
+    short (on a profile that parks away from home as well)."""
     tag = load_plan(LETTER_B)
     for overrides in ((), ("motion.park=false",)):
         job = prepare(tag, overrides=overrides)
