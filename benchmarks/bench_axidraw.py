@@ -617,6 +617,19 @@ def measure(name: str, tag: tagbot.Tag, profile_name: str, scratch: Path) -> dic
         planned_drawing_s=report["planned_drawing_s"],
         completed=report["completed"],
     )
+    details = report["details"]
+    margins = [
+        m - q
+        for m, q in zip(
+            details["run_moves_speed_snr_db"], details["run_steps_speed_snr_db"], strict=True
+        )
+        if m is not None and q is not None
+    ]
+    row.update(
+        fifo=details["fifo"],
+        draw_moves=details["draw_moves"],
+        moves_margin_min_db=min(margins, default=math.inf),
+    )
     worst = min(report["runs"], key=lambda r: r["speed_snr_db"] or math.inf, default=None)
     if worst is not None and worst["plan"] in plans:
         t, xy = planned[plans.index(worst["plan"])]
@@ -682,6 +695,13 @@ def print_totals(rows: list[dict[str, Any]]) -> None:
     print(
         f"- {n} tags: worst-run speed SNR ≥ {SNR_GOAL:g} dB on {snr_ok}, deviation ≤"
         f" {DEVIATION_GOAL:g} mm on {dev_ok}, job ≤ {BOUND_GOAL:g} x the bound on {bound_ok}"
+    )
+    margin = min(rows, key=lambda r: r["moves_margin_min_db"])
+    deeper = [r for r in rows if r["fifo"] > 8]
+    print(
+        f"- the moves' own speed error under the steps' by {margin['moves_margin_min_db']:.1f} dB"
+        f" at least ({margin['tag']}); FIFO deeper than 8 on {len(deeper)} tags"
+        f" ({', '.join(str(r['fifo']) for r in deeper) or '-'})"
     )
     worst = min(rows, key=lambda r: r["report_run_snr_min_db"])
     print(

@@ -182,7 +182,7 @@ class AxiDrawJob:
         error: BaseException | None = None
         connected = False
         try:
-            streamer.connect(keep_position=first > 0)
+            streamer.connect(keep_position=first > 0, fifo=job.fifo)
             connected = True
             preamble = self._preamble(streamer, first)
             streamer.stream(
@@ -318,6 +318,8 @@ class AxiDrawJob:
             "t3_moves": sum(e.move is not None and e.move.command == "T3" for e in draws),
             "move_error_max_mm": float(np.max(job.move_error, initial=0.0)),
             "run_error_mm": [float(e) for e in job.run_error],
+            "run_moves_speed_snr_db": [_finite(v) for v in job.run_speed_snr],
+            "run_steps_speed_snr_db": [_finite(v) for v in job.run_step_snr],
             "steps_per_mm": job.steps_per_mm,
             "polls": len(report.polls),
             "button_presses": report.button_presses,
@@ -387,6 +389,11 @@ def _grid(end: float, dt: float) -> np.ndarray:
     that close would be one after adding a job time, and their velocity 0/0)."""
     t = np.arange(0.0, end, dt)
     return np.append(t[t < end - 1e-6], end)
+
+
+def _finite(value: float) -> float | None:
+    """``value`` for report.json (JSON has no inf: None, a run too short for the figure)."""
+    return float(value) if np.isfinite(value) else None
 
 
 def _until(job: Job, done: int) -> float:

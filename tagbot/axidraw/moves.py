@@ -33,6 +33,24 @@ velocity there, down to 4 ms halves, and the run built again. Measured on ``cae.
 0.012 mm with ``LT`` (0.022 and 0.044 mm at 100 ms before splitting); at the default 25 ms
 0.0063 mm with ``T3`` (608 moves), 0.0116 mm with ``LT``.
 
+**Each run's move length, as it needs.** The speed a run is judged by is its position's change
+over ±10 ms (:data:`SPEED_WINDOW`, the comparison's). Whole motor steps cost a run a speed
+error of their own: each motor's rounding is uniform over a step, so its speed over 20 ms
+errs with variance ``2 × (1/12) / 0.02²`` steps²/s², and the run's speed SNR can be no better
+than its plan's speed energy over that (:attr:`Job.run_step_snr`: 28-51 dB on the development
+tags' runs, the slow short ones lowest). The moves' own error is the exact motion's (the
+accumulators' fractions kept: ``C_k / 2³¹`` steps) against the plan, taken over the same
+±10 ms (:attr:`Job.run_speed_snr`). While a run's moves err by more than the steps'
+:data:`SPEED_MARGIN_DB` (15 dB) below, the moves with more than their share are split at their
+middle tick (halves of 10 ms at least) and the run built again: then they take at most
+0.14 dB from its speed SNR. At the default 25 ms no run of the examples and the nine
+development tags looked at needs it (their moves stay 19 dB or more under their steps); with
+``motion.dt = 0.1`` two of cae's three runs have most of their moves halved, letter-b's run
+none. Shorter moves need a deeper FIFO to keep
+the board as far ahead: :attr:`Job.fifo` (:func:`fifo_depth`) holds ``serial.fifo`` x
+``motion.dt`` s of the job in every stretch of commands the board holds at once (0.2 s by
+default: 8 x 25 ms), up to the firmware's 32.
+
 **Travel** (``LM``, pen up): a trapezoid along the longer motor axis at ``limits.travel_speed``
 and ``limits.travel_acceleration`` (accelerate, cruise, decelerate: three ``LM``, step-exact per
 axis, the other motor's rates in proportion so both finish together), from and to a crawl of
@@ -51,7 +69,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, Move, execute
+from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, AxisStart, Move, execute
 from tagbot.axidraw.profile import MOTOR_AXES, Profile
 from tagbot.errors import PlacementError
 from tagbot.model import Tag
@@ -72,6 +90,15 @@ motor, 0.0088 mm at 80 steps/mm, is the position's own rounding; the rest is the
 missing the plan, which halving a move divides by about 16)."""
 MIN_SPLIT_TICKS = 100
 """Ticks (4 ms): a move is split only into halves this long at least."""
+SPEED_WINDOW = 0.01
+"""s: the speed a run is judged by is the position's change over ±this (``report.json``'s
+comparison: central differences on a 10 ms grid); the moves' own speed error is taken alike."""
+SPEED_MARGIN_DB = 15.0
+"""dB: each run's moves keep their own speed error this far under what whole motor steps cost
+the run (they then take at most 0.14 dB from its speed SNR; module docstring)."""
+MIN_SPEED_SPLIT_TICKS = 250
+"""Ticks (10 ms): a move is split for its speed only into halves this long at least (with
+the FIFO's 33 moves, 0.33 s of drawing: the board is never left short, ``Job.fifo``)."""
 CRAWL = 0.001
 """s of travel acceleration a pen-up move starts and ends at (its slowest rate)."""
 _MAX_RATE = ACCUMULATOR_STEP - 1
@@ -120,6 +147,17 @@ class Job:
     steps_per_mm: float
     pen_at: list[tuple[float, bool]] = field(default_factory=list)
     """``(time, down)`` at each pen command's start."""
+    run_speed_snr: list[float] = field(default_factory=list)
+    """Per run: the speed SNR, dB, of its moves' exact motion (the accumulators' fractions
+    kept) against the plan, speeds taken as in the comparison (:data:`SPEED_WINDOW`); inf for a
+    run too short to have one."""
+    run_step_snr: list[float] = field(default_factory=list)
+    """Per run: the speed SNR, dB, whole motor steps allow it (the plan's speed against the
+    rounding's expected noise, half a step either way on each motor; module docstring)."""
+    fifo: int = 1
+    """The motion FIFO depth the job asks (``CU,4``): ``serial.fifo`` at least, deeper where its
+    moves are short, so that the board always holds ``serial.fifo`` x ``motion.dt`` s of the job
+    (:func:`fifo_depth`)."""
 
     @property
     def duration(self) -> float:
@@ -163,7 +201,26 @@ def build_job(tag: Tag, setpoints: Setpoints, profile: Profile, start: Steps = (
         builder.pen(down=False, run=len(builder.runs) - 1)
     if profile["motion.park"]:
         builder.travel(_motor(np.array([profile["motion.park_x"], profile["motion.park_y"]]), k))
-    return builder.job()
+    job = builder.job()
+    base = int(profile["serial.fifo"])
+    job.fifo = fifo_depth([e.duration for e in job.entries], base, base * profile["motion.dt"])
+    return job
+
+
+FIFO_MAX = 32
+"""The deepest motion FIFO firmware 3.0 has (``QU,2``)."""
+
+
+def fifo_depth(durations: Sequence[float], least: int, ahead: float) -> int:
+    """The FIFO depth (at least ``least``, at most :data:`FIFO_MAX`) with which every run of
+    consecutive commands the board holds at once (the FIFO's and the one executing) lasts
+    ``ahead`` s at least: the time the host may be late without the board running dry."""
+    total = np.concatenate([[0.0], np.cumsum(durations)])
+    for depth in range(max(1, least), FIFO_MAX):
+        held = depth + 1
+        if held >= len(total) - 1 or (total[held:] - total[:-held]).min() >= ahead - 1e-9:
+            return depth
+    return FIFO_MAX
 
 
 def _motor(xy: Array, k: float) -> Steps:
@@ -190,12 +247,16 @@ class _Builder:
         self.tick_parts: list[NDArray[np.int64]] = []
         self.time_parts: list[Array] = []
         self.pen_at: list[tuple[float, bool]] = []
+        self.speed_noise: list[float] = []
+        self.run_speed_snr: list[float] = []
+        self.run_step_snr: list[float] = []
 
     def _add(self, kind: str, move: Move | None, line: bytes, duration: float, run: int) -> None:
         self.entries.append(
             Entry(kind, line, self.time, duration, run, self.steps, self.down, move)
         )
         self.errors.append(0.0)
+        self.speed_noise.append(0.0)
         self.time += duration
 
     def _motion(self, kind: str, move: Move, run: int) -> NDArray[np.int64]:
@@ -236,18 +297,27 @@ class _Builder:
         state = (self.steps, self.accumulators, self.time)
         splits: list[int] = []
         while True:
-            starts = self._draw(run, reference, index, splits)
+            starts, allowed = self._draw(run, reference, index, splits)
             first = before[0]
-            errors = self.errors[first:]
+            errors, noise = self.errors[first:], self.speed_noise[first:]
+            lengths = np.diff(starts)
             wide = [
                 g + n // 2
-                for g, n, e in zip(starts[:-1], np.diff(starts), errors, strict=True)
+                for g, n, e in zip(starts[:-1], lengths, errors, strict=True)
                 if e > SPLIT_ERROR and n >= 2 * MIN_SPLIT_TICKS
             ]
+            if not wide and sum(noise) > allowed:  # too fast a change for its moves' length
+                share = allowed / len(noise)
+                wide = [
+                    g + n // 2
+                    for g, n, e in zip(starts[:-1], lengths, noise, strict=True)
+                    if e > share and n >= 2 * MIN_SPEED_SPLIT_TICKS
+                ]
             if not wide:
                 break
             splits += wide
             del self.entries[before[0] :], self.errors[before[1] :]
+            del self.speed_noise[before[1] :]
             del self.tick_parts[before[2] :], self.time_parts[before[3] :]
             self.steps, self.accumulators, self.time = state
         if starts[-1] == starts[0]:  # a dot: no move
@@ -255,13 +325,16 @@ class _Builder:
             self.run_error.append(float(np.hypot(*here)))
         else:
             self.run_error.append(float(max(self.errors[before[1] :])))
+        self.run_speed_snr.append(self._snr)
+        self.run_step_snr.append(self._step_snr)
 
     def _draw(
         self, run: Run, reference: Callable[[Array], Array], index: int, splits: list[int]
-    ) -> list[int]:
+    ) -> tuple[list[int], float]:
         """The run's moves through its setpoints and the ``splits`` (ticks of the run's clock);
-        each move's largest error in :attr:`errors`. Returns the moves' start ticks and the last
-        one's end."""
+        each move's largest error in :attr:`errors` and its speed error in
+        :attr:`speed_noise` (:func:`_speed_figures`). Returns the moves' start ticks and the
+        last one's end, and the speed error the run's moves may have in all."""
         command = "T3" if self.profile["motion.jerk"] else "LT"
         t, xy, v = run.t, run.xy, run.v
         if command == "T3" and len(t) > 1 and t[1] > 2 * SETTLE:
@@ -287,6 +360,7 @@ class _Builder:
         aim = [[round((float(x) + 0.5) * ACCUMULATOR_STEP) for x in row] for row in m]
         rate = (v * self.k * (ACCUMULATOR_STEP / TICK_HZ)).tolist()
         first, parts = len(self.entries), len(self.tick_parts)
+        exact = [_fraction(self.steps, self.accumulators)]  # the exact motion, steps
         for i in range(len(grid) - 1):
             n = int(grid[i + 1] - grid[i])
             goal = (int(target[i + 1, 0]), int(target[i + 1, 1]))
@@ -311,17 +385,30 @@ class _Builder:
                 jerk=(axes[0][2], axes[1][2]) if command == "T3" else (0, 0),
             )
             _check_rates(move)
+            exact.append(_fraction(self.steps, self.accumulators) + _exact(move))
             self._motion("draw", move, index)
             if self.steps != goal:  # pragma: no cover - _axis ends on its target by construction
                 raise RuntimeError(f"a {command} move ended at {self.steps}, not {goal}")
         # The error at every tick of the run, and each move's largest.
         ticks = self.tick_parts[parts:]
+        self._snr = self._step_snr = math.inf
+        allowed = math.inf
         if ticks:
             times = np.concatenate(self.time_parts[parts:]) - self.run_start[index]
-            gap = np.hypot(*(steps_to_xy(np.concatenate(ticks), self.k) - reference(times)).T)
+            planned = reference(np.concatenate([[0.0], times]))
+            gap = np.hypot(*(steps_to_xy(np.concatenate(ticks), self.k) - planned[1:]).T)
             bounds = np.cumsum([0] + [len(t) for t in ticks[:-1]])
             self.errors[first:] = np.maximum.reduceat(gap, bounds).tolist()
-        return [int(g) for g in grid]
+            # Motor steps: the rounding (m + 1/2 aimed at, floor executed) taken out.
+            motion = np.concatenate(exact) - 0.5
+            figures = _speed_figures(motion, planned @ MOTOR_AXES.T * self.k, bounds)
+            if figures is not None:
+                per_move, signal, steps_noise = figures
+                self.speed_noise[first:] = per_move.tolist()
+                self._snr = _db(signal, float(per_move.sum()))
+                self._step_snr = _db(signal, steps_noise)
+                allowed = steps_noise * 10.0 ** (-SPEED_MARGIN_DB / 10.0)
+        return [int(g) for g in grid], allowed
 
     def job(self) -> Job:
         ticks = np.concatenate(self.tick_parts) if self.tick_parts else np.zeros((0, 2), np.int64)
@@ -336,7 +423,57 @@ class _Builder:
             self.run_error,
             self.k,
             self.pen_at,
+            self.run_speed_snr,
+            self.run_step_snr,
         )
+
+
+def _fraction(steps: Steps, accumulators: Steps) -> Array:
+    """The exact position, steps, of motors at ``steps`` holding ``accumulators``."""
+    return (np.asarray(steps, dtype=float) + np.asarray(accumulators) / ACCUMULATOR_STEP)[None]
+
+
+def _exact(move: Move) -> Array:
+    """``(n, 2)``: an ``LT``/``T3`` move's exact motion after each tick, steps from its start
+    (the sum of its rates, ``C_k − acc_0``, over 2³¹; :mod:`firmware_protocols.ebb.motion`)."""
+    k = np.arange(1, move.ticks + 1, dtype=np.int64)
+    columns = []
+    for axis in (0, 1):
+        jerk = move.jerk[axis] if move.command == "T3" else 0
+        start = AxisStart.load(move.rate[axis], move.accel[axis], jerk)
+        rates = start.rate + k * start.accel + start.jerk * (k * (k + 1) // 2)
+        columns.append(np.cumsum(rates) / ACCUMULATOR_STEP)
+    return np.column_stack(columns)
+
+
+def _speed_figures(
+    motion: Array, planned: Array, bounds: NDArray[np.int64]
+) -> tuple[Array, float, float] | None:
+    """A run's speed figures, motor steps (``motion``, ``planned``: ``(N + 1, 2)`` at its ticks
+    0..N; ``bounds``: each move's first tick, 0-based from tick 1), speeds taken over
+    ±:data:`SPEED_WINDOW`: each move's squared speed error summed over the instants within it,
+    the plan's squared speed summed, and the sum whole steps would cost (each motor's rounding
+    uniform over a step, independent at both ends: variance 2 × 1/12 / (2·window)² a motor).
+    None for a run shorter than two windows."""
+    half = round(SPEED_WINDOW * TICK_HZ)
+    if len(planned) <= 2 * half:
+        return None
+    span = 2 * half / TICK_HZ
+    error = motion - planned
+    speed_error = (error[2 * half :] - error[: -2 * half]) / span
+    speed = (planned[2 * half :] - planned[: -2 * half]) / span
+    centre = np.arange(half, len(planned) - half)  # the tick each speed is taken at
+    mover = np.clip(np.searchsorted(bounds, centre - 1, side="right") - 1, 0, len(bounds) - 1)
+    per_move = np.bincount(mover, (speed_error**2).sum(axis=1), minlength=len(bounds))
+    steps_noise = len(centre) * 2 * (2.0 / 12.0) / span**2
+    return per_move, float((speed**2).sum()), steps_noise
+
+
+def _db(signal: float, noise: float) -> float:
+    """``10·log10(signal / noise)``; inf without noise."""
+    if noise <= 0:
+        return math.inf
+    return 10.0 * math.log10(signal / noise) if signal > 0 else -math.inf
 
 
 def _ceil_div(a: int, b: int) -> int:

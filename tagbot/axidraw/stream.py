@@ -178,12 +178,15 @@ class EBBStreamer:
         return reply
 
     # -- connect ----------------------------------------------------------------------------
-    def connect(self, *, keep_position: bool = False) -> tuple[int, int, int]:
+    def connect(
+        self, *, keep_position: bool = False, fifo: int | None = None
+    ) -> tuple[int, int, int]:
         """Version, FIFO depth, motors and pen set up (module docstring); the version.
 
         ``EM`` clears the board's step counters: the job's steps count from where the motors
         are (home), or with ``keep_position`` (a resume) from where the counters said they
-        were before it."""
+        were before it. ``fifo``: the depth the job's short moves need, when more than the
+        profile's ``serial.fifo`` (:attr:`tagbot.axidraw.moves.Job.fifo`)."""
         p = self.profile
         version = parse_version(self.ask("V", data=True, ok=False))
         self.report.firmware = version
@@ -197,7 +200,7 @@ class EBBStreamer:
                 "update it with the makers' EBB firmware updater"
             )
         largest = int(self.ask("QU,2", data=True).split(b",")[-1])
-        depth = max(1, min(int(p["serial.fifo"]), largest))
+        depth = max(1, min(max(int(p["serial.fifo"]), fifo or 0), largest))
         self.ask(f"CU,4,{depth}")
         self.report.fifo = depth
         before = self.position()
