@@ -8,6 +8,7 @@ import logging
 from pathlib import Path
 
 import dynamixel_sdk as sdk
+import numpy as np
 import pytest
 
 import tagbot
@@ -15,6 +16,7 @@ from tagbot.arm import load_profile, prepare
 from tagbot.arm.driver import ArmDriver, UrlPortHandler
 from tagbot.arm.run import simulated_chain
 from tagbot.arm.serial.machine import prepare as serial_prepare
+from tagbot.control import RunControl
 from tagbot.draw import draw
 from tagbot.errors import ConnectionLost, DeviceError, DeviceTimeout, Interrupted
 from tagbot.io.planfile import load_plan
@@ -230,3 +232,71 @@ def test_lowering_the_pen_sends_one_goal_a_tick_for_pen_move_time(record, move_t
         driver.lower_pen(down)
         sent = sim.values(pen, GOAL_POSITION)[before:]
     assert len(sent) == goals and sent[-1] == down
+
+
+class _PauseAtTick(RunControl):
+    """Paused when the stream asks before tick ``tick`` (it asks once a tick), for ``looks``
+    more looks (the pause asks each time round its loop)."""
+
+    def __init__(self, tick: int, looks: int) -> None:
+        super().__init__()
+        self.asked, self.tick, self.looks = 0, tick, looks
+
+    @property
+    def paused(self) -> bool:
+        self.asked += 1
+        return self.tick < self.asked <= self.tick + 1 + self.looks
+
+
+@pytest.mark.parametrize("looks", [5, 6])
+def test_no_goal_is_sent_while_a_read_backs_replies_may_be_on_the_bus(
+    record, tmp_path, monkeypatch, looks
+):
+    """The bus is half duplex: after a SYNC_READ, goals (the stream's and a pause's pen lift)
+    wait until the request and every servo's reply could have passed, at the bus's bit rate.
+    At 57,600 baud a read-back takes 10.8 ms; a pause looks every 10 ms and reads back every
+    other look, so whichever look ends it, the pen's lowering comes soon after a request."""
+    overrides = ("bus.baud=57600", "motion.rate=50", "bus.readback_rate=50")
+    profile = load_profile(overrides=overrides)
+    sim = record(simulated_chain(profile))
+    job = prepare(two_plan_tag(), port=sim.url, overrides=overrides)
+    sent: list[tuple[float, int, int]] = []  # clock time, instruction, packet length
+    write = UrlPortHandler.writePort
+
+    def spy(port: UrlPortHandler, packet: list[int]) -> int:
+        sent.append((port.getCurrentTime() / 1000.0, packet[7], len(packet)))
+        return write(port, packet)
+
+    monkeypatch.setattr(UrlPortHandler, "writePort", spy)
+    pen_down = np.flatnonzero(job.program.goals[:, 2] == profile["pen.down"])
+    tick = int(pen_down[0]) + 20
+    run = job.run(tmp_path, control=_PauseAtTick(tick, looks))
+    assert run.error is None and len(run.pauses) == 1
+    byte = 10.0 / 57600
+    free, reads, goals = -1.0, 0, 0
+    for t, instruction, length in sent:  # in the order sent
+        if instruction == 0x82:  # SYNC_READ: its bytes, one a servo, and 15 from each servo
+            free, reads = t + (length + 15 * (length - 14)) * byte, reads + 1
+        elif instruction in (0x03, 0x83):  # WRITE, SYNC_WRITE of goals
+            assert t >= free - 1e-9
+            goals += 1
+    assert reads > 10 and goals > len(job.program.goals)
+
+
+def test_noise_like_a_status_header_of_an_impossible_length_is_skipped(record, tmp_path):
+    """A read-back reply is 15 bytes: bytes on the line that look like a status header but
+    claim 65,535 are noise, skipped at once; the replies after them are read as usual (not held
+    back until that many bytes came, the servos taken for silent)."""
+    profile = load_profile()
+    sim = record(simulated_chain(profile))
+    job = prepare(two_plan_tag(), port=sim.url)
+
+    def progress(done: int, total: int) -> None:
+        if done == 301:  # a burst on the line, as if a device had sent it (the simulator's bus)
+            with sim.chain.lock:
+                sim.chain._schedule(b"\xff\xff\xfd\x00\x01\xff\xff", sim.chain.now())
+
+    run = job.run(tmp_path, progress=progress)
+    assert run.error is None
+    assert run.details["corrupt_replies"] == 0
+    assert run.details["readbacks"] >= 0.9 * len(job.program.goals)

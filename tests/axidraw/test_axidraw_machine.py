@@ -37,12 +37,12 @@ def _url(device: SimulatedEBB) -> str:
     return attach_device(device, f"a3test{os.getpid()}_{next(_names)}")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def tag():
     return load_plan(LETTER_B)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def job(tag):
     return prepare(tag)
 
@@ -66,9 +66,9 @@ class KeyPause(RunControl):
         return False
 
 
-@pytest.fixture(scope="module")
-def drawn(job, tag, tmp_path_factory):
-    out = tmp_path_factory.mktemp("axidraw")
+@pytest.fixture
+def drawn(job, tag, tmp_path):
+    out = tmp_path / "axidraw"
     keys = KeyPause(reads=20)
     report = draw(tag, out, prepared=job, pictures=False, control=keys, progress=keys.progress)
     return out, report.report

@@ -75,20 +75,20 @@ def _simulated(monkeypatch, keys: ClockedControl) -> None:
     monkeypatch.setattr(transport, "attach_device", keep)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def tag():
     return load_plan(LETTER_B)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def job(tag):
     return prepare(tag)
 
 
-@pytest.fixture(scope="module")
-def plain(job, tag, tmp_path_factory):
+@pytest.fixture
+def plain(job, tag, tmp_path):
     """letter-b drawn through, no pause."""
-    return draw(tag, tmp_path_factory.mktemp("plain"), prepared=job, pictures=False).report
+    return draw(tag, tmp_path / "plain", prepared=job, pictures=False).report
 
 
 def _on(job, device: SimulatedEBB):

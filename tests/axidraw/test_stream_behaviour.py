@@ -220,3 +220,17 @@ def test_the_report_names_the_t3_moves_and_the_placement(tmp_path):
     assert placement["matrix"] == job.setpoints.matrix.tolist()
     (run,) = placement["runs"]
     assert run["start"] == pytest.approx(job.job.run_start[0])
+
+
+def test_each_run_is_compared_with_its_plan_to_the_runs_very_end():
+    """The plan a drawn run is judged against (the report's SNR and deviation) spans the whole
+    run on the job's clock, every millisecond: from its start to where the job's own moves end
+    it, at the same point, not a setpoint short."""
+    job = prepare(load_plan(LETTER_B))
+    compared = job._planned_runs()
+    planned = job.job.planned_runs()
+    assert len(compared) == len(planned) == len(job.job.runs)
+    for (t, xy), (moves_t, moves_xy) in zip(compared, planned, strict=True):
+        assert t[0] == pytest.approx(moves_t[0]) and t[-1] == pytest.approx(moves_t[-1])
+        assert xy[-1] == pytest.approx(moves_xy[-1])
+        assert max(t[1:] - t[:-1]) == pytest.approx(0.001)

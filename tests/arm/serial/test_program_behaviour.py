@@ -24,8 +24,10 @@ from tagbot.arm.serial.program import (
 )
 from tagbot.errors import PlacementError
 from tagbot.io.planfile import load_plan
+from tagbot.model import Tag
 
 from ..conftest import small_tag
+from .test_serial_fidelity import _stroke
 
 EXAMPLES = Path(tagbot.__file__).parent / "examples"
 
@@ -198,3 +200,14 @@ def test_each_joint_is_held_to_its_own_acceleration():
     q = np.zeros((5, 2))
     q[2] = [0.5e-4, 4e-4]  # joint 0: 1 rad/s² peak; joint 1: 8 rad/s² against its 10
     assert _excess(q, T, speed, acceleration) == pytest.approx(1.0)
+
+
+def test_a_way_back_to_park_that_dips_to_the_paper_is_refused_naming_the_park():
+    """A job from near the base to the far corner; a park pose the arm leaves cleanly for the
+    first run but reaches from the last one by sweeping its pen through the paper."""
+    first = _stroke([0.0, 0.0], [10.0, 0.0])
+    last = _stroke([90.0, 90.0], [100.0, 90.0], start=first.end(15.0) + 0.3)
+    park = [f"joint{i}.park_deg={v}" for i, v in enumerate((0, 40, -30, 30), start=1)]
+    profile = load_serial_profile("openmanipulator-x", park)
+    with pytest.raises(PlacementError, match=r"^tick \d+ \(park to park\): the pen's point would"):
+        build_serial_program(Tag(plans=(first, last)), profile)

@@ -40,7 +40,7 @@ def _stroke(a: list[float], b: list[float], start: float = 0.0) -> Plan:
     )
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def profile():
     return load_serial_profile("openmanipulator-x")
 
@@ -53,14 +53,14 @@ def _hop_tag() -> Tag:
     return Tag(plans=(first, second))
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def hop(profile):
     """:func:`_hop_tag`'s program: the travel between the runs is as short as the joints
     allow."""
     return build_serial_program(_hop_tag(), profile)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def letter_b(profile):
     return build_serial_program(tagbot.load_plan(EXAMPLES / "letter-b.json"), profile)
 
@@ -200,6 +200,19 @@ def test_the_feedforward_pushes_back_with_the_springs_preload_as_the_nib_touches
         assert torque == pytest.approx(expected, rel=1e-3, abs=1e-6)
     torque, _ = paper_torque(-0.5)  # above the paper: no force
     assert np.allclose(torque, 0.0)
+
+
+def test_two_rows_are_fed_forward_as_a_move_not_a_pose_standing(letter_b, profile) -> None:
+    """Two rows one period apart are a move at the rate between them (its back-EMF and damping
+    fed forward), as the first row of the same steady move three rows long; one row stands."""
+    k = next(first for kind, _, first, _ in letter_b.segments if kind == "draw") + 50
+    a, b = letter_b.angles[k], letter_b.angles[k + 1]  # mid-run: moving, the pen on the paper
+    pen = np.ones(3, dtype=bool)
+    two = feedforward(np.array([a, b]), pen[:2], profile)
+    steady = feedforward(np.array([a, b, 2 * b - a]), pen, profile)
+    standing = feedforward(a[None, :], pen[:1], profile)
+    assert two[0] == pytest.approx(steady[0], rel=1e-6, abs=1e-9)
+    assert np.abs(two[0] - standing[0]).max() > 1e-4  # the rate is felt
 
 
 def _jacobian(profile, q: np.ndarray) -> np.ndarray:

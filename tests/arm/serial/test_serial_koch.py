@@ -21,19 +21,19 @@ EXAMPLES = Path(tagbot.__file__).parent / "examples"
 KOCH_JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll"]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def letter_b() -> tagbot.Tag:
     return tagbot.load_plan(EXAMPLES / "letter-b.json")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def koch():
     return load_serial_profile("koch-v1.1")
 
 
-@pytest.fixture(scope="module")
-def drawn(letter_b, tmp_path_factory):
-    folder = tmp_path_factory.mktemp("koch") / "b"
+@pytest.fixture
+def drawn(letter_b, tmp_path):
+    folder = tmp_path / "b"
     result = draw(letter_b, folder, device="dynamixel", profile="koch-v1.1", pictures=False)
     return folder, result.report
 

@@ -38,24 +38,24 @@ from tagbot.errors import (
 EXAMPLES = Path(tagbot.__file__).parent / "examples"
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def letter_b() -> tagbot.Tag:
     return tagbot.load_plan(EXAMPLES / "letter-b.json")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def profile():
     return load_serial_profile("openmanipulator-x")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def program(letter_b, profile):
     return build_serial_program(letter_b, profile)
 
 
-@pytest.fixture(scope="module")
-def drawn(letter_b, tmp_path_factory):
-    folder = tmp_path_factory.mktemp("serial") / "b"
+@pytest.fixture
+def drawn(letter_b, tmp_path):
+    folder = tmp_path / "b"
     result = draw(letter_b, folder, device="dynamixel", profile="openmanipulator-x", pictures=False)
     return folder, result.report
 
