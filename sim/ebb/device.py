@@ -32,6 +32,15 @@ the shared parser knows but does not model (``UnsupportedCommand``: ``TP``, ``QL
 events, never guessed. A line with characters after its last parameter runs, answers, then
 ``!7`` (``format_reply``).
 
+RC servo channels (``S2``, ``SP``): up to :data:`SERVO_CHANNELS` (8), the boot's pen-up
+holding channel 1 on RP4. A servo move takes the channel its pin has, else the first free one
+(at parse time: the firmware takes it when the move runs, which only differs for two new pins
+queued at once); on a channel beyond ``SC,8``'s count, or with none free, it is answered ``OK``
+and ignored, as ``RCServo2_Move`` does (a recorder event says so). ``S2,0,pin`` frees the pin's
+channel at once; ``S2`` without a pin is RP0's. A pen whose channel ``SC,8`` leaves out gets no
+pulse until a servo command reaches it again. ``SC,8`` above 8 acts as 8, ``SC,9`` above 6 as
+6 and 0 as 1.
+
 Documented simplifications: ``CS`` during a move clears the accumulators from the next move on;
 for ``LT``/``T3`` ``QM`` reports a motor moving while the move lasts if it has a nonzero rate,
 accel or jerk; limit switches, the engraver, GPIO and analog commands are not simulated
@@ -97,9 +106,17 @@ OTHER_COMMAND_TIME = 0.0002
 """Seconds for any other line (an assumption: the reference gives no figure)."""
 
 PEN_PIN = 4
-"""RP4 (RB1): the pen servo's output at boot, and ``S2``'s pin when none is given."""
+"""RP4 (RB1): the pen servo's output at boot (``g_servo2_RPn``), given channel 1."""
+S2_DEFAULT_PIN = 0
+"""``S2``'s RPn when none is given: 0, as the firmware's ``Pin = 0`` before its optional
+``extract_number`` (``S2,0`` alone turns off RP0, which has no channel: nothing happens)."""
 DEFAULT_SP_PIN = 1
 """``SP``'s port B pin when none is given (RB1, RP4): the pen output moves back there."""
+SERVO_CHANNELS = 8
+"""Software RC servo channels (firmware 3.0: ``SC,8`` takes 1 to 8; larger values act as 8)."""
+MAX_SLOT_MS = 6
+"""``SC,9``'s largest slot, ms (larger values act as 6; 0 acts as 1: the slot ISR runs every
+ms and switches when its counter, just incremented, is at least the slot)."""
 
 _VERSION_TEXT = "EBBv13_and_above EB Firmware Version {}"
 STACK_HIGH_WATER = 0xE00
@@ -346,11 +363,13 @@ class SimulatedEBB:
         self.step_mode = 1
         self.servo_min, self.servo_max = servo_min, servo_max
         self.servo_rate_up = self.servo_rate_down = rate
-        self.servo_channels, self.servo_slot_ms = 8, 3
+        self.servo_channels, self.servo_slot_ms = SERVO_CHANNELS, 3
         self.servo_timeout_ms = timeout
         self._servo_power_until = -math.inf
         self.pen_up = True
         self.servo_rpn = PEN_PIN  # where SP sends the pen servo's pulses (g_servo2_RPn)
+        # Each channel's RPn (0: free); the boot's pen-up took channel 1 for RP4.
+        self.channels = [PEN_PIN] + [0] * (SERVO_CHANNELS - 1)
         here = servo_min if self.pen_rpn == PEN_PIN else 0  # the boot's pen-up, on RP4
         self._servo = ServoSegment(t, here, here, 0, self._servo_period(), t)
         self.recorder.servo.append(self._servo)
@@ -370,7 +389,31 @@ class SimulatedEBB:
             self.drop_connection()
 
     def _servo_period(self) -> float:
-        return self.servo_channels * self.servo_slot_ms / 1000.0
+        """Seconds between two pulses of a channel (every slot cycled through, used or not;
+        with ``SC,8,0`` no channel pulses: the period is then moot, one slot's)."""
+        return max(self.servo_channels, 1) * self.servo_slot_ms / 1000.0
+
+    def _channel(self, rpn: int) -> int | None:
+        """The channel (0-based) of ``rpn``: the one it has, else the first free one
+        (``RCServo2_get_channel_from_RPn``); None when all are taken. RP0 marks a free
+        channel, so ``rpn`` 0 finds one and never keeps it."""
+        if rpn in self.channels:
+            return self.channels.index(rpn)
+        return self.channels.index(0) if 0 in self.channels else None
+
+    def _servo_channel(self, t: float, rpn: int, what: str) -> bool:
+        """Whether a servo move on ``rpn`` is queued, its channel taken if new. The firmware
+        ignores one whose channel is beyond ``SC,8``'s count or that has none free, and still
+        answers ``OK`` (``RCServo2_Move``): noted in the recorder's events."""
+        channel = self._channel(rpn)
+        if channel is None or channel >= self.servo_channels:
+            where = "no channel free" if channel is None else f"channel {channel + 1}"
+            self.recorder.events.append(
+                (t, f"{what} on RP{rpn} ignored: {where}, SC,8 allows {self.servo_channels}")
+            )
+            return False
+        self.channels[channel] = rpn
+        return True
 
     @property
     def version_line(self) -> str:
@@ -679,13 +722,16 @@ class SimulatedEBB:
             return self._pen_job(command, text, t)
         # S2
         position = params[0] if params else 0
-        pin = params[1] if len(params) > 1 else PEN_PIN
+        pin = params[1] if len(params) > 1 else S2_DEFAULT_PIN
         if position == 0:
             self._servo_off(t, pin)
             self._answer(t, command)
             return None
         rate = params[2] if len(params) > 2 else 0
         delay = params[3] if len(params) > 3 else 0
+        if not self._servo_channel(t, pin, "S2"):
+            self._answer(t, command)
+            return None
         if pin == PEN_PIN:
             self._power_servo(t)
         ticks = TICK_HZ // 1000 * delay
@@ -693,6 +739,8 @@ class SimulatedEBB:
 
     def _servo_off(self, t: float, rpn: int) -> None:
         """The output on ``rpn`` stops at once (its channel freed): no pulse, the servo limp."""
+        if rpn and rpn in self.channels:
+            self.channels[self.channels.index(rpn)] = 0
         if rpn == self.pen_rpn:
             self._servo = ServoSegment(t, 0, 0, 0, self._servo_period(), self._boot_time)
             self.recorder.servo.append(self._servo)
@@ -717,6 +765,9 @@ class SimulatedEBB:
             if rpn == self.pen_rpn:
                 self._servo_to(t, self.servo_min, self.servo_rate_up)
             self.pen_up = True
+            self._answer(t, command)
+            return None
+        if not self._servo_channel(t, rpn, "SP"):
             self._answer(t, command)
             return None
         up = value == 1
@@ -869,9 +920,10 @@ class SimulatedEBB:
         elif which == 5:
             self.servo_max = value
         elif which == 8:
-            self.servo_channels = value
+            self.servo_channels = min(value, SERVO_CHANNELS)
+            self._pen_channel_count(t)
         elif which == 9:
-            self.servo_slot_ms = value
+            self.servo_slot_ms = max(1, min(value, MAX_SLOT_MS))
         elif which == 10:
             self.servo_rate_up = self.servo_rate_down = value
         elif which == 11:
@@ -879,6 +931,14 @@ class SimulatedEBB:
         elif which == 12:
             self.servo_rate_down = value
         self._answer(t, command)
+
+    def _pen_channel_count(self, t: float) -> None:
+        """After ``SC,8``: the pulse ISR cycles channels 1..count only, so a pen whose channel
+        is beyond the count gets no pulse (limp, its channel kept)."""
+        rpn = self.pen_rpn
+        if rpn in self.channels and self.channels.index(rpn) >= self.servo_channels:
+            self._servo = ServoSegment(t, 0, 0, 0, self._servo_period(), self._boot_time)
+            self.recorder.servo.append(self._servo)
 
     def _cmd_SR(self, command: Command, t: float) -> None:
         self.servo_timeout_ms = command.params[0]
