@@ -145,7 +145,10 @@ MOTORS: Mapping[int, Motor] = {
 class PenSpring:
     """The nib on a spring along the pen axis: ``stiffness`` (N/m), ``preload`` (N, the force
     the nib needs before it moves in), ``travel`` (m, how far it can go in), ``damping``
-    (N·s/m), ``mass`` (kg of the sliding nib). The defaults are a light spring-loaded holder."""
+    (N·s/m), ``mass`` (kg of the sliding nib). The defaults are a light spring-loaded holder:
+    0.2 N/mm with 0.2 N of preload, 0.5 N where the arm presses it 1.5 mm (``robot.press``),
+    the spring rates such holders are built with (a few tenths of a newton a millimetre), and a
+    refill-sized nib sliding in it."""
 
     stiffness: float = 200.0
     preload: float = 0.2
@@ -162,13 +165,36 @@ class PenSpring:
             raise ValueError(f"pen.preload: must be a finite number >= 0, got {self.preload!r}")
 
 
+STICK_SPEED = 0.005
+"""m/s: the nib's slip speed below which :func:`nib_drag` is taken up in proportion."""
+
+
+def nib_drag(slip: np.ndarray, normal_force: float, friction: float) -> np.ndarray:
+    """The paper's drag on a nib slipping at ``slip`` (m/s, along the paper) pressed with
+    ``normal_force`` (N): Coulomb's ``friction × normal_force`` against the slip, taken up in
+    proportion below :data:`STICK_SPEED` (a regularised Coulomb law: a nib barely moving
+    creeps rather than sticks, and the law stays continuous through zero). The simulator
+    applies this to its nib and tagbot's feedforward expects the same (one law).
+
+    Figures: a fibre or felt nib on office paper slides with a kinetic coefficient of about 0.2
+    to 0.4 (the profiles' 0.3); 5 mm/s is a fortieth of a hand's writing speed and a third of
+    the slowest stretches of the benchmark's runs, so the taking-up matters only where a run
+    starts, stops or turns."""
+    slip = np.asarray(slip, dtype=float)
+    speed = float(np.linalg.norm(slip))
+    if speed == 0.0 or normal_force <= 0.0:
+        return np.zeros_like(slip)
+    return -friction * normal_force * min(1.0, speed / STICK_SPEED) * slip / speed
+
+
 @dataclass(frozen=True)
 class Sheet:
     """The paper: ``origin`` (m, arm frame) is its (0, 0) corner, ``x_axis`` and ``y_axis`` its
     edges (orthonormal; the normal ``x × y`` points out of the paper, towards the pen), ``size``
-    (m) along them, ``friction`` between nib and paper. Any object with ``origin``, ``x_axis``
-    and ``y_axis`` (such as :class:`tagbot.arm.serial.reach.Paper`) converts with
-    :meth:`of`. A table (a board 0.1 m wider on every side, 2 cm thick) lies under it."""
+    (m) along them, ``friction`` between nib and paper (:func:`nib_drag`'s coefficient). Any
+    object with ``origin``, ``x_axis`` and ``y_axis`` (such as
+    :class:`tagbot.arm.serial.reach.Paper`) converts with :meth:`of`. A table (a board 0.1 m
+    wider on every side, 2 cm thick) lies under it."""
 
     origin: tuple[float, float, float] = (0.10, -0.105, 0.0)
     x_axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
@@ -188,7 +214,9 @@ class Sheet:
             raise ValueError(f"paper: friction must be >= 0, got {self.friction!r}")
 
     @classmethod
-    def of(cls, paper: Any, size: tuple[float, float] = (0.148, 0.210)) -> Sheet:
+    def of(
+        cls, paper: Any, size: tuple[float, float] = (0.148, 0.210), friction: float = 0.3
+    ) -> Sheet:
         """A sheet placed like ``paper`` (anything with ``origin``, ``x_axis``, ``y_axis``)."""
         if isinstance(paper, Sheet):
             return paper
@@ -197,6 +225,7 @@ class Sheet:
             tuple(map(float, paper.x_axis)),
             tuple(map(float, paper.y_axis)),
             size,
+            friction,
         )
 
     @property
@@ -211,6 +240,19 @@ DEFAULT_PAPER = Sheet()
 axis, centred left to right: where the OpenManipulator-X reaches with its pen upright."""
 
 _SHEET_THICKNESS = 1e-4
+NIB_SOLREF = (0.004, 1.0)
+NIB_SOLIMP = (0.9, 0.9, 0.001, 0.5, 2.0)
+"""The nib's contact with the paper and the table (MuJoCo's time constant and damping ratio,
+constant impedance). A fibre or felt nib is the soft part: about 1 mm² of its point carries the
+force through some 3 mm of bonded fibres with a modulus of 10 to 50 MPa, 3 000 to 17 000 N/m
+(E·A/L), while the paper on the table is far stiffer; 5 000 N/m, a tenth of a millimetre at
+0.5 N, is taken. Measured in the OpenManipulator-X's scene drawing temptTag 7_30 at 0.50 N:
+0.094 mm in (5 300 N/m). Damping ratio 1: felt is lossy, a nib does not ring on the paper.
+MuJoCo's time constant gives a stiffness in proportion to the mass the contact moves (here the
+nib's slider), which is why it is stated as measured. With MuJoCo's own friction in the contact
+(not :func:`nib_drag`) the nib chattered on the paper, leaving it for single steps tens of
+times a second at speed (BENCHMARKS.md, session 20); with the drag applied as a force and this
+contact it does not (session 21)."""
 _TABLE_MARGIN, _TABLE_THICKNESS = 0.1, 0.02
 _NIB_GROUP = 2  # collision bit shared by the nib, the paper and the table only
 
@@ -263,12 +305,6 @@ def build_scene(
     )
     # in the slider's frame (the tip site's orientation at the holder's origin)
     to_slider = _rotation_of(tip_quat).T
-    # The nib keeps MuJoCo's default solref (0.02, 1) and solimp (0.9, 0.95, ...): a contact
-    # takes the mean of its two geoms', so the nib on the paper is solref (0.011, 1), solimp
-    # (0.945, 0.9745, 0.001, 0.5, 2), not the paper's own (2 timesteps). The paper's own makes
-    # the 3 g nib leave the paper more often (845 one-step hops drawing dusttag-142 against
-    # 131) and spike to 1.5 N; softer (0.02-0.04 s) hops less but sinks 1.2-1.7 mm into it
-    # (BENCHMARKS.md, session 20).
     body.add_geom(
         name=nib,
         type=mujoco.mjtGeom.mjGEOM_CAPSULE,
@@ -276,7 +312,9 @@ def build_scene(
         size=nib_size,
         contype=0,
         conaffinity=_NIB_GROUP,
-        friction=[sheet.friction, 0.005, 0.0001],
+        condim=1,  # no friction in the contact: ArmPhysics applies nib_drag
+        solref=NIB_SOLREF,
+        solimp=NIB_SOLIMP,
         density=0,
         rgba=[0.1, 0.1, 0.6, 1],
     )
@@ -299,9 +337,9 @@ def build_scene(
             size=[half[0], half[1], depth / 2],
             contype=_NIB_GROUP,
             conaffinity=0,
-            friction=[sheet.friction, 0.005, 0.0001],
-            solref=[2.0 * timestep, 1.0],
-            solimp=[0.99, 0.999, 0.001, 0.5, 2.0],
+            condim=1,
+            solref=NIB_SOLREF,  # the same: a contact takes the mean of its two geoms'
+            solimp=NIB_SOLIMP,
             rgba=rgba,
         )
     for actuator in spec.actuators:
@@ -479,6 +517,9 @@ class ArmPhysics:
         self._paper = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "paper")
         self._nib = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "pen_nib")
         self._tip = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, "pen_tip")
+        self._slider = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "pen_slider")
+        self._normal = self.sheet.rotation[:, 2]
+        self._velocity6 = np.zeros(6)
         self._origin = np.asarray(self.sheet.origin, float)
         self._to_paper = self.sheet.rotation.T
         with chain.lock:
@@ -516,6 +557,7 @@ class ArmPhysics:
                 start = self.time
                 for drive in drives:
                     drive.control(start, dt)
+                self._drag()
                 mujoco.mj_step(m, d)
                 for drive in drives:
                     drive.after_step()
@@ -531,19 +573,42 @@ class ArmPhysics:
                 if drive.servo.plant is drive:
                     drive.servo.plant = None
 
+    def _drag(self) -> None:
+        """The paper's drag on the nib for the next step (:func:`nib_drag`), from the last
+        step's contacts: their normal force, the nib's point's slip along the sheet."""
+        m, d = self.model, self.data
+        d.qfrc_applied[:] = 0.0
+        normal, where = 0.0, None
+        for i in range(d.ncon):
+            contact = d.contact[i]
+            if self._nib in (contact.geom1, contact.geom2):
+                mujoco.mj_contactForce(m, d, i, self._force6)
+                normal += float(self._force6[0])
+                where = contact.pos
+        if where is None:
+            return
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, self._tip, self._velocity6, 0)
+        velocity = self._velocity6[3:]
+        slip = velocity - (velocity @ self._normal) * self._normal
+        force = nib_drag(slip, normal, self.sheet.friction)
+        mujoco.mj_applyFT(m, d, force, np.zeros(3), where, self._slider, d.qfrc_applied)
+
     # -- recorder ------------------------------------------------------------------------
 
     def _record(self) -> None:
+        """One row of the trace: where the nib touches the paper, and its whole normal force
+        there (a nib pressed through the 0.1 mm sheet also bears on the table under it)."""
         d = self.data
         force, where = 0.0, None
         for i in range(d.ncon):
             contact = d.contact[i]
-            if {contact.geom1, contact.geom2} == {self._paper, self._nib}:
+            if self._nib in (contact.geom1, contact.geom2):
                 mujoco.mj_contactForce(self.model, d, i, self._force6)
                 force += float(self._force6[0])
-                where = contact.pos
-        if where is None:
-            where = d.site_xpos[self._tip]
+                if self._paper in (contact.geom1, contact.geom2):
+                    where = contact.pos
+        if where is None:  # off the paper: no ink, whatever the table bears
+            where, force = d.site_xpos[self._tip], 0.0
         x, y, _ = self._to_paper @ (np.asarray(where) - self._origin)
         columns = self._columns
         columns["t"].append(self.time)
@@ -586,10 +651,12 @@ __all__ = [
     "OPEN_MANIPULATOR_X_JOINTS",
     "PWM_FULL_SCALE",
     "RATED_VOLTAGE",
+    "STICK_SPEED",
     "TICKS_PER_RAD",
     "ArmPhysics",
     "Motor",
     "PenSpring",
     "Sheet",
     "build_scene",
+    "nib_drag",
 ]

@@ -270,6 +270,26 @@ def test_pen_pressed_on_the_paper_then_lifted():
     assert t[-1] == pytest.approx(chain.now(), abs=physics.timestep)
 
 
+def test_the_felt_nib_gives_a_tenth_of_a_millimetre_at_half_a_newton():
+    # a fibre or felt nib's point (physics.NIB_SOLREF): about 5 000 N/m on the paper, the
+    # paper and the table under it far stiffer; MuJoCo's default contact let it sink 0.6 mm
+    chain, physics = new_arm()
+    torque_on(chain, gains=(1600, 0, 0))
+    on_paper = np.array([0.17, 0.0, 0.0])
+    go_to(chain, pose_for(physics, on_paper + np.array([0, 0, 0.005])))
+    chain.advance(1.5)
+    paper, nib = physics.model.geom("paper").id, physics.model.geom("pen_nib").id
+    stiffness = []
+    for depth in (0.0005, 0.0015):  # the holder's spring pressed 0.5 and 1.5 mm: 0.3, 0.5 N
+        go_to(chain, pose_for(physics, on_paper - np.array([0, 0, depth])))
+        chain.advance(1.5)
+        d = physics.data
+        (sunk,) = [-d.contact[i].dist for i in range(d.ncon)
+                   if {d.contact[i].geom1, d.contact[i].geom2} == {paper, nib}]  # fmt: skip
+        stiffness.append(physics.pen_trace()[-1, 4] / sunk)
+    assert all(3000.0 < k < 8000.0 for k in stiffness)
+
+
 def run_script() -> tuple[np.ndarray, ...]:
     chain, physics = new_arm()
     torque_on(chain)

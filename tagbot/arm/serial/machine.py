@@ -214,7 +214,7 @@ def simulated_arm(profile: SerialProfile, *, real_time: bool = False) -> tuple[A
     ``(chain, physics)``, the paper where the profile puts it; ``real_time`` follows the wall
     clock (for a pseudo-terminal: ``tagbot sim arm --profile openmanipulator-x``)."""
     from sim.dynamixel import SimulatedChain
-    from sim.dynamixel.physics import ArmPhysics
+    from sim.dynamixel.physics import ArmPhysics, Sheet
 
     clock = "real" if real_time else "simulated"
     chain = SimulatedChain(servos=profile.servos, baud=profile["bus.baud"], clock=clock)
@@ -228,8 +228,7 @@ def simulated_arm(profile: SerialProfile, *, real_time: bool = False) -> tuple[A
             chain,
             model,
             joints={j.id: j.name for j in profile.joints},
-            paper=profile.paper,
-            paper_size=size,
+            paper=Sheet.of(profile.paper, size, profile["robot.pen_friction"]),
         )
     return chain, physics
 
@@ -364,10 +363,10 @@ HOP = 0.02
 def bridge_hops(trace: Array, nib: float) -> Array:
     """The trace with the nib's hops closed: a gap in contact of at most :data:`HOP` and shorter
     on the paper than the nib's radius ``nib`` (m) leaves no gap in the line (the nib's width
-    covers it), so its samples count as ink. The simulated nib chatters on the paper for single 1 ms
-    steps at
-    speed (its 3 g slider against the soft contact); what it inks is the union of where it
-    touched, which such hops do not break."""
+    covers it), so its samples count as ink: what a nib inks is the union of where it touched,
+    which such hops do not break. (The simulated nib hopped for single 1 ms steps at speed while
+    MuJoCo's friction acted in its contact, BENCHMARKS.md session 20; with
+    :func:`sim.dynamixel.physics.nib_drag` it stays on the paper through a run.)"""
     out = np.array(trace, dtype=float)
     pen = out[:, 3] > 0.5
     starts = np.flatnonzero(pen[:-1] & ~pen[1:]) + 1  # first sample off the paper

@@ -40,6 +40,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.dynamixel.physics import nib_drag
 from tagbot.arm.kinematics import angles_to_ticks, exact_ticks
 from tagbot.arm.place import ArmProgram, Placement, Setpoints
 from tagbot.arm.serial.kinematics import PEN_SITE
@@ -58,9 +59,6 @@ FINE_STEP = 0.001
 """Seconds (tag clock) between the samples used for the ink's extent and the trimming."""
 MIN_JERK_PEAK_RATE = 1.875
 MIN_JERK_PEAK_ACCELERATION = 10.0 / math.sqrt(3.0)
-FRICTION_SPEED = 0.005
-"""m/s: below this the feedforward's drag of the nib on the paper falls off in proportion (a
-nib barely moving sticks, with whatever friction holds it, up to the drag)."""
 ROUNDS = 12
 """Most solve-and-retime rounds before giving up."""
 
@@ -425,8 +423,8 @@ def feedforward(angles: Array, pen: NDArray[np.bool_], profile: SerialProfile) -
     ``robot.pen_preload`` (at most ``robot.pen_force``) as soon as the point is aimed into the
     paper, growing in proportion to ``robot.pen_force`` where it is aimed ``robot.press`` in
     (none above the paper), and the drag
-    ``robot.pen_friction`` times that against the point's motion along the paper (eased in
-    below :data:`FRICTION_SPEED`). ``pen`` is
+    ``robot.pen_friction`` times that against the point's motion along the paper, by the law
+    the simulator's paper has (:func:`sim.dynamixel.physics.nib_drag`). ``pen`` is
     unused beyond its length: the force follows the planned height. A single row is a pose
     standing still."""
     arm, T = profile.arm, profile.period
@@ -454,10 +452,7 @@ def feedforward(angles: Array, pen: NDArray[np.bool_], profile: SerialProfile) -
         if depth > 0.0 and force > 0.0:
             push = (preload + (force - preload) * min(1.0, depth / press)) * normal
             slide = velocity[i] - (velocity[i] @ normal) * normal
-            speed = float(np.linalg.norm(slide))
-            if speed > 0.0:  # Coulomb's drag, eased in below FRICTION_SPEED (sticking)
-                drag = mu * float(np.linalg.norm(push)) * min(1.0, speed / FRICTION_SPEED)
-                push = push - drag * slide / speed
+            push = push + nib_drag(slide, float(np.linalg.norm(push)), mu)
             mujoco.mj_jacSite(model, data, jac, None, site)
             torque[i] -= jac.T @ push
     torque += profile.back_emf * rate
