@@ -48,8 +48,8 @@ development tags looked at needs it (their moves stay 19 dB or more under their 
 ``motion.dt = 0.1`` two of cae's three runs have most of their moves halved, letter-b's run
 none. Shorter moves need a deeper FIFO to keep
 the board as far ahead: :attr:`Job.fifo` (:func:`fifo_depth`) holds ``serial.fifo`` x
-``motion.dt`` s of the job in every stretch of commands the board holds at once (0.2 s by
-default: 8 x 25 ms), up to the firmware's 32.
+``motion.dt`` s of the job in every stretch of commands the board holds at once (0.275 s by
+default: 11 x 25 ms), up to the firmware's 32.
 
 **Travel** (``LM``, pen up): a trapezoid along the longer motor axis at ``limits.travel_speed``
 and ``limits.travel_acceleration`` (accelerate, cruise, decelerate: three ``LM``, step-exact per

@@ -87,9 +87,9 @@ def test_a_whole_tag_follows_the_plan(drawn, job):
     assert report["speed_snr_db"] >= 35.0
     assert report["path_deviation_max_mm"] <= 0.02
     assert report["executed_source"] == "simulator recorder, 1 ms"
-    assert report["details"]["fifo"] == 8 and report["details"]["firmware"] == "3.0.3"
-    # Streamed ahead by the FIFO's depth and never beyond (one executing, eight queued).
-    assert report["details"]["most_on_board"] == 9
+    assert report["details"]["fifo"] == 11 and report["details"]["firmware"] == "3.0.3"
+    # Streamed ahead by the FIFO's depth and never beyond (one executing, eleven queued).
+    assert report["details"]["most_on_board"] == 12
     assert report["stalls"] == 0  # the board never ran dry
     # What was sent, one command a line, the job's own.
     sent = (out / "moves.txt").read_text().splitlines()

@@ -110,17 +110,18 @@ def test_the_stated_speed_figures_are_the_moves_exact_motions():
 
 
 def test_the_fifo_holds_the_promised_drawing_ahead_and_the_board_never_runs_dry(tmp_path):
-    """100 ms setpoints promise 8 x 0.1 s ahead; the split moves need a deeper FIFO for it.
-    On the simulated board every move of a run starts on the tick the one before ends."""
+    """100 ms setpoints promise serial.fifo x 0.1 s ahead; the split moves need a deeper FIFO
+    for it. On the simulated board every move of a run starts on the tick the one before
+    ends."""
     tag = load_plan(CAE)
     prepared = prepare(tag, overrides=LONG)
-    job = prepared.job
-    assert 8 < job.fifo <= 32
+    job, fifo = prepared.job, prepared.profile["serial.fifo"]
+    assert fifo < job.fifo <= 32
     durations = np.array([e.duration for e in job.entries])
     held = np.convolve(durations, np.ones(job.fifo + 1), mode="valid")
-    assert held.min() >= 0.8 - 1e-9
+    assert held.min() >= fifo * 0.1 - 1e-9
     shallower = np.convolve(durations, np.ones(job.fifo), mode="valid")
-    assert shallower.min() < 0.8  # and no deeper than it needs
+    assert shallower.min() < fifo * 0.1  # and no deeper than it needs
     device = SimulatedEBB()
     url = attach_device(device, f"a3length{os.getpid()}_{next(_names)}")
     report = draw(tag, tmp_path / "r", prepared=replace(prepared, port=url), pictures=False).report
