@@ -627,6 +627,7 @@ def measure(name: str, tag: tagbot.Tag, profile_name: str, scratch: Path) -> dic
     ]
     row.update(
         fifo=details["fifo"],
+        profile_fifo=int(profile["serial.fifo"]),
         draw_moves=details["draw_moves"],
         moves_margin_min_db=min(margins, default=math.inf),
     )
@@ -697,10 +698,10 @@ def print_totals(rows: list[dict[str, Any]]) -> None:
         f" {DEVIATION_GOAL:g} mm on {dev_ok}, job ≤ {BOUND_GOAL:g} x the bound on {bound_ok}"
     )
     margin = min(rows, key=lambda r: r["moves_margin_min_db"])
-    deeper = [r for r in rows if r["fifo"] > 8]
+    deeper = [r for r in rows if r["fifo"] > r["profile_fifo"]]
     print(
         f"- the moves' own speed error under the steps' by {margin['moves_margin_min_db']:.1f} dB"
-        f" at least ({margin['tag']}); FIFO deeper than 8 on {len(deeper)} tags"
+        f" at least ({margin['tag']}); FIFO deeper than the profile's on {len(deeper)} tags"
         f" ({', '.join(str(r['fifo']) for r in deeper) or '-'})"
     )
     worst = min(rows, key=lambda r: r["report_run_snr_min_db"])
