@@ -64,7 +64,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_fit import case_traces, gml_cases, mocap_cases, unipen_cases
 
 from tagbot.gesture import reconstruction
-from tagbot.gesture.timing import SHAPE_MARGIN_MAX, SHAPE_MARGIN_MEAN, pen_down_span
+from tagbot.gesture.timing import SHAPE_MARGIN_MAX, SHAPE_MARGIN_MEAN, fit_cost, pen_down_span
 from tagbot.inputs import Trace
 from tagbot.inputs.stamps import sample_instants
 from tagbot.metrics import clock_velocity_snr, fit_report, recorded_velocity, tag_clock_snr
@@ -117,6 +117,11 @@ class Row:
     sampled at the capture's own instants): the fitter against a motion it can represent..."""
     rerecorded_ceiling_10hz_db: float = math.nan
     """... and that fit's ceiling: their gap is the fitter's own, with no noise in the data."""
+    rerecorded_traces: int = 0
+    """Re-recorded traces the fit times (:func:`tagbot.gesture.timing.fit_cost`)..."""
+    rerecorded_costlier: int = 0
+    """... and of those, how many the refit ends with a higher cost than the plan they were
+    recorded from: the fit stopped in a worse minimum (a search gap, not the objective's)."""
     fit_geometric_s: float = math.nan
     fit_s: float = math.nan
     matched: int = 0
@@ -171,6 +176,21 @@ def rerecorded(traces: Sequence[Any], tag: Tag) -> list[Trace]:
     return out
 
 
+def costlier_refits(traces: Sequence[Any], recorded: Tag, refit: Tag) -> tuple[int, int]:
+    """Of ``traces`` (re-recorded from ``recorded``, one plan per trace) those the fit times,
+    and how many of them ``refit``'s plan costs more on than ``recorded``'s
+    (:func:`~tagbot.gesture.timing.fit_cost`, both at ``recorded``'s size)."""
+    timed = costlier = 0
+    for truth, fitted, trace in zip(recorded.plans, refit.plans, traces, strict=True):
+        try:
+            cost_truth = fit_cost(truth, trace, recorded.size)
+        except ValueError:
+            continue
+        timed += 1
+        costlier += fit_cost(fitted, trace, recorded.size) > cost_truth
+    return timed, costlier
+
+
 def run_case(case: tuple[str, str, object], model: str, rerecord: bool = False) -> Row:
     """Both fits of one file and every figure of :class:`Row` (the re-recorded ones only with
     ``rerecord``)."""
@@ -206,6 +226,9 @@ def run_case(case: tuple[str, str, object], model: str, rerecord: bool = False) 
             if snr is not None:
                 row.rerecorded_10hz_db = snr[1]
             row.rerecorded_ceiling_10hz_db = ceiling_db(again, refit, CUTOFFS["10hz"])
+            row.rerecorded_traces, row.rerecorded_costlier = costlier_refits(
+                again, chosen.tag, refit
+            )
         kinds = Counter(t.kind for t in chosen.timings or ())
         for kind in KINDS:
             setattr(row, kind, kinds[kind])
@@ -332,7 +355,10 @@ def summarise(dataset: str, rows: list[Row]) -> list[str]:
             f"  re-recorded (the default fit sampled at the capture's instants, fitted again),"
             f" 10 Hz, {len(again)} files: per trace {_stat(again, 'rerecorded_10hz_db', 10)},"
             f" ceiling {_stat(again, 'rerecorded_ceiling_10hz_db', 10)}; per trace - ceiling"
-            f" {trace - ceiling:+.1f} (the fitter's own gap)"
+            f" {trace - ceiling:+.1f} (the fitter's own gap); the refit costs more than the plan"
+            f" it was recorded from on {sum(r.rerecorded_costlier for r in again)} of"
+            f" {sum(r.rerecorded_traces for r in again)} traces (where it does, the fit stopped"
+            " in a worse minimum: a search gap)"
         )
     return lines
 

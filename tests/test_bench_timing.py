@@ -13,9 +13,19 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 
-from bench_timing import KINDS, Row, ceiling_db, rerecorded, run_case, shape_excess, summarise
+from bench_timing import (
+    KINDS,
+    Row,
+    ceiling_db,
+    costlier_refits,
+    rerecorded,
+    run_case,
+    shape_excess,
+    summarise,
+)
 
 from tagbot.gesture import reconstruction
+from tagbot.gesture.timing import fit_cost, simulated_capture
 from tagbot.inputs import Trace
 from tagbot.metrics import clock_velocity_snr, fit_report, recorded_velocity, tag_clock_snr
 from tagbot.model.motion import evaluate_plan, sample_plan
@@ -131,6 +141,21 @@ def test_rerecorded_traces_are_the_fit_at_the_captures_instants() -> None:
     assert row.rerecorded_10hz_db == pytest.approx(tag_clock_snr(again, refit, 10.0)[1])
     assert row.rerecorded_ceiling_10hz_db == pytest.approx(ceiling_db(again, refit, 10.0))
     assert math.isnan(run_case(("unipen", "noisy", traces), "gamma").rerecorded_10hz_db)
+    recorded = reconstruction(traces, "gamma", "auto").tag
+    costs = [fit_cost(p, again[0], recorded.size) for p in (refit.plans[0], recorded.plans[0])]
+    assert (row.rerecorded_traces, row.rerecorded_costlier) == (1, int(costs[0] > costs[1]))
+
+
+def test_a_refit_costlier_than_the_recorded_plan_is_counted() -> None:
+    rng = np.random.default_rng(8)
+    plans = [random_timed_plan(rng) for _ in range(2)]
+    tag = Tag((plans[0], plans[1].at(plans[0].end(100.0) + 0.3)))
+    traces = [simulated_capture(p, rng, noise=0.0) for p in tag.plans]
+    short = Trace(traces[1].xy[:5], traces[1].t[:5])  # too few stamps: not counted
+    assert costlier_refits(traces, tag, tag) == (2, 0)
+    late = Tag((tag.plans[0].at(tag.plans[0].start + 0.03), tag.plans[1]))
+    assert costlier_refits(traces, tag, late) == (2, 1)
+    assert costlier_refits([traces[0], short], tag, late) == (1, 1)
 
 
 def test_run_case_reports_a_refused_clock_and_a_failure() -> None:
@@ -164,7 +189,14 @@ def test_summary_gives_the_fitters_own_gap_when_rerecorded() -> None:
     ]
     (line,) = [x for x in summarise("gml", rows) if "re-recorded" in x]
     assert "2 files" in line and "per trace 21.0 / " in line and "ceiling 23.2 / " in line
-    assert line.endswith("per trace - ceiling -2.2 (the fitter's own gap)")
+    assert "per trace - ceiling -2.2 (the fitter's own gap)" in line
+    assert "costs more than the plan it was recorded from on 0 of 0 traces" in line
+    counted = [_row("a.gml", rerecorded_10hz_db=20.0, rerecorded_ceiling_10hz_db=23.0,
+                    rerecorded_traces=4, rerecorded_costlier=3),
+               _row("b.gml", rerecorded_10hz_db=20.0, rerecorded_ceiling_10hz_db=23.0,
+                    rerecorded_traces=2, rerecorded_costlier=1)]  # fmt: skip
+    (line,) = [x for x in summarise("gml", counted) if "re-recorded" in x]
+    assert "from on 4 of 6 traces" in line
 
 
 def test_summary_names_the_worst_file_and_marks_the_goals() -> None:

@@ -521,6 +521,26 @@ def _ink_cost(
     return float(r @ r)
 
 
+def fit_cost(plan: Plan, trace: Any, size: float, options: TimingOptions | None = None) -> float:
+    """What the timing fit minimises, for ``plan`` (on ``trace``'s clock) against ``trace``
+    (timed): the velocity and position residuals at full weight where the trace was recorded
+    (:func:`_ink_cost`, the figure strokes in the air are judged by). Two plans of one trace
+    compare by it: e.g. a refit that costs more than the plan its recording was made from
+    stopped in a worse minimum (a search gap, not the data's). Raises ValueError for a trace
+    the fit would not time (fewer than :data:`MIN_SAMPLES` distinct stamps)."""
+    opts = options or TimingOptions()
+    xy = np.asarray(trace.xy, dtype=float)
+    stamps = np.asarray(trace.t, dtype=float)
+    if int(np.count_nonzero(np.diff(stamps) > 0)) + 1 < MIN_SAMPLES:
+        raise ValueError(f"fit_cost: the trace has fewer than {MIN_SAMPLES} distinct stamps")
+    t, _ = sample_instants(stamps, xy)
+    t0 = float(t[0])
+    rec = resample(t - t0, xy, opts)
+    strokes = Strokes.of([plan])
+    strokes = strokes.replace(onsets=strokes.onsets + (plan.start - t0))
+    return _ink_cost(strokes, rec, float(t[-1] - t0), size, False, opts)
+
+
 def _end_velocities(rec: Recording, last: float) -> tuple[NDArray[np.intp], Array, Array] | None:
     """The grid instants of the recorded span ``0 .. last`` and the recorded velocity at its
     first and at its last instant (from the resampled positions over about 40 ms), or None for a
@@ -1210,6 +1230,7 @@ __all__ = [
     "TraceTiming",
     "Turn",
     "fastest_turn",
+    "fit_cost",
     "implausible_clock",
     "initial_timing",
     "match",

@@ -9,7 +9,14 @@ import pytest
 
 from tagbot.errors import PlanError
 from tagbot.gesture import fit
-from tagbot.gesture.timing import TimingOptions, resample, simulated_capture, usable
+from tagbot.gesture.timing import (
+    MIN_SAMPLES,
+    TimingOptions,
+    fit_cost,
+    resample,
+    simulated_capture,
+    usable,
+)
 from tagbot.inputs import Trace, load_traces, read_gml
 from tagbot.metrics import (
     clock_velocity_snr,
@@ -386,3 +393,24 @@ def test_no_fitted_stroke_is_a_pulse_too_short_for_the_grid() -> None:
         plan = fit([trace], timing="match").plans[0]
         extent = 2 * np.exp(plan.mu) * np.sinh(1.2815515655446004 * plan.sigma)
         assert extent.min() >= 0.7 * options.min_extent * step, extent.min()
+
+
+def test_fit_cost_is_least_for_the_plan_a_recording_was_made_from() -> None:
+    """The cost the fit minimises, for any plan against a timed trace: lowest for the plan the
+    trace was sampled from, higher for it late by a few ms or with its shape moved, and
+    independent of which clock the plan and trace share."""
+    rng = np.random.default_rng(21)
+    plan = random_timed_plan(rng)
+    trace = simulated_capture(plan, rng, rate=60.0, noise=0.0)
+    own = fit_cost(plan, trace, 100.0)
+    assert own >= 0.0
+    late = [fit_cost(plan.at(plan.start + d), trace, 100.0) for d in (0.005, 0.02)]
+    assert own < late[0] < late[1]
+    moved = Plan(plan.targets * 1.01, plan.dt, plan.mu, plan.sigma, plan.phi1, plan.phi2,
+                 plan.start)  # fmt: skip
+    assert fit_cost(moved, trace, 100.0) > own
+    shifted = Trace(trace.xy, trace.t + 7.0)
+    assert fit_cost(plan.at(plan.start + 7.0), shifted, 100.0) == pytest.approx(own, rel=1e-6)
+    few = Trace(trace.xy[: MIN_SAMPLES - 1], trace.t[: MIN_SAMPLES - 1])
+    with pytest.raises(ValueError, match=f"fewer than {MIN_SAMPLES} distinct stamps"):
+        fit_cost(plan, few, 100.0)
