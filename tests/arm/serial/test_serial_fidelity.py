@@ -134,19 +134,22 @@ def _profile_after_one_period(goals: np.ndarray, profile) -> np.ndarray:
     return out
 
 
-def test_the_servos_profile_follows_the_plan_within_a_quarter_tick(letter_b, profile) -> None:
-    """Goal k is sent ``profile_ms`` (20 ms) ahead of its time, so one period after it arrives
-    the servo's profile should be where the plan is 10 ms before goal k's time: within a
-    quarter of a tick on every joint (each goal rounded alone: up to half a tick, and a lag
-    where the motion bends)."""
+def test_the_servos_profile_follows_the_plan_within_half_its_step(letter_b, profile) -> None:
+    """Goal k is sent ``profile_ms`` ahead of its time, so one period T after it arrives the
+    servo's profile should be where the plan is ``profile_ms − T`` before goal k's time: within
+    half of the profile's step T/profile_ms of a tick on every joint (an eighth of a tick at
+    40 ms and 100 Hz; each goal rounded alone: up to half a tick, and a lag where the motion
+    bends)."""
     q = letter_b.angles
     aimed = q + feedforward(q, letter_b.setpoints.pen, profile)
     exact = np.column_stack([exact_ticks(aimed[:, i], j) for i, j in enumerate(profile.joints)])
+    late = round(profile.lead / profile.period) - 1  # rows the profile stands behind
+    assert profile.period / profile.lead == 0.25
     reached = _profile_after_one_period(letter_b.goals, profile)
-    error = reached[1:] - exact[:-1]
-    assert np.max(np.abs(error)) <= 0.25 + 1e-9
+    error = reached[late:] - exact[: len(exact) - late]
+    assert np.max(np.abs(error)) <= profile.period / profile.lead / 2 + 1e-9
     rounded = _profile_after_one_period(np.rint(exact), profile)
-    assert np.max(np.abs(rounded[1:] - exact[:-1])) > 0.5  # what rounding alone gave
+    assert np.max(np.abs(rounded[late:] - exact[: len(exact) - late])) > 0.5  # rounding alone
 
 
 def test_goals_stay_whole_ticks_within_the_joints_ranges(profile) -> None:
