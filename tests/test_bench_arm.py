@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
 import signal
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
@@ -47,3 +49,16 @@ def test_a_server_is_stopped_even_when_it_ignores_ctrl_c(monkeypatch, ignore_int
             server.wait()
         assert server.stdout is not None
         server.stdout.close()
+
+
+def test_the_speed_error_floor_is_the_median_runs_error_and_names_what_it_rules_out() -> None:
+    # a run's error rms is its planned speed rms × 10^(−SNR/20): 40 mm/s at 32 dB is 1.0 mm/s
+    rows = [
+        {"run_speeds": [(0, 50.0, 40.0, 20 * math.log10(40.0))]},  # 1 mm/s
+        {"run_speeds": [(0, 9.0, 10.0, 20 * math.log10(10.0 / 2.0)), (1, 80.0, 60.0, 40.0)]},
+    ]
+    assert bench_arm.speed_error_floor(rows) == pytest.approx(1.0)  # of 1, 2 and 0.6 mm/s
+    assert bench_arm.speed_rms(np.array([0.0, 1.0, 2.0]), np.array([[0, 0], [3, 4], [6, 8.0]])) == (
+        pytest.approx(5.0)
+    )
+    assert bench_arm.path_length(np.array([[0, 0], [3, 4], [6, 8.0]])) == pytest.approx(10.0)
