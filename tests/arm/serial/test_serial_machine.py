@@ -210,8 +210,9 @@ def test_contact_lost_and_force_out_of_range_are_warnings() -> None:
     contacts = [{"contact_kept_pct": 100.0, "force_min_n": 0.3, "force_max_n": 0.5}] * 2
     warnings = SerialBudget(contacts, [1.4, 10.0])(json.loads(json.dumps(slow)))
     assert warnings == [
-        "run 1 (plan 3): speed SNR 12.0 dB below 25 dB (a short run, 1.4 mm: the nib's friction"
-        " and chatter on the paper and the servos' whole ticks are as large as its motion)",
+        "run 1 (plan 3): speed SNR 12.0 dB below 25 dB (a short run, 1.4 mm: the arm's speed"
+        " error, the servos' whole ticks and the speed where the run starts, is as large as its"
+        " motion)",
         "run 2 (plan 3): speed SNR 12.0 dB below 25 dB",
     ]
 
