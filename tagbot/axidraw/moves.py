@@ -43,8 +43,8 @@ accumulators' fractions kept: ``C_k / 2³¹`` steps) against the plan, taken ove
 ±10 ms (:attr:`Job.run_speed_snr`). While a run's moves err by more than the steps'
 :data:`SPEED_MARGIN_DB` (15 dB) below, the moves with more than their share are split at their
 middle tick (halves of 10 ms at least) and the run built again: then they take at most
-0.14 dB from its speed SNR. At the default 25 ms no run of the examples and the nine
-development tags looked at needs it (their moves stay 19 dB or more under their steps); with
+0.14 dB from its speed SNR. At the default 25 ms no run of the 49 development tags needs it
+(their moves stay 19.2 dB or more under their steps: BENCHMARKS.md, session 21); with
 ``motion.dt = 0.1`` two of cae's three runs have most of their moves halved, letter-b's run
 none. Shorter moves need a deeper FIFO to keep
 the board as far ahead: :attr:`Job.fifo` (:func:`fifo_depth`) holds ``serial.fifo`` x
