@@ -1212,6 +1212,14 @@ class ArmDriver:
         if settle:
             clock.sleep_until(clock.now() + p.lead)
 
+    def lift_from(self, pose: NDArray[np.int64], where: str) -> None:
+        """A serial arm standing at ``pose`` (ticks: its present positions), held there and
+        lifted along the paper's normal to the pen-up height (held only when the pen is up
+        already), on the streaming profile (a move of the servos' own is cut where it is)."""
+        assert self.lifter is not None
+        self._streaming_profile(where)
+        self._rows(np.concatenate([self.lifter.stand(pose), self.lifter.up(pose)]), None, where)
+
     def lower_pen(self, pen: int | NDArray[np.int64], where: str = "resume") -> None:
         """From up, put the pen to ``pen`` ticks as a pause's resume does (before streaming);
         a serial arm lowers itself to the row ``pen`` along the paper's normal."""
@@ -1286,8 +1294,8 @@ class ArmDriver:
                         return
                     rows = pose[:0]
                 else:  # the approach's own move cut where the arm is, then the lift
-                    self._streaming_profile("stop")
-                    rows = np.concatenate([lifter.stand(pose), lifter.up(pose)])
+                    self.lift_from(pose, "stop")
+                    rows = pose[:0]
             if len(rows):
                 self._rows(rows, None, "stop")
             self.lifted, self.lift_failure = True, None

@@ -271,6 +271,9 @@ def _connect_and_stream(
     driver.connect()
     outcome.where = "approach"
     present = driver.read_present()
+    if not driver.lifter.is_up(present):  # found on the paper: off it first, not across it
+        driver.lift_from(present, "approach")
+        present = driver.read_present()
     if first:  # above where the job stopped, then the pen down along the normal
         row = program.goals[first - 1]
         above = driver.lifter.up(row)

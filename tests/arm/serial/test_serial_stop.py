@@ -151,3 +151,29 @@ def test_ctrl_c_in_the_approach_from_park_holds_the_arm_where_it_is(letter_b, tm
     goal = job.program.goals[RESUME - 2]
     assert np.abs(after - goal).max() > 200  # far from the approach's goal
     assert physics.pen_trace()[:, 3].max() == 0.0
+
+
+def test_a_resumed_job_found_on_the_paper_lifts_off_it_before_moving_across_it(
+    letter_b, tmp_path
+) -> None:
+    # the arm found with its pen on the paper at tick RESUME's pose, the job resumed 80 mm
+    # away: the move to above the resumed tick, in joint space, dragged the nib 10 mm across
+    # the paper; now the arm lifts it there first (what is left is the arm's fall onto the
+    # paper while connecting, its torque off: 1.8 mm)
+    job = prepare(letter_b, profile="openmanipulator-x", resume_from=420)
+    held = {}
+
+    def fault(chain) -> None:
+        held["chain"] = chain
+        q = job.program.angles[RESUME - 1]
+        for joint, angle in zip(job.profile.joints, q, strict=True):
+            chain.set_position(joint.id, float(angles_to_ticks(angle, joint)))
+
+    job.fault = fault
+    report = draw(letter_b, tmp_path / "run", prepared=job, pictures=False).report
+    assert report["completed"]
+    trace = held["chain"].plant.pen_trace()
+    on = trace[:, 3] > 0.5
+    assert on[1]
+    first = trace[1 : int(np.argmax(~on[1:])) + 1]  # the contact it was found in
+    assert np.hypot(*(first[:, 1:3] - first[0, 1:3]).T).max() < 2.5
