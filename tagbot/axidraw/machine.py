@@ -208,7 +208,7 @@ class AxiDrawJob:
         report = streamer.report
         done, partial = self._executed_moves(report)
         if isinstance(error, DeviceError) and error.where is None:
-            error = type(error)(str(error), _where(job, done))
+            error = type(error)(str(error), _where(job, done, partial))
         executed, runs = self._trace(report, device)
         planned = _runs_from(self._planned_runs(), job, first)
         total = len(job.entries)
@@ -400,7 +400,11 @@ def _until(job: Job, done: int) -> float:
     return job.entries[done].start if done < len(job.entries) else job.duration
 
 
-def _where(job: Job, done: int) -> str:
+def _where(job: Job, done: int, partial: int) -> str:
+    """Where a stop left the job: after the last move executed in full; during move 1 when it
+    was cut short (the motors had left home); before it when nothing ran."""
+    if done == 0 and partial:
+        return f"during move 1 of {len(job.entries)} (moves.txt; cut short)"
     if done == 0:
         return "before move 1 (nothing of the job was executed)"
     return f"after move {done} of {len(job.entries)} (moves.txt)"

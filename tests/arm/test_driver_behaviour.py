@@ -5,6 +5,7 @@ stop whose lift cannot be written."""
 from __future__ import annotations
 
 import logging
+import re
 from pathlib import Path
 
 import dynamixel_sdk as sdk
@@ -300,3 +301,26 @@ def test_noise_like_a_status_header_of_an_impossible_length_is_skipped(record, t
     assert run.error is None
     assert run.details["corrupt_replies"] == 0
     assert run.details["readbacks"] >= 0.9 * len(job.program.goals)
+
+
+def test_a_port_that_fails_in_a_write_names_the_write(record, profile, monkeypatch):
+    """An adapter that fails while a servo's control item is written: the error names the
+    port, the write (its address) and the adapter's own words."""
+    sim = record(simulated_chain(profile))
+
+    def fails(*args, **kwargs):
+        raise OSError("the adapter went away")
+
+    monkeypatch.setattr(type(sdk.PacketHandler(2.0)), "write1ByteTxRx", fails)
+    with ArmDriver(sim.url, profile) as driver, pytest.raises(ConnectionLost) as caught:
+        driver.connect()
+    assert re.search(rf"{re.escape(sim.url)}: write \d+: the adapter went away$", str(caught.value))
+
+
+def test_a_hardware_error_of_no_known_bit_says_none_reported(tmp_path):
+    """Hardware Error Status bits the e-Manual names nothing for (here bit 1): the sentence says
+    none is reported and gives the byte."""
+    error, *_ = _faulted(
+        load_plan(LETTER_B), tmp_path, lambda chain: chain.set_hardware_error(13, 0x02)
+    )
+    assert "hardware error: none reported (Hardware Error Status 0x02)" in str(error)

@@ -22,15 +22,15 @@ from .conftest import small_tag, two_plan_tag
 TICK_DEG = 360.0 / 4096
 
 
-@pytest.fixture(scope="module")
-def clean(tmp_path_factory) -> tuple[Any, Any, dict[str, Any]]:
+@pytest.fixture
+def clean(tmp_path) -> tuple[Any, Any, dict[str, Any]]:
     """A clean simulated run of the two-plan tag: the job, the run and its report."""
     job = prepare(two_plan_tag())
-    run = job.run(tmp_path_factory.mktemp("clean"))
+    run = job.run(tmp_path)
     return job, run, run_report(run)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def small() -> Any:
     """The one-plan tag's checked job, not run (its goals' rounding has a low speed SNR)."""
     return prepare(small_tag())

@@ -9,12 +9,15 @@ import os
 from itertools import count
 from pathlib import Path
 
+import pytest
+
 from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device
 from tagbot.axidraw.machine import prepare, resume_point
 from tagbot.axidraw.stream import StreamReport
 from tagbot.cli import main
-from tagbot.errors import InputError
+from tagbot.draw import draw
+from tagbot.errors import InputError, Interrupted
 from tagbot.io.planfile import load_plan
 
 from .conftest import LETTER_B
@@ -106,3 +109,19 @@ def test_a_stop_in_the_last_move_leaves_nothing_to_resume():
     report = StreamReport(first=0, sent=total, executed=total - 1, stopped_at=tuple(middle))
     assert job._executed_moves(report) == (total - 1, 1)
     assert resume_point(job.job, total - 1, 1) is None
+
+
+def test_a_stop_during_the_first_travel_says_the_motors_had_left_home(tmp_path):
+    """Ctrl-C at the first progress call, while move 1 (the travel from home) runs: the error
+    names move 1 as cut short, not "nothing executed", and the resume point skips it."""
+    tag = load_plan(LETTER_B)
+    job = prepare(tag)
+
+    def progress(done: int, total: int) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted, match=r"^during move 1 of \d+ \(moves.txt; cut short\)"):
+        draw(tag, tmp_path / "r", prepared=job, pictures=False, progress=progress)
+    report = json.loads((tmp_path / "r" / "report.json").read_text())
+    assert report["executed"] == 0 and report["resume_from"] == 2
+    assert report["details"]["stopped_at_steps"] != [0, 0]

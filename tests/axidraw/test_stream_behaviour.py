@@ -9,6 +9,7 @@ import os
 from dataclasses import replace
 from itertools import count
 
+import numpy as np
 import pytest
 import serial
 
@@ -146,9 +147,16 @@ def test_a_resumed_runs_plan_starts_at_the_resumed_move(tmp_path):
     start = entries[resume_from - 1].start
     assert start - base.job.run_start[0] > 2.0  # well into the one run
     again = replace(base, port=_url(device), resume_from=resume_from)
+    began = device.now
     second = draw(tag, tmp_path / "b", prepared=again, pictures=False).report
     (run,) = second["runs"]
     assert start - 1e-6 <= run["planned_start"] <= start + 0.002
+    # Resumed on a pen-down move: the pen goes back down (the board's pen all the way down, as
+    # in the first part) for the rest of the run, not only up for the travel there.
+    pen = device.recorder.pen_at(np.linspace(began, device.now, 200))
+    lowest = device.recorder.pen_at(np.linspace(0.0, began, 200)).min()
+    rest = sum(e.duration for e in entries[resume_from - 1 :] if e.kind == "draw" and e.pen)
+    assert np.mean(pen == lowest) >= 0.9 * rest / (device.now - began)
 
 
 def test_port_auto_takes_the_board_the_makers_finder_names(monkeypatch):
