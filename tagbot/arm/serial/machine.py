@@ -435,10 +435,9 @@ class SerialBudget:
     :data:`MIN_SPEED_SNR_DB`, contact kept through the planned ink and the nib's force within
     :data:`FORCE_RANGE`; a warning naming the run and the figure otherwise. A run whose SNR
     is low and whose planned path is shorter than :data:`SHORT_RUN_MM` is named as such: the
-    arm's speed error, about 1 mm/s rms on every run whatever its speed (the servos' whole-tick
-    goals, the speed step where the plan's trimmed run starts), is as large as such a run's
-    motion (measured on the simulator: a 1.4 mm run at 6 mm/s rms scores 19 dB; BENCHMARKS.md,
-    session 21)."""
+    arm's speed error, under 1 mm/s rms on every run whatever its speed (the servos' whole-tick
+    goals), is as large as such a run's motion (measured on the simulator: a 1.4 mm run at 6
+    mm/s rms scores 19-22 dB; BENCHMARKS.md, sessions 21 and 22)."""
 
     contacts: list[dict[str, float]]
     lengths: list[float] = field(default_factory=list)
@@ -455,9 +454,8 @@ class SerialBudget:
                 why = ""
                 if i < len(self.lengths) and self.lengths[i] < SHORT_RUN_MM:
                     why = (
-                        f" (a short run, {self.lengths[i]:.1f} mm: the arm's speed error, the"
-                        " servos' whole ticks and the speed where the run starts, is as large as"
-                        " its motion)"
+                        f" (a short run, {self.lengths[i]:.1f} mm: the arm's speed error, set by"
+                        " the servos' whole ticks, is as large as its motion)"
                     )
                 over.append(f"speed SNR {snr:.1f} dB below {MIN_SPEED_SNR_DB:g} dB{why}")
             if i < len(self.contacts):

@@ -25,6 +25,9 @@ from tagbot.arm.serial.program import (
 from tagbot.errors import PlacementError
 from tagbot.io.planfile import load_plan
 from tagbot.model import Tag
+from tagbot.model.easing import EASE
+from tagbot.model.motion import evaluate_plan
+from tests.model.test_ink import lifted
 
 from ..conftest import small_tag
 from .test_serial_fidelity import _stroke
@@ -211,3 +214,59 @@ def test_a_way_back_to_park_that_dips_to_the_paper_is_refused_naming_the_park():
     profile = load_serial_profile("openmanipulator-x", park)
     with pytest.raises(PlacementError, match=r"^tick \d+ \(park to park\): the pen's point would"):
         build_serial_program(Tag(plans=(first, last)), profile)
+
+
+def _run_rows(program, k: int) -> np.ndarray:
+    return np.flatnonzero(program.setpoints.plan == k)
+
+
+def _plan_speed(tag: Tag, k: int, tau: float, program) -> float:
+    """Plan ``k``'s speed on the paper at tag time ``tau``, mm/s, at its run's time scale."""
+    sp = program.setpoints
+    _, v = evaluate_plan(tag.plans[k], np.array([tau]), tag.size)
+    return float(np.hypot(*(v @ sp.placement.matrix.T)[0]) / sp.run_scales[k])
+
+
+def test_a_trimmed_run_starts_and_ends_at_rest_not_at_the_plans_speed_there():
+    """letter-b trimmed by motion.trim_mm: the plan moves where the run starts and ends (a
+    lognormal moves everywhere after its onset), so the run eases from and to rest there; its
+    first and last ticks move the pen a fraction of what the plan's speed would."""
+    tag = load_plan(EXAMPLES / "letter-b.json")
+    program = build_serial_program(tag, load_serial_profile("openmanipulator-x"))
+    sp = program.setpoints
+    clock = sp.run_clocks[0]
+    assert clock.on > tag.plans[0].start and clock.off < tag.plans[0].end(tag.size)
+    assert (clock.ease_in, clock.ease_out) == (EASE, EASE)
+    rows = _run_rows(program, 0)
+    assert np.hypot(*sp.v[rows[0]]) == 0.0 and np.hypot(*sp.v[rows[-1]]) < 1e-6
+    T = sp.period
+    for first, second, tau in ((rows[0], rows[1], clock.on), (rows[-1], rows[-2], clock.off)):
+        moving = _plan_speed(tag, 0, tau, program)
+        assert moving > 0.1  # mm/s: the plan moves where the trim cut it
+        assert np.hypot(*(sp.xy[second] - sp.xy[first])) / T < 0.2 * moving
+
+
+def test_a_run_drawn_from_the_plans_own_rest_is_not_eased():
+    """With motion.trim_mm = 0 the run starts at the lognormal's onset and ends where it has
+    stopped: at rest already, on the plan's own clock."""
+    tag = load_plan(EXAMPLES / "letter-b.json")
+    profile = load_serial_profile("openmanipulator-x", ["motion.trim_mm=0"])
+    clock = build_serial_program(tag, profile).setpoints.run_clocks[0]
+    assert (clock.on, clock.off) == (tag.plans[0].start, tag.plans[0].end(tag.size))
+    assert (clock.ease_in, clock.ease_out) == (0.0, 0.0)
+    assert clock.duration == pytest.approx(clock.off - clock.on)
+
+
+def test_a_run_touching_down_moving_and_trimmed_still_eases_from_rest():
+    """A plan whose ink touches down and lifts off moving, trimmed inside its ink window (as
+    ga3 19754's hook was: its run started at 12 mm/s): eased at both ends, starting at rest.
+    (Its ink window, 0.3 s, a whole number of the trim's 1 ms samples, once failed the trim.)"""
+    tag = Tag((lifted(start=0.0),))
+    profile = load_serial_profile("openmanipulator-x", ["motion.trim_mm=1"])
+    program = build_serial_program(tag, profile)
+    clock = program.setpoints.run_clocks[0]
+    down, up = tag.plans[0].ink_window(tag.size)
+    assert down < clock.on and clock.off < up  # the trim cut inside the ink
+    assert (clock.ease_in, clock.ease_out) == (EASE, EASE)
+    rows = _run_rows(program, 0)
+    assert np.hypot(*program.setpoints.v[rows[0]]) == 0.0

@@ -211,8 +211,7 @@ def test_contact_lost_and_force_out_of_range_are_warnings() -> None:
     warnings = SerialBudget(contacts, [1.4, 10.0])(json.loads(json.dumps(slow)))
     assert warnings == [
         "run 1 (plan 3): speed SNR 12.0 dB below 25 dB (a short run, 1.4 mm: the arm's speed"
-        " error, the servos' whole ticks and the speed where the run starts, is as large as its"
-        " motion)",
+        " error, set by the servos' whole ticks, is as large as its motion)",
         "run 2 (plan 3): speed SNR 12.0 dB below 25 dB",
     ]
 
