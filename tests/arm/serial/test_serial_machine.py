@@ -14,11 +14,14 @@ import numpy as np
 import pytest
 
 import tagbot
+from tagbot.arm.kinematics import angles_to_ticks
 from tagbot.arm.serial.machine import (
     FORCE_RANGE,
     ArmLift,
     SerialBudget,
     bridge_hops,
+    contact_figures,
+    executed_from_reads,
     prepare,
     time_bound,
 )
@@ -29,6 +32,7 @@ from tagbot.draw import draw
 from tagbot.errors import (
     ConnectionLost,
     DeviceError,
+    InputError,
     Interrupted,
     PlacementError,
     ProfileError,
@@ -459,3 +463,87 @@ def test_a_run_is_slowed_by_the_joints_acceleration_where_that_binds(letter_b, p
         for i, j in enumerate(gentle.joints)
     )
     assert speed < 0.9 and 0.95 < acc <= 1.0 + 1e-6  # the acceleration, not the speed, binds
+
+
+# -- the pen's height from the servos' positions, the contact figures, the options -------------
+
+
+def _park_row(profile) -> np.ndarray:
+    """The goal ticks of the profile's rest pose, and the pen's height there, mm."""
+    pairs = zip(profile.park, profile.joints, strict=True)
+    row = np.array([int(angles_to_ticks(a, j)) for a, j in pairs])
+    lift = ArmLift(profile)
+    return row, 1000.0 * lift.height(lift.angles(row))
+
+
+@pytest.mark.parametrize(("factor", "down"), [(1 - 1e-6, False), (1.0, True), (1 + 1e-6, True)])
+def test_read_back_pen_is_down_within_half_the_press_of_the_paper(factor, down) -> None:
+    row, height = _park_row(load_serial_profile("openmanipulator-x"))
+    press = 2.0 * height * factor  # the pen counts as down at up to robot.press / 2 above
+    profile = load_serial_profile("openmanipulator-x", [f"robot.press={press!r}"])
+    (sample,) = executed_from_reads(np.array([[0.5, *row]]), profile)
+    assert sample[0] == 0.5 and sample[3] == float(down)
+
+
+@pytest.mark.parametrize(("factor", "up"), [(1 - 1e-6, True), (1.0, True), (1 + 1e-6, False)])
+def test_the_pen_is_up_from_half_the_pen_up_height(factor, up) -> None:
+    row, height = _park_row(load_serial_profile("openmanipulator-x"))
+    profile = load_serial_profile("openmanipulator-x", [f"robot.pen_up={2.0 * height * factor!r}"])
+    assert ArmLift(profile).is_up(row) is up
+
+
+def test_a_hop_is_measured_from_the_last_sample_on_the_paper() -> None:
+    t = np.arange(5) * 0.001
+    x = np.array([-5.0, 0.0, 0.3, 0.6, 0.9])  # far before the last sample on the paper
+    pen = np.array([1, 1, 0, 1, 1.0])
+    out = bridge_hops(np.column_stack([t, x, np.zeros(5), pen]), nib=0.002)
+    np.testing.assert_array_equal(out[:, 3], [1, 1, 1, 1, 1])
+
+
+def test_a_run_of_two_planned_instants_has_its_contact_figure() -> None:
+    executed = np.column_stack([np.linspace(0, 2, 21), np.zeros(21), np.zeros(21), np.ones(21)])
+    run = (np.array([0.5, 1.5]), np.array([[0.0, 0.0], [1.0, 0.0]]))
+    (figures,) = contact_figures([run], executed, np.zeros((0, 2)))
+    assert figures["contact_kept_pct"] == 100.0
+    assert math.isnan(figures["force_min_n"]) and math.isnan(figures["force_max_n"])
+
+
+def test_joints_csv_times_step_by_the_period_from_zero(letter_b, tmp_path) -> None:
+    job = prepare(letter_b, profile="openmanipulator-x")
+    job.run(tmp_path)
+    rows = np.loadtxt(tmp_path / "joints.csv", delimiter=",", skiprows=1)
+    np.testing.assert_allclose(rows[:3, 0], [0.0, 0.01, 0.02])
+    assert rows[0, 1:].tolist() == job.program.goals[0].tolist()
+
+
+def test_the_planar_arms_sysfs_option_is_accepted_and_others_refused(letter_b) -> None:
+    assert prepare(letter_b, profile="openmanipulator-x", sysfs="/no/sys").port is None
+    with pytest.raises(InputError, match=r"^speed: not an option of the arm$"):
+        prepare(letter_b, profile="openmanipulator-x", speed=2)
+
+
+def test_a_serial_profile_file_is_one_with_a_robot_section(tmp_path) -> None:
+    serial = tmp_path / "mine.toml"
+    serial.write_text('[robot]\ndescription = "open_manipulator_x.xml"\n', encoding="utf-8")
+    planar = tmp_path / "planar.toml"
+    planar.write_text("[arm]\nl1 = 100\n", encoding="utf-8")
+    text = tmp_path / "robot.txt"
+    text.write_text("[robot]\n", encoding="utf-8")
+    assert is_serial_profile(serial) and is_serial_profile(str(serial))
+    assert not is_serial_profile(planar) and not is_serial_profile(text)
+    assert not is_serial_profile(tmp_path / "missing.toml") and not is_serial_profile(None)
+    assert not is_serial_profile("default") and is_serial_profile("koch-v1.1")
+
+
+def test_a_robot_description_by_path_relative_to_the_working_folder(tmp_path, monkeypatch) -> None:
+    shipped = load_serial_profile("openmanipulator-x").description
+    (tmp_path / "my_arm.xml").write_text(shipped.read_text(encoding="utf-8"), encoding="utf-8")
+    default = Path(tagbot.__file__).parent / "arm" / "serial" / "profiles" / "default.toml"
+    text = default.read_text(encoding="utf-8")
+    mine = text.replace('description = "open_manipulator_x.xml"', 'description = "my_arm.xml"')
+    assert mine != text
+    (tmp_path / "mine.toml").write_text(mine, encoding="utf-8")
+    monkeypatch.chdir(tmp_path)
+    profile = load_serial_profile("mine.toml")
+    assert profile.description == Path("my_arm.xml")
+    assert [j.name for j in profile.joints] == ["joint1", "joint2", "joint3", "joint4"]
