@@ -547,3 +547,30 @@ def test_a_robot_description_by_path_relative_to_the_working_folder(tmp_path, mo
     profile = load_serial_profile("mine.toml")
     assert profile.description == Path("my_arm.xml")
     assert [j.name for j in profile.joints] == ["joint1", "joint2", "joint3", "joint4"]
+
+
+def _profile_file(folder: Path, description: str, model_text: str | None = None) -> Path:
+    """A copy of the shipped default profile naming ``description`` (and that model written)."""
+    default = Path(tagbot.__file__).parent / "arm" / "serial" / "profiles" / "default.toml"
+    text = default.read_text(encoding="utf-8")
+    mine = text.replace('description = "open_manipulator_x.xml"', f"description = {description}")
+    assert mine != text
+    if model_text is not None:
+        (folder / "my_arm.xml").write_text(model_text, encoding="utf-8")
+    (folder / "mine.toml").write_text(mine, encoding="utf-8")
+    return folder / "mine.toml"
+
+
+def test_a_robot_description_that_is_no_text_is_named_with_its_file(tmp_path) -> None:
+    path = _profile_file(tmp_path, "5")
+    with pytest.raises(ProfileError, match=rf"^{path}: robot\.description: must be a non-empty"):
+        load_serial_profile(path)
+
+
+def test_a_description_without_the_pens_mount_is_named_with_the_profile_file(tmp_path) -> None:
+    shipped = load_serial_profile("openmanipulator-x").description.read_text(encoding="utf-8")
+    model = shipped.replace('<site name="end_effector"', '<site name="wrist"')
+    assert model != shipped
+    path = _profile_file(tmp_path, f'"{tmp_path / "my_arm.xml"}"', model)
+    with pytest.raises(ProfileError, match=rf"^{path}: robot\.description: .*needs sites"):
+        load_serial_profile(path)
