@@ -296,3 +296,18 @@ def test_a_run_over_its_limit_by_a_hair_whatever_its_scale_is_still_retimed(monk
     profile = load_serial_profile("openmanipulator-x", ["place.scale=2"])
     program = build_serial_program(small_tag(), profile)
     assert 1.01 <= program.setpoints.run_scales[0] < 1.02
+
+
+@pytest.mark.parametrize("end", ["lower", "upper"])
+def test_a_joint_held_at_its_range_end_passes_and_just_beyond_is_refused(end) -> None:
+    profile = load_serial_profile("openmanipulator-x")
+    program = build_serial_program(load_plan(EXAMPLES / "letter-b.json"), profile)
+    joint = profile.joints[1]
+    bound = getattr(joint, end)
+    at = program.angles.copy()
+    at[:, 1] = bound  # held there the whole job: no speed, no acceleration
+    check_serial_program(replace(program, angles=at), profile)
+    beyond = at.copy()
+    beyond[:, 1] += 1e-6 if end == "upper" else -1e-6
+    with pytest.raises(PlacementError, match=r"^tick 0 .*joint2 at -?\d+\.\d\d° beyond its range"):
+        check_serial_program(replace(program, angles=beyond), profile)
