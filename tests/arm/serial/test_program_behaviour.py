@@ -12,6 +12,7 @@ import pytest
 
 import tagbot
 import tagbot.arm.serial.program as program_module
+from tagbot.arm.kinematics import angles_to_ticks
 from tagbot.arm.serial.profile import load_serial_profile
 from tagbot.arm.serial.program import (
     MIN_JERK_PEAK_RATE,
@@ -22,6 +23,7 @@ from tagbot.arm.serial.program import (
     check_serial_program,
     move_excess,
     place_on_paper,
+    profile_goals,
 )
 from tagbot.errors import PlacementError
 from tagbot.io.planfile import load_plan
@@ -311,3 +313,18 @@ def test_a_joint_held_at_its_range_end_passes_and_just_beyond_is_refused(end) ->
     beyond[:, 1] += 1e-6 if end == "upper" else -1e-6
     with pytest.raises(PlacementError, match=r"^tick 0 .*joint2 at -?\d+\.\d\d° beyond its range"):
         check_serial_program(replace(program, angles=beyond), profile)
+
+
+@pytest.mark.parametrize("end", ["lower", "upper"])
+def test_goals_stepping_to_a_range_end_stay_within_the_servos_limits(end) -> None:
+    """A step to a joint's range end in one tick: the goals that undo the profile's lag would
+    overshoot it, and stop at the end's tick instead (the servo's position limit)."""
+    profile = load_serial_profile("openmanipulator-x")
+    joint = profile.joints[1]
+    angles = np.tile(profile.park, (40, 1))
+    angles[10:, 1] = getattr(joint, end)
+    goals = profile_goals(angles, profile)
+    limit = int(angles_to_ticks(getattr(joint, end), joint))
+    ticks = goals[:, 1]
+    assert (ticks <= limit).all() if limit >= ticks[0] else (ticks >= limit).all()
+    assert ticks[-1] == limit
