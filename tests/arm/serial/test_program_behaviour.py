@@ -21,6 +21,7 @@ from tagbot.arm.serial.program import (
     _owned,
     build_serial_program,
     check_serial_program,
+    feedforward,
     move_excess,
     place_on_paper,
     profile_goals,
@@ -328,3 +329,21 @@ def test_goals_stepping_to_a_range_end_stay_within_the_servos_limits(end) -> Non
     ticks = goals[:, 1]
     assert (ticks <= limit).all() if limit >= ticks[0] else (ticks >= limit).all()
     assert ticks[-1] == limit
+
+
+def test_the_papers_push_is_fed_forward_where_the_point_is_below_the_paper_wherever_it_is():
+    """A pose standing with the pen's point 1 mm above a raised paper: no push; the paper 1 mm
+    above the point (the point aimed 1 mm in): the joints' feedforward takes the paper's push."""
+    profile = load_serial_profile("openmanipulator-x")
+    pose = profile.park[None, :]
+    tip, _ = profile.arm.fk(pose)
+    z = 1000.0 * float(np.asarray(tip).reshape(-1, 3)[0, 2])  # mm above the base plate
+    alone = feedforward(pose, np.ones(1, dtype=bool), profile)
+
+    def on_paper_at(height: float) -> np.ndarray:
+        raised = load_serial_profile("openmanipulator-x", [f"paper.z={height!r}"])
+        return feedforward(pose, np.ones(1, dtype=bool), raised) - alone
+
+    np.testing.assert_array_equal(on_paper_at(z - 1.0), 0.0)
+    pushed = on_paper_at(z + 1.0)
+    assert np.abs(pushed[0, 1:]).min() > 1e-3  # rad: the shoulder, elbow and wrist take it
