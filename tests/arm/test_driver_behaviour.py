@@ -16,7 +16,10 @@ import tagbot
 from tagbot.arm import load_profile, prepare
 from tagbot.arm.driver import ArmDriver, UrlPortHandler
 from tagbot.arm.run import simulated_chain
+from tagbot.arm.serial.machine import ArmLift, simulated_arm
 from tagbot.arm.serial.machine import prepare as serial_prepare
+from tagbot.arm.serial.profile import load_serial_profile
+from tagbot.arm.serial.program import build_serial_program
 from tagbot.control import RunControl
 from tagbot.draw import draw
 from tagbot.errors import ConnectionLost, DeviceError, DeviceTimeout, Interrupted
@@ -324,3 +327,24 @@ def test_a_hardware_error_of_no_known_bit_says_none_reported(tmp_path):
         load_plan(LETTER_B), tmp_path, lambda chain: chain.set_hardware_error(13, 0x02)
     )
     assert "hardware error: none reported (Hardware Error Status 0x02)" in str(error)
+
+
+def test_a_serial_arm_that_fails_while_lowering_its_pen_names_the_resume(record, monkeypatch):
+    """A serial arm lowers itself onto the paper to resume; a write failing there names the
+    resume, the port and the write."""
+    profile = load_serial_profile("openmanipulator-x")
+    program = build_serial_program(load_plan(LETTER_B), profile)
+    on_paper = program.goals[next(s for s in program.segments if s[0] == "draw")[2] + 5]
+    sim = record(simulated_arm(profile)[0])
+    with ArmDriver(sim.url, profile) as driver:
+        driver.lifter = ArmLift(profile, program)
+        driver.connect()
+
+        def fails(*args, **kwargs):
+            raise OSError("the adapter went away")
+
+        monkeypatch.setattr(sdk.GroupSyncWrite, "txPacket", fails)
+        with pytest.raises(ConnectionLost) as caught:
+            driver.lower_pen(on_paper)
+    assert caught.value.where == "resume"
+    assert str(caught.value) == f"resume: {sim.url}: goal positions: the adapter went away"
