@@ -19,6 +19,7 @@ from tagbot.arm.serial.program import (
     _excess,
     _joint_move,
     _owned,
+    _stroke_at,
     build_serial_program,
     check_serial_program,
     feedforward,
@@ -347,3 +348,13 @@ def test_the_papers_push_is_fed_forward_where_the_point_is_below_the_paper_where
     np.testing.assert_array_equal(on_paper_at(z - 1.0), 0.0)
     pushed = on_paper_at(z + 1.0)
     assert np.abs(pushed[0, 1:]).min() > 1e-3  # rad: the shoulder, elbow and wrist take it
+
+
+def test_a_point_at_a_strokes_onset_is_named_for_that_stroke() -> None:
+    """A refusal names the stroke under way (the last one begun): at its onset exactly, the
+    stroke that begins there; just before, the one before it."""
+    tag = load_plan(EXAMPLES / "letter-b.json")
+    onsets = tag.plans[0].onsets
+    assert [_stroke_at(tag, 0, float(t)) for t in onsets] == list(range(len(onsets)))
+    assert [_stroke_at(tag, 0, float(t) - 1e-6) for t in onsets[1:]] == list(range(len(onsets) - 1))
+    assert _stroke_at(tag, 0, 0.0) == 0  # before the first onset: the first stroke
