@@ -358,3 +358,19 @@ def test_a_point_at_a_strokes_onset_is_named_for_that_stroke() -> None:
     assert [_stroke_at(tag, 0, float(t)) for t in onsets] == list(range(len(onsets)))
     assert [_stroke_at(tag, 0, float(t) - 1e-6) for t in onsets[1:]] == list(range(len(onsets) - 1))
     assert _stroke_at(tag, 0, 0.0) == 0  # before the first onset: the first stroke
+
+
+def test_the_planned_timeline_puts_every_tick_where_the_pens_point_is_over_the_paper() -> None:
+    """The planned timeline (report, pictures) in mm on the paper: pen-up ticks too (travel,
+    approach, the moves from and to park) are where the planned angles put the pen's point,
+    seen along the paper's normal, within 0.01 mm."""
+    profile = load_serial_profile("openmanipulator-x")
+    program = build_serial_program(load_plan(EXAMPLES / "letter-b.json"), profile)
+    tip, _ = profile.arm.fk(program.angles)
+    paper = profile.paper
+    rel = (np.asarray(tip).reshape(-1, 3) - np.asarray(paper.origin)) * 1000.0
+    seen = np.column_stack([rel @ np.asarray(paper.x_axis), rel @ np.asarray(paper.y_axis)])
+    sp = program.setpoints
+    up = ~np.asarray(sp.pen, dtype=bool)
+    assert up.sum() > 100
+    assert np.hypot(*(seen - sp.xy).T).max() < 0.01
