@@ -374,3 +374,10 @@ def test_the_planned_timeline_puts_every_tick_where_the_pens_point_is_over_the_p
     up = ~np.asarray(sp.pen, dtype=bool)
     assert up.sum() > 100
     assert np.hypot(*(seen - sp.xy).T).max() < 0.01
+
+
+@pytest.mark.parametrize("off", [0.7, 0.6])
+def test_a_run_window_with_no_time_in_it_is_an_empty_clock_at_its_start(off) -> None:
+    clock = program_module.moving_clock(lifted(), 0.7, off, 40.0)
+    assert (clock.on, clock.off, clock.duration) == (0.7, 0.7, 0.0)
+    assert (clock.ease_in, clock.ease_out) == (0.0, 0.0)
