@@ -1118,23 +1118,21 @@ def match(
 def _match_from_starts(
     plan: Plan, trace: Any, size: float, model: Model, options: TimingOptions
 ) -> tuple[Plan, float, tuple[Plan, float] | None]:
-    """:func:`_match_trace` from each of :attr:`TimingOptions.starts`, the one that costs least
-    at the nominal weights (:func:`_ink_cost`; with strokes in the air, if they help, their
-    cost) kept."""
-    best, lowest = None, np.inf
-    for weight in options.starts:
-        heavier = replace(options, position_weight=options.position_weight * weight)
-        fitted = _match_trace(plan, trace, size, model, heavier)
-        if len(options.starts) == 1 or _distinct(trace.t) < MIN_SAMPLES:
-            return fitted  # (nothing to compare; too few stamps: the same plan from every start)
+    """:func:`_match_trace` from each of :attr:`TimingOptions.starts`: the one whose plan (with
+    strokes in the air, where they help) costs least at the nominal weights."""
+
+    def cost(fitted: tuple[Plan, float, tuple[Plan, float] | None]) -> float:
+        drawn = fitted[2][0] if fitted[2] is not None else fitted[0]
         try:
-            cost = _relative_cost(fitted[0], trace, size, model == "sigma", options)
+            return _relative_cost(drawn, trace, size, model == "sigma", options)
         except (PlanError, FloatingPointError, ZeroDivisionError):
-            continue
-        cost *= 1.0 - (fitted[2][1] if fitted[2] is not None else 0.0)
-        if cost < lowest:
-            best, lowest = fitted, cost
-    return best if best is not None else _match_trace(plan, trace, size, model, options)
+            return np.inf
+
+    weights = [options.position_weight * start for start in options.starts]
+    fits = [
+        _match_trace(plan, trace, size, model, replace(options, position_weight=w)) for w in weights
+    ]
+    return min(fits, key=cost)
 
 
 def _with_ink(

@@ -263,27 +263,31 @@ def test_a_timing_lost_from_the_nominal_start_is_kept_from_a_heavier_one(seed: i
 
 def test_the_start_that_costs_least_is_kept(monkeypatch) -> None:
     """Each start is fitted once, in order, and the plan kept is the one the fit's own cost
-    (:func:`fit_cost`) ranks first."""
+    (:func:`fit_cost`) ranks first, strokes in the air included where they help."""
     import tagbot.gesture.timing as timing
 
     real, tried = timing._match_trace, []
 
     def recorded(plan, trace, size, model, options):
         fitted = real(plan, trace, size, model, options)
-        tried.append((options.position_weight, fitted))
+        tried.append((options.position_weight, fitted[2][0] if fitted[2] else fitted[0]))
         return fitted
 
     monkeypatch.setattr(timing, "_match_trace", recorded)
-    rng = np.random.default_rng(33)
-    trace = capture(random_timed_plan(rng), rng, rate=60.0, noise=0.3)
-    options = TimingOptions(starts=(1.0, 30.0, 1000.0), air_speed=None)
+    rng = np.random.default_rng(37)  # (the plan in the air ranks otherwise without its strokes)
+    whole = simulated_capture(random_timed_plan(rng), rng, rate=60.0, noise=0.3)
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(whole.xy, axis=0).T))]
+    inked = (s >= 0.05 * s[-1]) & (s <= 0.95 * s[-1])  # touched down and lifted off moving
+    trace = Trace(whole.xy[inked], whole.t[inked])
+    options = TimingOptions(starts=(1.0, 30.0, 1000.0))
     kept = reconstruction([trace], timing="match", timing_options=options)
     assert [w / options.position_weight for w, _ in tried] == [1.0, 30.0, 1000.0]
     t0 = float(trace.t[0])  # (the capture's stamps are the instants: no burst, no noise)
     size = float(np.hypot(*np.ptp(trace.xy, axis=0)))
-    costs = [fit_cost(f[0].at(f[0].start + t0), trace, size) for _, f in tried]
+    costs = [fit_cost(p.at(p.start + t0), trace, size) for _, p in tried]
     assert len(set(np.round(costs, 6))) == 3, costs  # three different minima
-    best = tried[int(np.argmin(costs))][1][0]
+    best = tried[int(np.argmin(costs))][1]
+    assert any(p.ink is not None for _, p in tried)  # strokes in the air kept
     np.testing.assert_allclose(kept.tag.plans[0].targets, best.targets)
 
 
