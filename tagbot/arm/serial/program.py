@@ -388,8 +388,8 @@ def profile_goals(angles: Array, profile: SerialProfile) -> NDArray[np.int64]:
     alone puts the profile up to half a tick off the plan and lags it where the motion
     bends (on the OpenManipulator-X half a tick of a joint moves the pen 0.05-0.17 mm along
     the paper); here each goal is the whole tick that brings the profile nearest the plan's angle at
-    that instant, from where the earlier goals left it: within ``α/2`` tick (an eighth at
-    the profiles' 40 ms and 100 Hz, a quarter at 20 ms), its lag undone. Steady motion gets
+    that instant, from where the earlier goals left it: within ``α/2`` tick (a sixteenth at
+    the profiles' 80 ms and 100 Hz, a quarter at 20 ms), its lag undone. Steady motion gets
     the same goals as rounding.
     Goals stay within the joints' ranges (the servos' position limits); with a ramped profile
     (``acceleration_fraction > 0``) each goal is the angle rounded."""

@@ -137,14 +137,14 @@ def _profile_after_one_period(goals: np.ndarray, profile) -> np.ndarray:
 def test_the_servos_profile_follows_the_plan_within_half_its_step(letter_b, profile) -> None:
     """Goal k is sent ``profile_ms`` ahead of its time, so one period T after it arrives the
     servo's profile should be where the plan is ``profile_ms − T`` before goal k's time: within
-    half of the profile's step T/profile_ms of a tick on every joint (an eighth of a tick at
-    40 ms and 100 Hz; each goal rounded alone: up to half a tick, and a lag where the motion
+    half of the profile's step T/profile_ms of a tick on every joint (a sixteenth of a tick
+    at 80 ms and 100 Hz; each goal rounded alone: up to half a tick, and a lag where the motion
     bends)."""
     q = letter_b.angles
     aimed = q + feedforward(q, letter_b.setpoints.pen, profile)
     exact = np.column_stack([exact_ticks(aimed[:, i], j) for i, j in enumerate(profile.joints)])
     late = round(profile.lead / profile.period) - 1  # rows the profile stands behind
-    assert profile.period / profile.lead == 0.25
+    assert profile.period / profile.lead == 0.125
     reached = _profile_after_one_period(letter_b.goals, profile)
     error = reached[late:] - exact[: len(exact) - late]
     assert np.max(np.abs(error)) <= profile.period / profile.lead / 2 + 1e-9
@@ -155,9 +155,12 @@ def test_the_servos_profile_follows_the_plan_within_half_its_step(letter_b, prof
 def test_goals_stay_whole_ticks_within_the_joints_ranges(profile) -> None:
     joint = profile.joints[1]
     top = float(exact_ticks(joint.upper, joint))
-    angles = np.zeros((6, len(profile.joints)))
-    # towards the range's end fast: the profile's catch-up would ask beyond it
-    angles[:, 1] = np.linspace(joint.upper - 0.05, joint.upper, 6)
+    # towards the range's end fast: the profile's catch-up would ask beyond it; then held there
+    # as long as a goal is sent ahead of its angle (servo.profile_ms), so the last goal is the end
+    ahead = round(profile.lead / profile.period)
+    angles = np.zeros((6 + ahead, len(profile.joints)))
+    angles[:, 1] = joint.upper
+    angles[:6, 1] = np.linspace(joint.upper - 0.05, joint.upper, 6)
     goals = profile_goals(angles, profile)
     assert goals.dtype == np.int64
     assert goals[:, 1].max() <= round(top)

@@ -5,6 +5,7 @@ and a fault mid-run lifting the pen by the arm."""
 from __future__ import annotations
 
 import json
+import logging
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -305,6 +306,23 @@ def test_ctrl_c_mid_run_lifts_the_pen_by_the_arm(letter_b, tmp_path) -> None:
     assert physics.pen_trace()[-50:, 4].max() == 0.0
 
 
+def test_ctrl_c_mid_run_takes_the_nib_off_the_paper_within_0_2_s(letter_b, tmp_path) -> None:
+    # the servos run servo.profile_ms (80 ms) behind the host: what was sent is drawn, then the
+    # arm lifts along the normal; the nib leaves the paper 0.18 s (simulated) after the Ctrl-C
+    fired = {}
+
+    def interrupt(chain) -> None:
+        fired["sample"] = len(chain.plant.pen_trace()) - 1
+        raise KeyboardInterrupt
+
+    _, _, physics, job, _ = _faulted(letter_b, tmp_path, interrupt)
+    trace = physics.pen_trace()
+    at = fired["sample"]
+    assert trace[at, 3] == 1.0  # on the paper when stopped
+    off = at + np.flatnonzero(trace[at:, 3] == 0.0)[0]
+    assert job.profile.lead <= trace[off, 0] - trace[at, 0] <= 0.2
+
+
 def _height(physics, profile) -> float:
     """The pen's point above the paper in the physics, m."""
     tip = physics.data.site_xpos[physics._tip]
@@ -498,6 +516,9 @@ def test_a_hop_is_measured_from_the_last_sample_on_the_paper() -> None:
     pen = np.array([1, 1, 0, 1, 1.0])
     out = bridge_hops(np.column_stack([t, x, np.zeros(5), pen]), nib=0.002)
     np.testing.assert_array_equal(out[:, 3], [1, 1, 1, 1, 1])
+    # far from the paper's origin, on both axes: the hop is 0.6 mm along x, none along y
+    far = bridge_hops(np.column_stack([t, x + 100.0, np.full(5, 50.0), pen]), nib=0.002)
+    np.testing.assert_array_equal(far[:, 3], [1, 1, 1, 1, 1])
 
 
 def test_a_run_of_two_planned_instants_has_its_contact_figure() -> None:
@@ -506,6 +527,20 @@ def test_a_run_of_two_planned_instants_has_its_contact_figure() -> None:
     (figures,) = contact_figures([run], executed, np.zeros((0, 2)))
     assert figures["contact_kept_pct"] == 100.0
     assert math.isnan(figures["force_min_n"]) and math.isnan(figures["force_max_n"])
+    force = np.column_stack([[0.2, 0.5, 1.0, 1.5, 1.8], [9.0, 0.3, 0.4, 0.6, 9.0]])
+    (figures,) = contact_figures([run], executed, force)  # the force while the run draws
+    assert (figures["force_min_n"], figures["force_max_n"]) == (0.3, 0.6)
+
+
+def test_planned_instants_in_whole_seconds_move_on_by_a_pause() -> None:
+    """A pause of 0.25 s at 0.5 s on the executed clock: the planned instants after it are found
+    0.25 s later, given as whole seconds too."""
+    executed = np.column_stack([np.linspace(0, 3, 31), np.zeros(31), np.zeros(31), np.ones(31)])
+    executed[14:17, 3] = 0.0  # off the paper 1.4..1.6 s: the second step's middle, unpaused
+    run = (np.array([0, 1, 2]), np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]))
+    (paused,) = contact_figures([run], executed, np.zeros((0, 2)), [(0.5, 0.25)])
+    (plain,) = contact_figures([run], executed, np.zeros((0, 2)))
+    assert (paused["contact_kept_pct"], plain["contact_kept_pct"]) == (100.0, 50.0)
 
 
 def test_joints_csv_times_step_by_the_period_from_zero(letter_b, tmp_path) -> None:
@@ -574,3 +609,45 @@ def test_a_description_without_the_pens_mount_is_named_with_the_profile_file(tmp
     path = _profile_file(tmp_path, f'"{tmp_path / "my_arm.xml"}"', model)
     with pytest.raises(ProfileError, match=rf"^{path}: robot\.description: .*needs sites"):
         load_serial_profile(path)
+
+
+def test_the_budgets_warnings_are_logged_as_worded(caplog) -> None:
+    report = {"runs": [{"plan": 2, "path_deviation_max_mm": 0.5, "speed_snr_db": 30.0}]}
+    contacts = [{"contact_kept_pct": 100.0, "force_min_n": 0.3, "force_max_n": 0.5}]
+    with caplog.at_level(logging.WARNING, logger="tagbot.arm.serial.machine"):
+        (warning,) = SerialBudget(contacts, [10.0])(report)
+    assert warning == "run 1 (plan 2): path deviation 0.500 mm over 0.3 mm"
+    assert [r.getMessage() for r in caplog.records] == [warning]
+
+
+def test_lifting_and_lowering_at_a_pose_retrace_one_path(program, profile) -> None:
+    """From a pose on the paper, the lift's goals are the lowering's in reverse, the pose's own
+    standing goal ending the lowering (and not in the lift)."""
+    lift = ArmLift(profile, program)
+    row = program.goals[next(s for s in program.segments if s[0] == "draw")[2] + 5]
+    up, down = lift.up(row), lift.down(row)
+    assert len(up) >= 2 and len(down) == len(up) + 1
+    np.testing.assert_array_equal(down[::-1][1:], up)
+    np.testing.assert_array_equal(down[-1], lift.stand(row)[0])
+    assert lift.is_up(up[-1]) and not lift.is_up(down[-1])
+
+
+@pytest.mark.parametrize(("gain", "ok"), [(16383, True), (16384, False)])
+def test_a_position_gain_is_a_14_bit_value(gain, ok) -> None:
+    overrides = [f"servo.position_p_gain={gain}"]
+    if ok:
+        assert load_serial_profile("openmanipulator-x", overrides).gains[0] == gain
+        return
+    with pytest.raises(ProfileError, match=r"^--set: servo\.position_p_gain: must be 0\.\.16383$"):
+        load_serial_profile("openmanipulator-x", overrides)
+
+
+def test_a_servo_range_touching_the_joints_range_at_one_angle_is_refused() -> None:
+    """The Koch's shoulder_lift ranges 0..2.5 rad; zero = 4095 puts the servo's 0..4095 ticks
+    at -2π..0 rad, meeting that range at 0 alone: no overlap."""
+    with pytest.raises(
+        ProfileError,
+        match=r"^--set: shoulder_lift\.zero: the joint's range and the servo's 0\.\.4095 ticks"
+        r" do not overlap$",
+    ):
+        load_serial_profile("koch-v1.1", ["shoulder_lift.zero=4095"])
