@@ -651,3 +651,14 @@ def test_a_servo_range_touching_the_joints_range_at_one_angle_is_refused() -> No
         r" do not overlap$",
     ):
         load_serial_profile("koch-v1.1", ["shoulder_lift.zero=4095"])
+
+
+def test_a_joint_the_lift_does_not_move_does_not_slow_it(program) -> None:
+    """Lifting straight up along the paper's normal leaves the base where it is: a base with
+    a slow speed and acceleration limit lifts the pen in as many ticks as a fast one."""
+    row = program.goals[next(s for s in program.segments if s[0] == "draw")[2] + 5]
+    fast = ArmLift(load_serial_profile("openmanipulator-x"), program).up(row)
+    slow_base = ("joint1.max_acceleration=20", "joint1.max_speed=5")
+    slow = ArmLift(load_serial_profile("openmanipulator-x", slow_base), program).up(row)
+    assert (fast[:, 0] == row[0]).all()
+    np.testing.assert_array_equal(slow, fast)
