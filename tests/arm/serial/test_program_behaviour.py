@@ -13,6 +13,7 @@ import pytest
 import tagbot
 import tagbot.arm.serial.program as program_module
 from tagbot.arm.kinematics import angles_to_ticks
+from tagbot.arm.run import placement_of
 from tagbot.arm.serial.profile import load_serial_profile
 from tagbot.arm.serial.program import (
     MIN_JERK_PEAK_RATE,
@@ -381,3 +382,17 @@ def test_a_run_window_with_no_time_in_it_is_an_empty_clock_at_its_start(off) -> 
     clock = program_module.moving_clock(lifted(), 0.7, off, 40.0)
     assert (clock.on, clock.off, clock.duration) == (0.7, 0.7, 0.0)
     assert (clock.ease_in, clock.ease_out) == (0.0, 0.0)
+
+
+def test_each_runs_reported_start_is_where_its_ink_starts() -> None:
+    """cae's three runs: the report's placement starts each run at its first drawing tick, and
+    pen-up ticks (travel, approach, retreat, park) belong to no run."""
+    profile = load_serial_profile("openmanipulator-x")
+    program = build_serial_program(load_plan(EXAMPLES / "cae.json"), profile)
+    draws = [(plan, first) for kind, plan, first, _ in program.segments if kind == "draw"]
+    runs = placement_of(program.setpoints)["runs"]
+    assert [(r["plan"], r["start"]) for r in runs] == [
+        (plan, pytest.approx(first * profile.period)) for plan, first in draws
+    ]
+    sp = program.setpoints
+    assert (sp.plan[~np.asarray(sp.pen, dtype=bool)] == -1).all()
