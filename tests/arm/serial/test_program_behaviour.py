@@ -396,3 +396,24 @@ def test_each_runs_reported_start_is_where_its_ink_starts() -> None:
     ]
     sp = program.setpoints
     assert (sp.plan[~np.asarray(sp.pen, dtype=bool)] == -1).all()
+
+
+def test_a_runs_lift_off_mirrors_its_touch_down() -> None:
+    """Around each of cae's runs: the pen comes down from robot.pen_up (10 mm) above the paper
+    to the run's first point and goes back up from its last in as many ticks, at the same
+    heights in reverse (within 0.001 mm)."""
+    profile = load_serial_profile("openmanipulator-x")
+    program = build_serial_program(load_plan(EXAMPLES / "cae.json"), profile)
+    tip, _ = profile.arm.fk(program.angles)
+    paper = profile.paper
+    height = (np.asarray(tip).reshape(-1, 3) - np.asarray(paper.origin)) @ paper.normal * 1000.0
+    segments = program.segments
+    runs = [i for i, s in enumerate(segments) if s[0] == "draw"]
+    assert len(runs) == 3
+    for i in runs:
+        down, up = segments[i - 1], segments[i + 1]
+        assert down[0] == up[0] == "pen"
+        lowering, lifting = height[down[2] : down[3]], height[up[2] : up[3]]
+        assert len(lowering) == len(lifting)
+        assert lowering[0] == pytest.approx(10.0, abs=1e-3)
+        np.testing.assert_allclose(lifting[::-1], lowering, atol=1e-3)
