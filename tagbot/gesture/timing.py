@@ -178,10 +178,11 @@ class TimingOptions:
     """The timed fit is run from the geometric plan once per start, with the position residuals
     weighing that many times ``position_weight`` (heavier: the shape held while the strokes find
     their instants, which leads to other minima), and the plan that costs least at the nominal
-    weights is kept. The fit is not convex: from the nominal start alone, some traces end in a
-    minimum that breaks the shape and lose their timing (on the development data: 10 Hz median
-    per-trace velocity SNR 2.8 dB below the reference's ceiling on the graffiti tags, 1.8 dB
-    with these starts, for three times the fit time; BENCHMARKS.md, session 22)."""
+    weights is kept; where it misses the shape, the next cheapest that keeps it (``restrained``).
+    The fit is not convex: from the nominal start alone some traces end in a minimum that breaks
+    the shape and lose their timing (on the development data: 10 Hz median per-trace velocity
+    SNR 2.8 dB below the reference's ceiling on the graffiti tags, 1.6 dB with these starts, for
+    about three times the fit time; BENCHMARKS.md, session 22)."""
     max_stroke_ratio: float = 1.5
     """Strokes may be added up to this many times the geometric fit's count (rounded down: a
     trace of one stroke is never split), so a whole tag keeps within it too."""
@@ -903,12 +904,6 @@ MARGIN_HEADROOM = 0.9
 """The fit holds each trace to this fraction of the margins (see :data:`SHAPE_MARGIN_MAX`)."""
 
 TimingKind = Literal["matched", "restrained", "mapped", "scaled", "geometric"]
-RESTRAINTS = (8.0, 100.0, 1000.0)
-"""Where the timed fit would miss the shape, it is tried again with the positions weighing each
-of these many times more in turn (:attr:`TimingOptions.position_weight`), until one keeps the
-shape: the more the positions weigh, the closer the plan keeps to the recorded path, and the
-less of the recorded speed it follows (the velocities then mostly come from the positions'
-timing)."""
 
 
 @dataclass(frozen=True)
@@ -917,8 +912,8 @@ class TraceTiming:
 
     kind: TimingKind
     """How much of the recorded timing it keeps, the most first: ``matched``: its velocity
-    fitted to the recorded one; ``restrained``: fitted again with the shape weighing more (the
-    first fit missed the shape); ``mapped``: the geometric plan's strokes moved onto the
+    fitted to the recorded one; ``restrained``: the fit from a start with the shape weighing
+    more (:attr:`TimingOptions.starts`; the cheapest fit missed the shape); ``mapped``: the geometric plan's strokes moved onto the
     recording's clock by arc length; ``scaled``: the geometric plan, its clock scaled to the
     recorded pen-down span (the geometric fit's shape exactly); ``geometric``: the geometric
     plan at the paper's rhythm (a clock no hand can produce)."""
@@ -1056,10 +1051,11 @@ def match(
         else ""
         for plan, turn, span, tr in zip(plans, turning, spans, traces, strict=True)
     ]
-    candidates = [
+    starts = [
         None if verdict else _match_from_starts(plan, trace, size, model, opts)
         for plan, trace, verdict in zip(plans, traces, verdicts, strict=True)
     ]
+    candidates = [None if fits is None else fits[0] for fits in starts]
     # Strokes in the air where they help most for the strokes they add, within the tag's budget
     # (max_stroke_ratio times the geometric strokes, less what the splits added).
     chosen = [plan if c is None else c[0] for plan, c in zip(plans, candidates, strict=True)]
@@ -1091,8 +1087,9 @@ def match(
         else:
             limits = (float(lows[k] - t[0]), float(highs[k] - t[0]))
             enough = _distinct(t) >= MIN_SAMPLES
+            others = [(fit[0], fit[1]) for fit in starts[k][1:]]
             options = _shape_first(
-                chosen[k] if enough else None, candidates[k][1], geometric, trace, size, model,
+                chosen[k] if enough else None, candidates[k][1], others, geometric, trace, size,
                 opts,
             )  # fmt: skip
             plan, kind, base, reason, window = _kept_to_shape(
@@ -1117,9 +1114,9 @@ def match(
 
 def _match_from_starts(
     plan: Plan, trace: Any, size: float, model: Model, options: TimingOptions
-) -> tuple[Plan, float, tuple[Plan, float] | None]:
-    """:func:`_match_trace` from each of :attr:`TimingOptions.starts`: the one whose plan (with
-    strokes in the air, where they help) costs least at the nominal weights."""
+) -> list[tuple[Plan, float, tuple[Plan, float] | None]]:
+    """:func:`_match_trace` from each of :attr:`TimingOptions.starts`, the one whose plan (with
+    strokes in the air, where they help) costs least at the nominal weights first."""
 
     def cost(fitted: tuple[Plan, float, tuple[Plan, float] | None]) -> float:
         drawn = fitted[2][0] if fitted[2] is not None else fitted[0]
@@ -1132,7 +1129,7 @@ def _match_from_starts(
     fits = [
         _match_trace(plan, trace, size, model, replace(options, position_weight=w)) for w in weights
     ]
-    return min(fits, key=cost)
+    return sorted(fits, key=cost)
 
 
 def _with_ink(
@@ -1211,21 +1208,19 @@ def _kept_to_shape(
 def _shape_first(
     timed: Plan | None,
     t0: float,
+    others: list[tuple[Plan, float]],
     geometric: Plan,
     trace: Any,
     size: float,
-    model: Model,
     options: TimingOptions,
 ) -> Iterator[tuple[Plan, TimingKind, float]]:
     """The plans a trace may be drawn with, the most timing first: the timed fit (if it has
-    one), the timed fit again with positions weighing more and more (:data:`RESTRAINTS`),
-    then the geometric plan moved onto the recording's clock by arc length
-    (:func:`initial_timing`). Each is fitted only when the one before missed the shape."""
+    one), the fits from the other starts (``others``, cheapest first; the positions weighed
+    more there) within its strokes, then the geometric plan moved onto the recording's clock by
+    arc length (:func:`initial_timing`)."""
     if timed is not None:
         yield timed, "matched", t0
-        for restraint in RESTRAINTS:
-            stronger = replace(options, position_weight=options.position_weight * restraint)
-            restrained, t0_restrained, _ = _match_trace(geometric, trace, size, model, stronger)
+        for restrained, t0_restrained in others:
             if restrained.n_strokes <= timed.n_strokes:  # within the tag's stroke budget
                 yield restrained, "restrained", t0_restrained
     xy = np.asarray(trace.xy, dtype=float)

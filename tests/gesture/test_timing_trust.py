@@ -210,36 +210,45 @@ def test_a_timed_plan_that_would_break_the_shape_keeps_the_geometric_plan(monkey
     assert up == pytest.approx(trace.t[-1], abs=0.01 * span)
 
 
-@pytest.mark.parametrize(("kept_from", "ladder"), [(8.0, [8.0]), (1000.0, [8.0, 100.0, 1000.0])])
-def test_a_broken_shape_is_refitted_with_the_positions_weighing_more_and_more(
-    monkeypatch, kept_from: float, ladder: list[float]
-) -> None:
-    """Where the timed fit (from every start) breaks the shape, the trace is refitted with the
-    positions weighing 8, then 100, then 1000 times more, each only if the one before broke it
-    too, and keeps the first that holds the shape (with its timing, not the geometric plan's)."""
+@pytest.mark.parametrize("kept", [30.0, 1000.0])
+def test_a_broken_shape_keeps_the_cheapest_start_that_holds_it(monkeypatch, kept: float) -> None:
+    """Where the cheapest start's fit breaks the shape, the trace keeps the next cheapest start's
+    fit that holds it (``restrained``, with its timing, not the geometric plan's); no fit is
+    made beyond the starts."""
     import tagbot.gesture.timing as timing
 
-    real, weights = timing._match_trace, []
-    base, starts = timing.TimingOptions().position_weight, list(timing.TimingOptions().starts)
+    real, weights, plans = timing._match_trace, [], {}
+    base = timing.TimingOptions().position_weight
 
-    def restrained_only_from(plan, trace, size, model, options):
-        weights.append(options.position_weight / base)
+    def broken_below(plan, trace, size, model, options):
+        weight = options.position_weight / base
+        weights.append(weight)
         rest, t0, air = real(plan, trace, size, model, options)
-        if len(weights) > len(starts) and weights[-1] >= kept_from:  # (every start broken)
-            return rest, t0, air
-        noise = np.random.default_rng(0).normal(0, 0.05 * size, rest.targets.shape)
-        bad = Plan(
-            rest.targets + noise, rest.dt, rest.mu, rest.sigma, rest.phi1, rest.phi2, rest.start
-        )
-        return bad, t0, None
+        if weight < kept:  # wrecked: its targets scattered
+            noise = np.random.default_rng(0).normal(0, 0.05 * size, rest.targets.shape)
+            rest = Plan(
+                rest.targets + noise, rest.dt, rest.mu, rest.sigma, rest.phi1, rest.phi2,
+                rest.start,
+            )  # fmt: skip
+            air = None
+        plans[weight] = rest
+        return rest, t0, air
 
-    monkeypatch.setattr(timing, "_match_trace", restrained_only_from)
+    def broken_first(fitted) -> float:  # (ranked as if the wrecked fits cost least)
+        return next(w for w, plan in plans.items() if plan is fitted[0])
+
+    real_starts = timing._match_from_starts
+    monkeypatch.setattr(timing, "_match_trace", broken_below)
+    monkeypatch.setattr(
+        timing, "_match_from_starts", lambda *a: sorted(real_starts(*a), key=broken_first)
+    )
     rng = np.random.default_rng(12)
     trace = capture(random_timed_plan(rng), rng)
     fitted = assert_within_margin([trace], "match")
-    assert weights == starts + ladder
+    assert weights == [1.0, 30.0, 1000.0]
     assert fitted.timings[0].kind == "restrained"
     assert fitted.timings[0].reason.startswith("the timed fit missed the shape: mean ")
+    np.testing.assert_allclose(fitted.tag.plans[0].targets, plans[kept].targets)
 
 
 @pytest.mark.parametrize("seed", [1, 16])
