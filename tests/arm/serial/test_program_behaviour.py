@@ -107,7 +107,7 @@ def test_the_check_refuses_a_joint_just_beyond_its_acceleration_and_speed_not_at
     standing = _standing(profile)
     joint, T, k = profile.joints[1], profile.period, 20
     # a step of d at tick k: the acceleration there is d/T² then -2d/T²... peak 2d/T²
-    for factor, refused in ((0.999, False), (1.001, True)):
+    for factor, refused in ((0.999, False), (1.0, False), (1.001, True)):
         d = factor * joint.max_acceleration * T**2 / 2
         bumped = standing.angles.copy()
         bumped[k, 1] += d
@@ -121,7 +121,7 @@ def test_the_check_refuses_a_joint_just_beyond_its_acceleration_and_speed_not_at
     fast = load_serial_profile(
         "openmanipulator-x", [f"{j.name}.max_acceleration=1e9" for j in profile.joints]
     )
-    for factor, refused in ((0.999, False), (1.001, True)):
+    for factor, refused in ((0.999, False), (1.0, False), (1.001, True)):
         ramp = standing.angles.copy()
         rate = factor * joint.max_speed * T
         ramp[k:, 1] += rate * np.arange(1, len(ramp) - k + 1)
