@@ -913,10 +913,11 @@ class TraceTiming:
     kind: TimingKind
     """How much of the recorded timing it keeps, the most first: ``matched``: its velocity
     fitted to the recorded one; ``restrained``: the fit from a start with the shape weighing
-    more (:attr:`TimingOptions.starts`; the cheapest fit missed the shape); ``mapped``: the geometric plan's strokes moved onto the
-    recording's clock by arc length; ``scaled``: the geometric plan, its clock scaled to the
-    recorded pen-down span (the geometric fit's shape exactly); ``geometric``: the geometric
-    plan at the paper's rhythm (a clock no hand can produce)."""
+    more (:attr:`TimingOptions.starts`; the cheapest fit missed the shape); ``mapped``: the
+    geometric plan's strokes moved onto the recording's clock by arc length; ``scaled``: the
+    geometric plan, its clock scaled to the recorded pen-down span (the geometric fit's shape
+    exactly); ``geometric``: the geometric plan at the paper's rhythm (a clock no hand can
+    produce)."""
     reason: str = ""
     """Why it is not ``matched`` (empty when it is)."""
 
