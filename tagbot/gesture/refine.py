@@ -40,13 +40,11 @@ from numpy.typing import NDArray
 
 from tagbot.gesture import kernels, refine_kernels
 from tagbot.gesture.strokes import Strokes
-from tagbot.model.plan import END_TOLERANCE
+from tagbot.model.plan import END_TOLERANCE, PHI_LIMIT
 
 Array = NDArray[np.float64]
 Index = NDArray[np.intp]
 
-PHI_LIMIT = 3.0
-"""Tangent deviations stay within ±3 rad while refining (away from the ±π ambiguity)."""
 ANGLE_STEP = 1e-6
 """Central-difference step for the spirals' parameters in the tangents, radians."""
 REST = 1e-2

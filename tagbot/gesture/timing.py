@@ -81,6 +81,7 @@ from tagbot.inputs.stamps import sample_instants
 from tagbot.model.plan import (
     MAX_DURATION,
     MU_RANGE,
+    PHI_LIMIT,
     Model,
     Plan,
 )
@@ -135,7 +136,7 @@ class TimingOptions:
     penalty of ``extent_weight`` per e-fold short."""
     extent_weight: float = 10.0
     """See ``min_extent``."""
-    phi_limit: float = 3.0
+    phi_limit: float = PHI_LIMIT
     """Tangent deviations stay within ± this, radians."""
     pad: float = 0.15
     """The grid extends this far before the first sample and after the last (pen at rest, or

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from tagbot.errors import PlanError
 from tagbot.model.motion import evaluate_plan
-from tagbot.model.plan import Model, Plan, Tag
+from tagbot.model.plan import PHI_LIMIT, Model, Plan, Tag
 
 PATH_NODES = 512
 """Evaluations of the pen's speed per stroke window when a plan's path length is integrated."""
@@ -156,6 +156,15 @@ def _time_at(t: NDArray[np.float64], s: NDArray[np.float64], length: float) -> f
     return float(t[i - 1] + (t[i] - t[i - 1]) * ((length - s[i - 1]) / ds if ds > 0 else 0.0))
 
 
+def _bent(phi: NDArray[np.float64], bend: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Tangent deviations ``phi`` times ``bend``, no larger than the fits make them
+    (:data:`~tagbot.model.plan.PHI_LIMIT`) or than they were: towards ±π a Euler spiral
+    between two fixed targets grows without bound (a deviation of 3.0 bent to π − 10⁻⁶ drew a
+    stroke two million times the tag's size)."""
+    limit = np.maximum(PHI_LIMIT, np.abs(phi))
+    return np.clip(phi * bend, -limit, limit)
+
+
 def _instance(tag: Tag, rng: np.random.Generator, v: Variation) -> Tag:
     size = tag.size
     points = np.concatenate([plan.targets for plan in tag.plans])
@@ -169,8 +178,7 @@ def _instance(tag: Tag, rng: np.random.Generator, v: Variation) -> Tag:
         bend = 1.0 + rng.normal(0.0, v.phi, plan.n_strokes)
         # Arcs stay arcs (one factor for both ends); spirals vary each end on its own.
         bend2 = np.where(plan.arcs, bend, 1.0 + rng.normal(0.0, v.phi, plan.n_strokes))
-        phi1 = np.clip(plan.phi1 * bend, -np.pi + 1e-6, np.pi - 1e-6)
-        phi2 = np.clip(plan.phi2 * bend2, -np.pi + 1e-6, np.pi - 1e-6)
+        phi1, phi2 = _bent(plan.phi1, bend), _bent(plan.phi2, bend2)
         varied.append(Plan(targets, dt, plan.mu, plan.sigma, phi1, phi2, plan.start))
     points = np.concatenate([plan.targets for plan in varied])
     varied_size = float(np.hypot(*np.ptp(points, axis=0)))

@@ -46,6 +46,10 @@ MODELS: tuple[Model, ...] = ("gamma", "sigma")
 END_TOLERANCE = 1e-6
 """A plan's motion ends once the path still to travel is below this fraction of the tag's size."""
 
+PHI_LIMIT = 3.0
+"""The largest tangent deviation (rad) the fits give a stroke: away from the ±π ambiguity,
+towards which a Euler spiral between two fixed targets grows without bound."""
+
 MIN_CHORD = 1e-9
 """Consecutive targets closer than this fraction of the plan's extent are refused."""
 

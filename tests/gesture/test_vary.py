@@ -6,7 +6,7 @@ import pytest
 from tagbot.errors import PlanError
 from tagbot.gesture import Variation, new_seed, vary
 from tagbot.metrics import pen_down_paths, shape_error
-from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, Plan, Tag
+from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, PHI_LIMIT, Plan, Tag
 
 
 def example_tag(model="gamma"):
@@ -57,6 +57,26 @@ def test_default_variations_stay_readable_and_keep_lifts():
         assert 0.001 < error.mean < 0.05
         gap = instance.plans[1].start - instance.plans[0].end(instance.size)
         assert gap == pytest.approx(lift, rel=1e-9)
+
+
+def test_strokes_bent_to_the_fits_limit_stay_their_size():
+    """A stroke whose tangents deviate as much as the fits allow (±3 rad, a tight spiral) is
+    varied like any other: no tangent bent beyond that limit (towards ±π the Euler spiral between
+    the same two targets grows without bound), so every variation keeps about the tag's size; a
+    tangent already beyond the limit (drawn in the studio) is never bent further out."""
+    targets = np.array([[0.0, 0.0], [40.0, 10.0], [80.0, 0.0], [120.0, 20.0]])
+    args = (targets, [0.0, 0.2, 0.2], [DEFAULT_MU] * 3, [DEFAULT_SIGMA] * 3)
+    tag = Tag((Plan(*args, [0.3, -3.0, PHI_LIMIT], [0.1, 3.0, 0.2]),))
+    width = np.ptp(tag.sample(0.005).xy, axis=0)
+    for instance in vary(tag, 40, 8):
+        plan = instance.plans[0]
+        assert np.all(np.abs(plan.phi1) <= PHI_LIMIT) and np.all(np.abs(plan.phi2) <= PHI_LIMIT)
+        assert np.all(np.ptp(instance.sample(0.005).xy, axis=0) < 1.5 * width)
+    designed = Tag((Plan(*args, [0.3, -3.1, 0.0], [0.1, 3.1, 0.2]),))
+    for instance in vary(designed, 20, 9):
+        plan = instance.plans[0]
+        assert abs(plan.phi1[1]) <= 3.1 + 1e-12 and abs(plan.phi2[1]) <= 3.1 + 1e-12
+    assert any(abs(v.plans[0].phi1[1]) < 3.1 for v in vary(designed, 20, 9))  # (still varied)
 
 
 def test_sigma_tags_stay_sigma():
