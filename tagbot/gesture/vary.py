@@ -19,7 +19,7 @@ Two things a variation keeps:
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -29,6 +29,14 @@ from tagbot.errors import PlanError
 from tagbot.model.motion import evaluate_plan
 from tagbot.model.plan import PHI_LIMIT, Model, Plan, Tag
 
+REACH = 0.1
+"""How far apart (a fraction of the tag's size) two targets' displacements stop moving together:
+the field's correlation length. A writer's hand drifts over a whole letter; a tiny loop between
+two close targets keeps its size (displaced independently, a 0.4 mm near-circle stroke grew into a
+balloon several mm across)."""
+FIELD_WAVES = 32
+"""Random waves summed into the displacement field (random Fourier features of a Gaussian
+correlation)."""
 PATH_NODES = 512
 """Evaluations of the pen's speed per stroke window when a plan's path length is integrated."""
 
@@ -38,7 +46,8 @@ class Variation:
     """Standard deviations of the perturbations (all relative, so units do not matter)."""
 
     position: float = 0.012
-    """Target displacement, as a fraction of the tag's size."""
+    """Target displacement, as a fraction of the tag's size: a smooth field over the tag (see
+    :data:`REACH`), so that targets close together move together."""
     scale: float = 0.04
     """Log-scale of the tag's width and height, independently."""
     dt: float = 0.12
@@ -156,6 +165,17 @@ def _time_at(t: NDArray[np.float64], s: NDArray[np.float64], length: float) -> f
     return float(t[i - 1] + (t[i] - t[i - 1]) * ((length - s[i - 1]) / ds if ds > 0 else 0.0))
 
 
+def _displacement(
+    rng: np.random.Generator, amplitude: float, reach: float
+) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+    """A random smooth displacement field: at any point, each coordinate normal with standard
+    deviation ``amplitude``; two points ``d`` apart correlate as ``exp(−d² / (2 reach²))``."""
+    waves = rng.normal(0.0, 1.0 / max(reach, 1e-300), (FIELD_WAVES, 2))
+    phases = rng.uniform(0.0, 2.0 * np.pi, FIELD_WAVES)
+    weights = rng.normal(0.0, amplitude * np.sqrt(2.0 / FIELD_WAVES), (FIELD_WAVES, 2))
+    return lambda points: np.cos(points @ waves.T + phases) @ weights
+
+
 def _bent(phi: NDArray[np.float64], bend: NDArray[np.float64]) -> NDArray[np.float64]:
     """Tangent deviations ``phi`` times ``bend``, no larger than the fits make them
     (:data:`~tagbot.model.plan.PHI_LIMIT`) or than they were: towards ±π a Euler spiral
@@ -170,10 +190,11 @@ def _instance(tag: Tag, rng: np.random.Generator, v: Variation) -> Tag:
     points = np.concatenate([plan.targets for plan in tag.plans])
     centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
     stretch = np.exp(rng.normal(0.0, v.scale, 2))
+    displace = _displacement(rng, v.position * size, REACH * size)
     varied: list[Plan] = []
     for plan in tag.plans:
         targets = centre + (plan.targets - centre) * stretch
-        targets = targets + rng.normal(0.0, v.position * size, targets.shape)
+        targets = targets + displace(plan.targets)
         dt = plan.dt * np.exp(rng.normal(0.0, v.dt, plan.n_strokes))
         bend = 1.0 + rng.normal(0.0, v.phi, plan.n_strokes)
         # Arcs stay arcs (one factor for both ends); spirals vary each end on its own.

@@ -79,6 +79,22 @@ def test_strokes_bent_to_the_fits_limit_stay_their_size():
     assert any(abs(v.plans[0].phi1[1]) < 3.1 for v in vary(designed, 20, 9))  # (still varied)
 
 
+def test_targets_close_together_move_together():
+    """Targets are displaced by a smooth field over the tag: two targets 0.4 mm apart (a tiny
+    loop) stay about that close in every variation, while targets across the tag move on their
+    own (by about the 1.2 % of its size each)."""
+    targets = np.array([[0.0, 0.0], [50.0, 10.0], [50.3, 10.25], [100.0, 0.0]])
+    args = (targets, [0.0, 0.2, 0.2], [DEFAULT_MU] * 3, [DEFAULT_SIGMA] * 3)
+    tag = Tag((Plan(*args, [0.3, -3.0, 0.2], [0.1, 3.0, 0.2]),))
+    near, far = [], []
+    for instance in vary(tag, 60, 4, Variation(scale=0.0)):
+        moved = instance.plans[0].targets - targets
+        near.append(np.hypot(*(moved[2] - moved[1])))
+        far.append(np.hypot(*(moved[3] - moved[0])))
+    assert max(near) < 0.2  # mm: the loop's chord (0.39 mm) kept within half of itself
+    assert 0.01 * tag.size < np.sqrt(np.mean(np.square(far))) < 0.03 * tag.size
+
+
 def test_sigma_tags_stay_sigma():
     for instance in vary(example_tag("sigma"), 5, 1):
         assert instance.model == "sigma"
