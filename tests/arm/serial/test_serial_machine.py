@@ -20,6 +20,7 @@ from tagbot.arm.serial.machine import (
     FORCE_RANGE,
     ArmLift,
     SerialBudget,
+    _approach_time,
     bridge_hops,
     contact_figures,
     executed_from_reads,
@@ -662,3 +663,52 @@ def test_a_joint_the_lift_does_not_move_does_not_slow_it(program) -> None:
     slow = ArmLift(load_serial_profile("openmanipulator-x", slow_base), program).up(row)
     assert (fast[:, 0] == row[0]).all()
     np.testing.assert_array_equal(slow, fast)
+
+
+def test_the_budgets_at_their_limits_and_without_figures_warn_of_nothing() -> None:
+    """A run at 0.3 mm, 25 dB, contact 100 % and 1.1 N is within every budget; a run without
+    figures (NaN contact and force, no deviation or SNR) is judged on nothing; the contact
+    figures join the runs of the report."""
+    at = {"plan": 0, "path_deviation_max_mm": 0.3, "speed_snr_db": 25.0}
+    bare = {"plan": 1}
+    contacts = [
+        {"contact_kept_pct": 100.0, "force_min_n": 0.05, "force_max_n": 1.1},
+        {"contact_kept_pct": math.nan, "force_min_n": math.nan, "force_max_n": math.nan},
+    ]
+    report = {"runs": [at, bare]}
+    assert SerialBudget(contacts, [0.5, 0.5])(report) == []
+    assert report["runs"][0]["contact_kept_pct"] == 100.0
+    assert report["runs"][0]["force_max_n"] == 1.1
+    assert math.isnan(report["runs"][1]["contact_kept_pct"])
+    # past each limit, with fewer contact figures and lengths than runs: named, not a crash
+    past = {"plan": 0, "path_deviation_max_mm": 0.301, "speed_snr_db": 24.9}
+    warnings = SerialBudget([])({"runs": [past]})
+    assert warnings == [
+        "run 1 (plan 0): path deviation 0.301 mm over 0.3 mm and speed SNR 24.9 dB below 25 dB"
+    ]
+
+
+@pytest.mark.parametrize(
+    ("ticks", "seconds"),
+    [
+        (0, 0.2),  # standing still: the servos' move is never shorter than 0.2 s
+        (1024, 2.0 * math.pi / (3.0 * math.radians(150.0))),  # a quarter turn: the speed binds
+    ],
+)
+def test_the_approach_takes_what_the_slowest_joint_needs_at_least_0_2_s(ticks, seconds) -> None:
+    """The servos' own move with ramps a quarter each way: 4d/3 ÷ max_speed, or
+    √(16d/3 ÷ max_acceleration) when that is longer (a short move)."""
+    profile = load_serial_profile("openmanipulator-x")
+    present = np.array([2148, 2348, 1848, 1948])  # away from every joint's zero
+    goals = present.copy()
+    goals[0] += ticks // 2
+    goals[2] -= ticks  # joint3 moves the farthest and binds
+    assert _approach_time(present, goals, profile) == pytest.approx(seconds, rel=1e-9)
+    small = present.copy()
+    small[1] += 20  # 20 ticks: 0.0307 rad, the acceleration binds (1500°/s²)
+    d = 20 * 2 * math.pi / 4096
+    bound = max(0.2, math.sqrt(16.0 * d / (3.0 * math.radians(1500.0))))
+    slow = load_serial_profile("openmanipulator-x", ["joint2.max_acceleration=20"])
+    bound_slow = math.sqrt(16.0 * d / (3.0 * math.radians(20.0)))
+    assert _approach_time(present, small, profile) == pytest.approx(bound, rel=1e-9)
+    assert _approach_time(present, small, slow) == pytest.approx(bound_slow, rel=1e-9)
