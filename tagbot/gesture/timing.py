@@ -182,8 +182,8 @@ class TimingOptions:
     weights is kept; where it misses the shape, the next cheapest that keeps it (``restrained``).
     The fit is not convex: from the nominal start alone some traces end in a minimum that breaks
     the shape and lose their timing (on the development data: 10 Hz median per-trace velocity
-    SNR 2.8 dB below the reference's ceiling on the graffiti tags, 1.6 dB with these starts, for
-    about three times the fit time; BENCHMARKS.md, session 22)."""
+    SNR 2.8 dB below the reference's ceiling on the graffiti tags, 1.8 dB with these starts, for
+    about three times the fit time; BENCHMARKS.md, session 22). At least one, each > 0."""
     max_stroke_ratio: float = 1.5
     """Strokes may be added up to this many times the geometric fit's count (rounded down: a
     trace of one stroke is never split), so a whole tag keeps within it too."""
@@ -200,6 +200,11 @@ class TimingOptions:
     """See ``dip_depth``, seconds."""
     split_gain: float = 0.05
     """A round of splits is kept only if it lowers the cost by at least this fraction."""
+
+    def __post_init__(self) -> None:
+        starts = np.asarray(self.starts, dtype=float)
+        if starts.ndim != 1 or starts.size == 0 or not np.all(np.isfinite(starts) & (starts > 0)):
+            raise PlanError(f"starts: must be one or more finite weights > 0, got {self.starts!r}")
 
 
 def simulated_capture(

@@ -8,6 +8,7 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
+from tagbot.errors import PlanError
 from tagbot.gesture import reconstruction
 from tagbot.gesture.timing import (
     MAX_STROKE_RATE,
@@ -268,6 +269,12 @@ def test_a_timing_lost_from_the_nominal_start_is_kept_from_a_heavier_one(seed: i
     assert snr >= 12.0 and snr >= snr_alone + 8.0, (snr, snr_alone)
     cost, cost_alone = (fit_cost(r.tag.plans[0], trace, r.tag.size) for r in (fitted, alone))
     assert cost < 0.01 * cost_alone
+
+
+@pytest.mark.parametrize("starts", [(), (1.0, 0.0), (1.0, float("nan")), (-1.0,)])
+def test_starts_must_be_positive_weights(starts) -> None:
+    with pytest.raises(PlanError, match=r"starts: must be one or more finite weights > 0"):
+        TimingOptions(starts=starts)
 
 
 def test_the_start_that_costs_least_is_kept(monkeypatch) -> None:
