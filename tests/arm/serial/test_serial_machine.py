@@ -665,6 +665,16 @@ def test_a_joint_the_lift_does_not_move_does_not_slow_it(program) -> None:
     np.testing.assert_array_equal(slow, fast)
 
 
+def test_a_lift_is_slowed_where_a_joints_acceleration_binds(program) -> None:
+    """The joints the lift moves (shoulder, elbow, wrist) with a lower acceleration limit, their
+    speed limit unchanged: the lift takes more ticks than with the default limits."""
+    row = program.goals[next(s for s in program.segments if s[0] == "draw")[2] + 5]
+    fast = ArmLift(load_serial_profile("openmanipulator-x"), program).up(row)
+    slower = tuple(f"joint{i}.max_acceleration=20" for i in (2, 3, 4))
+    slow = ArmLift(load_serial_profile("openmanipulator-x", slower), program).up(row)
+    assert len(slow) > len(fast)
+
+
 def test_the_budgets_at_their_limits_and_without_figures_warn_of_nothing() -> None:
     """A run at 0.3 mm, 25 dB, contact 100 % and 1.1 N is within every budget; a run without
     figures (NaN contact and force, no deviation or SNR) is judged on nothing; the contact
