@@ -109,17 +109,28 @@ class RunClock:
 
 
 def run_clock(
-    plan: Plan, on: float, off: float, size: float, jerk_limited: bool = True
+    plan: Plan,
+    on: float,
+    off: float,
+    size: float,
+    jerk_limited: bool = True,
+    ease_trimmed: bool = False,
 ) -> RunClock:
     """The clock of a run drawing ``plan`` from ``on`` to ``off`` (tag clock, within its ink
     window): easing in if it starts where the plan touches down moving, out if it ends where
     the plan lifts off moving (:data:`EASE`, at most the run's own length each), by
-    smoothstep or, not ``jerk_limited``, from a constant acceleration (module docstring)."""
-    if plan.ink is None or off <= on:
+    smoothstep or, not ``jerk_limited``, from a constant acceleration (module docstring). With
+    ``ease_trimmed``, also wherever it starts after the plan's own start or ends before its end
+    (a run trimmed where little path is left: a lognormal moves everywhere between its onset and
+    its end, so a trimmed end is as much a step in speed as a touch-down in motion)."""
+    if off <= on or (plan.ink is None and not ease_trimmed):
         return RunClock(on, max(on, off), jerk_limited=jerk_limited)
     down, up = plan.ink_window(size)
-    touches, lifts = plan.moving_ends(size)
-    eases = (touches and on <= down + _EDGE, lifts and off >= up - _EDGE)
+    touches, lifts = plan.moving_ends(size) if plan.ink is not None else (False, False)
+    eases = (
+        (touches and on <= down + _EDGE) or (ease_trimmed and on > plan.start + _EDGE),
+        (lifts and off >= up - _EDGE) or (ease_trimmed and off < plan.end(size) - _EDGE),
+    )
     ramp = min(EASE, off - on)
     if all(eases):  # both ramps within the run: together they cover 2·S(1)·ramp of its clock
         kept = RunClock(on, off, jerk_limited=jerk_limited)._kept

@@ -10,8 +10,8 @@ that fits, centred. :func:`build_serial_program` then lays out the job at the lo
 - each run is its plan's drawn window (trimmed where less than ``motion.trim_mm`` of path is left
   at either end) on its run clock, eased from and to rest wherever it starts or ends with the
   plan moving (a trimmed end, or the plan touching down or lifting off moving:
-  :func:`moving_clock`), slowed by its own time scale ``s_k ≥ 1``: the lognormal speed along
-  the paper, speeds ÷ ``s_k``;
+  :func:`~tagbot.model.easing.run_clock` with ``ease_trimmed``), slowed by its own time scale
+  ``s_k ≥ 1``: the lognormal speed along the paper, speeds ÷ ``s_k``;
 - the approach and the retreat are minimum-jerk moves along the paper's normal between
   ``robot.pen_up`` above the run's first (last) point and ``robot.press`` below it: the ink
   starts where the plan's starts;
@@ -48,8 +48,8 @@ from tagbot.arm.serial.kinematics import PEN_SITE
 from tagbot.arm.serial.profile import SerialProfile
 from tagbot.arm.serial.reach import Paper
 from tagbot.errors import PlacementError, ReachError
-from tagbot.model import Plan, Tag
-from tagbot.model.easing import EASE, RunClock
+from tagbot.model import Tag
+from tagbot.model.easing import RunClock, run_clock
 from tagbot.model.motion import evaluate_plan, sample_ink
 
 __all__ = ["build_serial_program", "min_jerk", "place_on_paper", "profile_goals"]
@@ -65,8 +65,6 @@ ROUNDS = 12
 that doubles each round (1e-4 at first): the IK's pull of the pen's axis is one step per
 sample, so a small part of a run's joint acceleration does not shrink with its time scale, and
 a run found 1e-4 over a limit stayed over it, round after round (ga3 19981, session 22)."""
-EDGE = 1e-9
-"""A run edge within this of the plan's start or end (s) starts or ends there, at rest."""
 
 
 def min_jerk(n: int) -> Array:
@@ -137,21 +135,6 @@ class _Move:
     a: Array | None = None
     b: Array | None = None
     """Ends of a straight move (m, arm frame) or of a joint-space move (rad)."""
-
-
-def moving_clock(plan: Plan, on: float, off: float, size: float) -> RunClock:
-    """The clock of a run drawing ``plan`` from ``on`` to ``off`` (tag clock): eased from rest
-    wherever it starts after the plan's own start and to rest wherever it ends before the
-    plan's own end (:func:`~tagbot.model.easing.run_clock`'s ramps, :data:`EASE` each, the
-    two together at most the run's length). A lognormal moves everywhere between its onset and
-    its end, so a run trimmed by ``motion.trim_mm`` starts and ends moving (several mm/s) as
-    much as one whose ink touches down or lifts off moving: uneased, each would ask the arm
-    for a step in speed at the paper, which it can only smooth."""
-    if off <= on:
-        return RunClock(on, max(on, off))
-    eases = (on > plan.start + EDGE, off < plan.end(size) - EDGE)
-    ramp = min(EASE, off - on)  # two ramps cover 2·S(1)·ramp = ramp of the plan's clock
-    return RunClock(on, off, ramp if eases[0] else 0.0, ramp if eases[1] else 0.0)
 
 
 def _excess(q: Array, T: float, speed: Array, acceleration: Array) -> float:
@@ -229,7 +212,7 @@ def build_serial_program(
     up, press = profile["robot.pen_up"] / 1000.0, profile["robot.press"] / 1000.0
     n = len(tag.plans)
     windows = [_trimmed_window(tag, k, placement, profile["motion.trim_mm"]) for k in range(n)]
-    clocks = [moving_clock(tag.plans[k], *windows[k], tag.size) for k in range(n)]
+    clocks = [run_clock(tag.plans[k], *windows[k], tag.size, ease_trimmed=True) for k in range(n)]
     ends = []
     for k in range(n):
         xy, _ = evaluate_plan(tag.plans[k], clocks[k].tag_time(np.array([0.0, clocks[k].duration])))

@@ -31,7 +31,7 @@ from tagbot.arm.serial.program import (
 from tagbot.errors import PlacementError
 from tagbot.io.planfile import load_plan
 from tagbot.model import Tag
-from tagbot.model.easing import EASE
+from tagbot.model.easing import EASE, run_clock
 from tagbot.model.motion import evaluate_plan
 from tests.model.test_ink import lifted
 
@@ -379,7 +379,7 @@ def test_the_planned_timeline_puts_every_tick_where_the_pens_point_is_over_the_p
 
 @pytest.mark.parametrize("off", [0.7, 0.6])
 def test_a_run_window_with_no_time_in_it_is_an_empty_clock_at_its_start(off) -> None:
-    clock = program_module.moving_clock(lifted(), 0.7, off, 40.0)
+    clock = run_clock(lifted(), 0.7, off, 40.0, ease_trimmed=True)
     assert (clock.on, clock.off, clock.duration) == (0.7, 0.7, 0.0)
     assert (clock.ease_in, clock.ease_out) == (0.0, 0.0)
 
