@@ -176,9 +176,13 @@ class ArmLift:
         return self._goals(path)
 
     def _pose(self, row: NDArray[np.int64]) -> Array:
-        """The angles of ``row``: the planned pose of a program's goal row, else the ticks'."""
+        """The angles of ``row``: the planned pose of a program's goal row, else the ticks',
+        within the joints' ranges (an arm found with its torque off may lie a hair beyond one,
+        where no goal may be sent)."""
         q = self.planned.get(tuple(int(v) for v in np.asarray(row).tolist()))
-        return self.angles(np.asarray(row)) if q is None else q
+        if q is not None:
+            return q
+        return np.clip(self.angles(np.asarray(row)), self.arm.lower, self.arm.upper)
 
     def _goals(self, path: Array) -> NDArray[np.int64]:
         """Goal rows (ticks) of poses held in turn, pen up: with the torque each pose needs when

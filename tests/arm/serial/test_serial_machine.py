@@ -675,6 +675,21 @@ def test_a_lift_is_slowed_where_a_joints_acceleration_binds(program) -> None:
     assert len(slow) > len(fast)
 
 
+def test_an_arm_found_a_hair_beyond_a_joints_range_is_lifted_within_it(profile) -> None:
+    """Found with its torque off 3 mm above the paper, its elbow 2 mrad past the range's end (as
+    the simulator on a pty leaves it after falling): the lift starts from the nearest pose within
+    the ranges, no goal leaves them, and the pen ends up."""
+    lift, arm = ArmLift(profile), profile.arm
+    q = np.array([0.0, -0.3, arm.upper[2] + 2e-3, -0.599])
+    row = np.array([angles_to_ticks(q[i], j) for i, j in enumerate(profile.joints)])
+    assert lift.angles(row)[2] > arm.upper[2] and not lift.is_up(row)
+    goals = np.concatenate([lift.stand(row), lift.up(row)])
+    angles = np.array([lift.angles(g) for g in goals])
+    tick = 2 * np.pi / 4096
+    assert np.all(angles >= arm.lower - tick) and np.all(angles <= arm.upper + tick)
+    assert len(goals) > 2 and lift.is_up(goals[-1])
+
+
 def test_the_budgets_at_their_limits_and_without_figures_warn_of_nothing() -> None:
     """A run at 0.3 mm, 25 dB, contact 100 % and 1.1 N is within every budget; a run without
     figures (NaN contact and force, no deviation or SNR) is judged on nothing; the contact
