@@ -6,8 +6,6 @@ sample per module, stratified by function (functions in a seeded random order, o
 each in turn, until the module's quota is met), runs it with ``mutmut run --max-children N
 <names>`` and prints, per module, the killed share of the non-equivalent mutants. Equivalent
 mutants are those listed in tests/EQUIVALENT_MUTANTS.txt (one per line: name, then the reason).
-Where ``[tool.mutmut.sample_functions]`` names a module's functions, its sample is drawn from
-their mutants only.
 
     python tools/mutation_sample.py                       # 40 per module, seed 0
     python tools/mutation_sample.py --per-module 20 --seed 7 --module tagbot/plotter/program.py
@@ -63,18 +61,6 @@ def function_of(name: str) -> str:
     return name.rsplit("__mutmut_", 1)[0]
 
 
-def short_name(name: str) -> str:
-    """A mutant's function as written in the source: ``f``, or ``Class.method`` for mutmut's
-    ``pkg.mod.xǁClassǁmethod__mutmut_3``."""
-    last = function_of(name).rsplit(".", 1)[-1]
-    return last[2:] if last.startswith("x_") else ".".join(last.split("ǁ")[1:])
-
-
-def in_scope(names: list[str], functions: list[str] | None) -> list[str]:
-    """The mutants of ``functions`` (all of them when None)."""
-    return names if functions is None else [n for n in names if short_name(n) in functions]
-
-
 def stratified(names: list[str], count: int, rng: random.Random) -> list[str]:
     """``count`` names drawn round-robin over functions taken in a random order."""
     by_function: dict[str, list[str]] = defaultdict(list)
@@ -117,7 +103,6 @@ def main(argv: list[str] | None = None) -> int:
 
     config = configuration()
     modules = list(config["only_mutate"])
-    scope = config.get("sample_functions", {})
     unknown = sorted(set(args.module or []) - set(modules))
     if unknown:
         print(f"pyproject.toml: {', '.join(unknown)} not in [tool.mutmut] only_mutate")
@@ -126,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     generate()
     sample = {  # each module's own seeded draw: the same whichever modules are run with it
         m: stratified(
-            in_scope(list(exit_codes(m)), scope.get(m)),
+            list(exit_codes(m)),
             args.per_module,
             random.Random(f"{args.seed}:{m}"),
         )
