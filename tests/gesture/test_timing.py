@@ -414,3 +414,44 @@ def test_fit_cost_is_least_for_the_plan_a_recording_was_made_from() -> None:
     few = Trace(trace.xy[: MIN_SAMPLES - 1], trace.t[: MIN_SAMPLES - 1])
     with pytest.raises(ValueError, match=f"fewer than {MIN_SAMPLES} distinct stamps"):
         fit_cost(plan, few, 100.0)
+
+
+def _missed_bump_at(at: float) -> tuple[object, object]:
+    """One straight stroke, and a recording of it plus a sideways velocity bump centred at
+    ``at`` seconds that the stroke misses (so the only candidate cut is there)."""
+    from tagbot.gesture.strokes import Strokes
+    from tagbot.gesture.timing import Recording
+
+    one = Plan([[0.0, 0.0], [80.0, 0.0]], [0.0], [np.log(0.3)], [0.3], [0.0], [0.0])
+    strokes = Strokes.of([one])
+    t = np.arange(-0.1, 1.6, 0.005)
+    _, v = strokes.evaluate(np.zeros(len(t), dtype=np.intp), t, 80.0)
+    v = v.copy()
+    v[:, 1] += 100.0 * np.exp(-0.5 * ((t - at) / 0.08) ** 2)  # wider than the dip reach
+    xy = np.cumsum(v, axis=0) * 0.005
+    return strokes, Recording(t, xy, v, np.ones(len(t)), float(t[-1]))
+
+
+def test_a_stroke_is_split_only_inside_its_10_90_interval_less_a_tenth_at_each_end() -> None:
+    """A missed bump inside a stroke's 10-90 % interval splits it there; one within the interval's
+    outer tenths, or beyond, splits nothing (the halves would be too short to fit)."""
+    from tagbot.gesture.timing import _Z10, _Z90, _split
+
+    onset, mu, sigma = 0.0, np.log(0.3), 0.3
+    lo, hi = onset + np.exp(mu + sigma * _Z10), onset + np.exp(mu + sigma * _Z90)
+    margin = 0.1 * (hi - lo)
+    for at, splits in [
+        (lo + 1.5 * margin, True),
+        (0.5 * (lo + hi), True),
+        (hi - 1.5 * margin, True),
+        (lo + 0.5 * margin, False),
+        (hi - 0.5 * margin, False),
+        (hi + 0.5 * margin, False),
+    ]:
+        strokes, rec = _missed_bump_at(at)
+        split = _split(strokes, rec, 80.0, TimingOptions(), room=1)
+        assert (split is not None) == splits, (at - lo) / margin
+        if splits:
+            assert len(split.onsets) == 2
+            near = np.abs(rec.t - at) <= 0.011  # the new target: where the recording was then
+            assert np.min(np.hypot(*(rec.xy[near] - split.targets[1]).T)) < 1e-9

@@ -3,6 +3,8 @@ fall back to the geometric timing and say so, and the tag keeps the writer's own
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings
@@ -412,3 +414,23 @@ def test_implausible_clock_turn_bound() -> None:
     )
     # The rates are named first (the older, coarser checks).
     assert implausible_clock(41, 1.0, 1.0, beyond).startswith("clock implausible: 41 strokes")
+
+
+def test_a_clock_scaled_onto_the_models_longest_delay_is_scaled_and_no_further() -> None:
+    """The scaled fallback stretches a plan's clock while its strokes' median delays stay within
+    the model's range (MU_RANGE, bound included); a stretch beyond it only moves the plan."""
+    from tagbot.gesture.timing import INK_TOLERANCE, _scaled
+    from tagbot.model.plan import MU_RANGE
+
+    hi, k = MU_RANGE[1], 2.0
+    mu = hi - math.log(k)
+    while mu + math.log(k) > hi:  # the largest mu whose stretched delay is the bound exactly
+        mu = np.nextafter(mu, -np.inf)
+    assert mu + math.log(k) == hi
+    for m, stretched in ((mu, True), (np.nextafter(mu, np.inf), False)):
+        plan = Plan([[0.0, 0.0], [10.0, 0.0]], [0.0], [m], [0.3], [0.0], [0.0])
+        on, off = plan.windows(10.0, INK_TOLERANCE)
+        span = k * float(off.max() - on.min())
+        out = _scaled(plan, np.array([5.0, 5.0 + span]), 10.0)
+        assert out.mu[0] == (hi if stretched else m)
+        assert out.windows(10.0, INK_TOLERANCE)[0].min() == pytest.approx(5.0)
