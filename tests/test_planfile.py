@@ -364,6 +364,42 @@ def test_phi_mix_up_between_models_is_explained() -> None:
         tag_from_dict(d)
 
 
+def test_phi_mix_up_is_explained_when_only_one_of_the_others_is_there() -> None:
+    """A sigma stroke holding phi1 alone or phi2 alone, or a gamma stroke holding phi beside one
+    of phi1/phi2, still gets the hint; a stroke with no phi of any kind gets none."""
+    sigma_hint = r' \(sigma-model strokes have one "phi"; "phi1"/"phi2" are for model "gamma"\)$'
+    for other in ("phi1", "phi2"):
+        d = doc("sigma")
+        stroke = d["plans"][0]["strokes"][1]
+        stroke[other] = stroke.pop("phi")
+        with pytest.raises(
+            PlanFileError, match=r"^plans\[0\]\.strokes\[1\]\.phi: missing" + sigma_hint
+        ):
+            tag_from_dict(d)
+    gamma_hint = r' \(gamma-model strokes have "phi1" and "phi2"; one "phi" is for model "sigma"\)$'
+    for missing in ("phi1", "phi2"):
+        d = doc("gamma")
+        stroke = d["plans"][1]["strokes"][0]
+        stroke["phi"] = stroke.pop(missing)
+        field = rf"^plans\[1\]\.strokes\[0\]\.{missing}: missing"
+        with pytest.raises(PlanFileError, match=field + gamma_hint):
+            tag_from_dict(d)
+    d = doc("sigma")
+    del d["plans"][0]["strokes"][0]["phi"]
+    with pytest.raises(PlanFileError, match=r"^plans\[0\]\.strokes\[0\]\.phi: missing$"):
+        tag_from_dict(d)
+
+
+def test_an_integer_too_long_for_python_is_not_json(tmp_path: Path) -> None:
+    """A number of 5000 digits (beyond Python's integer-parsing limit) is refused as a plan-file
+    error naming the file, not a crash."""
+    path = tmp_path / "long.json"
+    path.write_text(json.dumps(doc()).replace('"version": 1', '"version": ' + "1" * 5000))
+    with pytest.raises(PlanFileError, match=rf"^{re.escape(str(path))}: not JSON \(.*digits") as e:
+        load_plan(path)
+    assert "\n" not in str(e.value)
+
+
 def test_top_level_must_be_an_object() -> None:
     with pytest.raises(
         PlanFileError, match=r"^expected a JSON object at the top level, got a list$"

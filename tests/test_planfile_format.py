@@ -138,6 +138,13 @@ def test_a_long_value_is_shown_cut_to_40_characters() -> None:
     assert _message(d) == f'version: unsupported "{"v" * 38}" (this tagbot reads 1 and 2)'
 
 
+def test_a_value_json_cannot_write_is_shown_as_python_writes_it() -> None:
+    """tag_from_dict takes any mapping: a value no JSON text holds (bytes) is still shown."""
+    d = _doc()
+    d["format"] = b"tagbot-plan"
+    assert _message(d) == "format: expected \"tagbot-plan\", got b'tagbot-plan'"
+
+
 @pytest.mark.parametrize(
     ("point", "message"),
     [

@@ -77,6 +77,8 @@ def load_plan(path: str | os.PathLike[str]) -> Tag:
         raise PlanFileError(f"{name}: not JSON (line {e.lineno}, column {e.colno}: {e.msg})") from e
     except RecursionError as e:
         raise PlanFileError(f"{name}: not JSON (nested too deeply)") from e
+    except ValueError as e:  # an integer with more digits than Python parses
+        raise PlanFileError(f"{name}: not JSON ({e})") from e
     try:
         return tag_from_dict(data)
     except PlanFileError as e:
