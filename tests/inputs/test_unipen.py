@@ -159,6 +159,14 @@ def test_segments_are_listed() -> None:
     ]
 
 
+def test_segment_labels_read_backslash_escapes() -> None:
+    """In a label, \\n is a newline, \\t a tab, and a backslash before anything else is that
+    character itself."""
+    data = unp('.COORD X Y\n.SEGMENT WORD 0 OK "a\\nb\\tc\\\\d\\"e\\x"\n.PEN_DOWN\n0 0\n')
+    (seg,) = parse_unipen(data).segments
+    assert seg.label == 'a\nb\tc\\d"ex'
+
+
 @pytest.mark.parametrize(
     ("spec", "points"),
     [
@@ -198,6 +206,17 @@ def test_component_selection(spec: str, points: list[list[int]]) -> None:
 )
 def test_bad_selections(spec: str, message: str) -> None:
     assert message in error(unp(SEGMENTED), components=spec)
+
+
+def test_load_unipen_reads_the_selected_components(tmp_path) -> None:
+    path = tmp_path / "segmented.dat"
+    path.write_bytes(unp(SEGMENTED))
+    assert [tr.xy[:, 0].tolist() for tr in load_unipen(path, "3")] == [[7]]
+    assert [tr.xy[:, 0].tolist() for tr in load_unipen(path, components="0:1-2:1")] == [
+        [1, 2],
+        [4, 5],
+    ]
+    assert len(load_unipen(path)) == 3  # every pen-down component
 
 
 def test_selection_is_refused_when_sets_restart_the_numbering() -> None:
