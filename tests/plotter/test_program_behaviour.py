@@ -291,6 +291,19 @@ def test_resting_share_is_the_time_near_the_ends(tiny_file):
     assert program.resting_time(box) == pytest.approx(exact, abs=2 * lines * step)
 
 
+def test_resting_time_counts_a_run_of_one_line(tiny_file):
+    """A run planned as a single line (two setpoints) rests near both its ends too."""
+    profile = load_profile(tiny_file, ["motion.setpoints=fixed", "motion.dt=1", "motion.max_dt=1"])
+    program = build_program(place(straight_tag(), profile), profile)
+    ((t, xy),) = program.planned_runs
+    assert len(t) == 2
+    box = np.array([1.0, 1.0])
+    # 1 mm at each end of a straight line drawn at constant speed
+    exact = 2 * 1.0 / abs(xy[1, 0] - xy[0, 0]) * (t[1] - t[0])
+    assert exact == pytest.approx(_resting_exact(program, box))
+    assert program.resting_time(box) == pytest.approx(exact, abs=2 * 2 * 0.0005)
+
+
 def test_bed_edges(tiny_file):
     """A tag touching the bed's edges (no margin) is accepted; one 1 mm wider is refused, naming
     the axis, the overflow and the limit."""
