@@ -409,8 +409,9 @@ def test_general_status_bits() -> None:
     assert GeneralStatus.from_byte(0x81).limit_switch and GeneralStatus.from_byte(0x81).fifo
     assert GeneralStatus.from_byte(0x40).power_lost
     assert all(GeneralStatus.from_byte(b).byte() == b for b in range(256))
-    with pytest.raises(ReplyError):
-        GeneralStatus.from_byte(256)
+    for value in (256, -1):  # just beyond either end: refused, naming the value
+        with pytest.raises(ReplyError, match=rf"^QG status {value}: not a byte$"):
+            GeneralStatus.from_byte(value)
 
 
 def test_firmware_from_version() -> None:
