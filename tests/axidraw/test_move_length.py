@@ -18,7 +18,7 @@ from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, AxisStart, 
 from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device
 from tagbot.axidraw.machine import prepare
-from tagbot.axidraw.moves import SPEED_MARGIN_DB, fifo_depth, run_reference
+from tagbot.axidraw.moves import SPEED_MARGIN_DB, run_reference
 from tagbot.axidraw.profile import MOTOR_AXES
 from tagbot.draw import draw
 from tagbot.io.planfile import load_plan
@@ -132,13 +132,3 @@ def test_the_fifo_holds_the_promised_drawing_ahead_and_the_board_never_runs_dry(
     gaps = [b.load_tick - (a.load_tick + a.ticks) for a, b in pairwise(segments)]
     within_runs = [g for g in gaps if g < 25 * 50]  # a pen move and travel between runs
     assert within_runs and max(within_runs) == 0
-
-
-def test_fifo_depth_is_the_least_that_holds_the_time_ahead():
-    assert fifo_depth([0.025] * 40, 8, 0.2) == 8  # 9 moves of 25 ms: 0.225 s
-    assert fifo_depth([0.0125] * 40, 8, 0.2) == 15  # 16 moves of 12.5 ms: 0.2 s
-    assert fifo_depth([0.025] * 4, 8, 10.0) == 8  # the whole job is on the board at once
-    assert fifo_depth([0.004] * 100, 8, 0.2) == 32  # 33 moves of 4 ms: the deepest there is
-    # A short stretch among long moves sets the depth: 9 held, 4 x 12.5 + 5 x 25 ms = 0.175 s;
-    # 10 held, 0.2 s.
-    assert fifo_depth([0.025] * 20 + [0.0125] * 4 + [0.025] * 20, 8, 0.2) == 9

@@ -12,18 +12,27 @@ import numpy as np
 import pytest
 
 import tagbot
-from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, Move, axis_final, execute
+from firmware_protocols.ebb.motion import (
+    ACCUMULATOR_STEP,
+    TICK_HZ,
+    AxisStart,
+    Move,
+    axis_final,
+    execute,
+)
 from tagbot.axidraw.moves import (
     CRAWL,
     SETTLE,
+    SPEED_MARGIN_DB,
     _axis,
     _check_rates,
     _travel_moves,
     build_job,
+    fifo_depth,
     run_reference,
     steps_to_xy,
 )
-from tagbot.axidraw.profile import load_profile
+from tagbot.axidraw.profile import MOTOR_AXES, load_profile
 from tagbot.errors import PlacementError
 from tagbot.io.planfile import load_plan
 from tagbot.plotter.place import place
@@ -167,6 +176,28 @@ def test_a_t3_whose_rate_peaks_mid_move_is_judged_at_its_peak():
     assert refused(lt(peak_ok + 101, 99, ticks=40, jerk=-2)) is not None
 
 
+def test_a_t3_is_judged_at_its_fastest_tick_next_to_its_end():
+    """Jerk -100 over 10 ticks, the rate r + 980k - 50k(k+1) cresting between ticks 9 and 10:
+    kept when its fastest tick (tick 9, by the firmware's own arithmetic, 20 above tick 10)
+    steps once per tick, refused one unit faster."""
+    loaded = AxisStart.load(0, 880, -100)
+    rates = [loaded.rate_at(k) for k in range(1, 11)]
+    assert int(np.argmax(rates)) + 1 == 9 and rates[8] - rates[9] == 20
+    rate = MAX_RATE - max(rates)  # tick 9 at one step per tick exactly
+    assert refused(lt(rate, 880, ticks=10, jerk=-100)) is None
+    assert refused(lt(rate + 1, 880, ticks=10, jerk=-100)) is not None
+
+
+def test_a_t3_slowing_from_one_step_per_tick_is_kept():
+    """Rate at one step per tick, Accel -450, Jerk -1000: the rate's curve crests just before
+    tick 1 (59 above the Rate, at "tick 0", which steps nothing); the board (the firmware's
+    arithmetic) steps at most once per tick throughout, so the move is kept."""
+    move = lt(MAX_RATE, -450, ticks=10, jerk=-1000)
+    positions, _ = execute(move)
+    assert np.abs(np.diff(positions[:, 0], prepend=0)).max() == 1
+    assert refused(move) is None
+
+
 def test_a_refused_move_names_the_speed_it_needs():
     # 1.5 steps per tick: 37500 steps/s.
     message = refused(lt(3 * 2**30, 0, ticks=5))
@@ -273,6 +304,35 @@ def test_every_tick_is_on_the_jobs_clock_and_every_move_states_its_own_error(sma
         run = setpoints.runs[index]
         np.testing.assert_array_equal(times, job.run_start[index] + run.t)
         np.testing.assert_array_equal(xy, run.xy)
+
+
+def test_each_runs_stated_speed_snrs_are_its_plans_speed_over_their_noise(small):
+    """A run's steps SNR is its plan's speed energy (motor steps/s over ±10 ms, at every tick
+    of the run) over what whole steps cost, 2 x (1/12) / 0.02² a motor per instant, in dB;
+    its moves' own figure is the margin or more above it."""
+    tag, profile, setpoints, job = small
+    k = profile.steps_per_mm
+    for index, run in enumerate(setpoints.runs):
+        ticks = sum(e.move.ticks for e in job.entries if e.kind == "draw" and e.run == index)
+        at = run_reference(tag, run, setpoints.matrix, setpoints.offset)
+        plan = at(np.arange(ticks + 1) / TICK_HZ) @ MOTOR_AXES.T * k
+        w = round(0.01 * TICK_HZ)
+        speed = (plan[2 * w :] - plan[: -2 * w]) / 0.02
+        noise = len(speed) * 2 * (2 / 12) / 0.02**2
+        expected = 10 * math.log10((speed**2).sum() / noise)
+        assert 20.0 < expected < 60.0
+        assert job.run_step_snr[index] == pytest.approx(expected, abs=1e-6)
+        assert job.run_speed_snr[index] >= job.run_step_snr[index] + SPEED_MARGIN_DB
+
+
+def test_fifo_depth_is_the_least_that_holds_the_time_ahead():
+    assert fifo_depth([0.025] * 40, 8, 0.2) == 8  # 9 moves of 25 ms: 0.225 s
+    assert fifo_depth([0.0125] * 40, 8, 0.2) == 15  # 16 moves of 12.5 ms: 0.2 s
+    assert fifo_depth([0.025] * 4, 8, 10.0) == 8  # the whole job is on the board at once
+    assert fifo_depth([0.004] * 100, 8, 0.2) == 32  # 33 moves of 4 ms: the deepest there is
+    # A short stretch among long moves sets the depth: 9 held, 4 x 12.5 + 5 x 25 ms = 0.175 s;
+    # 10 held, 0.2 s.
+    assert fifo_depth([0.025] * 20 + [0.0125] * 4 + [0.025] * 20, 8, 0.2) == 9
 
 
 def test_no_runs_and_no_travel_is_an_empty_job():
