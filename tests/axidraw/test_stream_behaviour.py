@@ -15,11 +15,25 @@ import serial
 
 from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device
-from tagbot.axidraw.machine import find_port, prepare, timeline
+from tagbot.axidraw.machine import (
+    _runs_from,
+    find_port,
+    prepare,
+    resumable,
+    resume_point,
+    timeline,
+)
 from tagbot.axidraw.profile import load_profile
-from tagbot.axidraw.stream import RESYNC_TIMEOUT, EBBStreamer, StreamReport
+from tagbot.axidraw.stream import RESYNC_TIMEOUT, EBBStreamer, StreamReport, entry_end_ticks
 from tagbot.draw import draw
-from tagbot.errors import ConnectionLost, DeviceError, DeviceFault, Interrupted
+from tagbot.errors import (
+    ConnectionLost,
+    DeviceError,
+    DeviceFault,
+    DeviceTimeout,
+    InputError,
+    Interrupted,
+)
 from tagbot.io.planfile import load_plan
 
 from .conftest import LETTER_B
@@ -242,3 +256,86 @@ def test_each_run_is_compared_with_its_plan_to_the_runs_very_end():
         assert t[0] == pytest.approx(moves_t[0]) and t[-1] == pytest.approx(moves_t[-1])
         assert xy[-1] == pytest.approx(moves_xy[-1])
         assert max(t[1:] - t[:-1]) == pytest.approx(0.001)
+
+
+def test_a_line_given_with_its_cr_goes_out_as_it_is(streamer, monkeypatch):
+    """moves.txt's lines end in ``\\r``: each is written once as it is, with no empty line
+    after it; a command without one gets it."""
+    written = []
+    write = streamer.link.write
+    monkeypatch.setattr(streamer.link, "write", lambda data: written.append(data) or write(data))
+    streamer.ask(b"SM,10,0,0\r")
+    streamer.ask("SM,10,0,0")
+    assert written == [b"SM,10,0,0\r", b"SM,10,0,0\r"]
+
+
+def test_a_board_that_ran_dry_resumes_from_the_move_after_its_last(tmp_path):
+    """A USB stall past the reply timeout: the board runs its FIFO dry and stands at the end of
+    the last move it executed. Nothing was cut short, so the report resumes from the very next
+    move (none skipped)."""
+    tag = load_plan(LETTER_B)
+    device = SimulatedEBB()
+    device.stall_usb(4.0, 3.0)
+    job = prepare(tag, port=_url(device))
+    entries = job.job.entries
+    with pytest.raises(DeviceTimeout):
+        draw(tag, tmp_path / "dry", prepared=job, pictures=False)
+    report = json.loads((tmp_path / "dry" / "report.json").read_text())
+    executed = report["executed"]
+    assert 0 < executed < len(entries) - 1
+    assert tuple(report["details"]["stopped_at_steps"]) == entries[executed - 1].steps
+    assert entries[executed].move is not None  # the next move would have moved the motors
+    assert report["resume_from"] == executed + 1
+
+
+def test_resume_from_is_taken_from_move_2_to_the_last():
+    """``--resume-from``'s edges: ``prepare`` takes move 2 and refuses one past the last
+    (before anything is sent), naming the moves it takes; 1 is refused, the last taken."""
+    tag = load_plan(LETTER_B)
+    job = prepare(tag, resume_from=2)
+    assert job.resume_from == 2
+    total = len(job.job.entries)
+    with pytest.raises(InputError, match=rf"^--resume-from: move {total + 1} is not in the job "
+                       rf"\(moves 2 to {total}\)$"):  # fmt: skip
+        prepare(tag, resume_from=total + 1)
+    assert not resumable(job.job, 1) and resumable(job.job, 2)
+    assert resumable(job.job, total) and not resumable(job.job, total + 1)
+
+
+def test_a_stop_before_a_moves_first_step_cuts_nothing_short():
+    """Stopped mid-job in a drawing move's first ticks, before it took a step (the motors where
+    the move before it left them, later moves sent): that move is not cut short, and the job
+    resumes from it; one step later it is cut short, and the job resumes after it."""
+    job = prepare(load_plan(LETTER_B))
+    entries, ticks, ends = job.job.entries, job.job.ticks, entry_end_ticks(job.job)
+    k = next(
+        k
+        for k in range(len(entries) // 2, len(entries))
+        if entries[k].kind == entries[k - 1].kind == "draw"
+        and entries[k - 1].steps != entries[k - 2].steps  # move k - 1 moved the motors
+        and tuple(ticks[ends[k - 1]]) == entries[k - 1].steps  # move k's first tick: no step
+    )
+    here = entries[k - 1].steps
+    report = StreamReport(first=0, sent=k + 5, executed=k - 1, stopped_at=here)
+    assert job._executed_moves(report) == (k, 0)
+    assert resume_point(job.job, k, 0) == k + 1  # move k, 1-based
+    stepped = next(tuple(p) for p in ticks[ends[k - 1] : ends[k]] if tuple(p) != here)
+    report = StreamReport(first=0, sent=k + 5, executed=k - 1, stopped_at=stepped)
+    assert job._executed_moves(report) == (k, 1)
+
+
+def test_a_resumed_run_with_two_planned_samples_left_is_still_compared():
+    """A resumed run's plan keeps what is left of it from the resumed move's start: a run
+    ending a millisecond after it (two samples left, a segment) is still compared; one ending
+    on it (one sample, no segment) is not."""
+    job = prepare(load_plan(LETTER_B))
+    first = next(i for i, e in enumerate(job.job.entries) if e.kind == "draw" and i > 20)
+    start = job.job.entries[first].start
+    ((t, xy),) = job._planned_runs()
+    j = int(np.searchsorted(t, start - 1e-9))
+    assert abs(t[j] - start) < 1e-6 and t[j + 1] - t[j] == pytest.approx(0.001)
+    ((kept, plan),) = _runs_from([(t[: j + 2], xy[: j + 2])], job.job, first)
+    assert plan == job.job.runs[0].plan
+    np.testing.assert_array_equal(kept[0], t[j : j + 2])
+    np.testing.assert_array_equal(kept[1], xy[j : j + 2])
+    assert _runs_from([(t[: j + 1], xy[: j + 1])], job.job, first) == []
