@@ -114,3 +114,22 @@ def test_an_explicit_scale_is_placed_in_the_middle_of_the_safe_workspace() -> No
     centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
     assert abs(centre[0]) < 4.5
     assert centre[1] == pytest.approx((40.0 + 250.0) / 2, abs=8.0)
+
+
+def test_the_box_a_placement_checks_is_the_unit_squares_edge_densely_and_its_inside() -> None:
+    """A candidate placement is checked at points of the tag's box: every 1/48 of each edge (a
+    reach boundary cannot cut a corner between two of them by more than that) and a grid
+    inside, each point once."""
+    from tagbot.arm.place import _box_template
+
+    points = _box_template()
+    assert np.abs(points).max() == 0.5
+    assert len(np.unique(points, axis=0)) == len(points)
+    for axis in (0, 1):
+        for side in (-0.5, 0.5):
+            along = np.sort(points[points[:, axis] == side][:, 1 - axis])
+            assert along[0] == -0.5 and along[-1] == 0.5
+            assert np.diff(along).max() == pytest.approx(1 / 48)
+    inside = points[np.abs(points).max(axis=1) < 0.5]
+    assert len(inside) == 36 and len(points) == 4 * 48 + 4 * 6 + 36  # the grid meets the edges too
+    assert np.diff(np.unique(inside[:, 0])) == pytest.approx(np.full(5, 1 / 7))
