@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from tagbot import metrics_kernels
 from tagbot.gesture.timing import simulated_capture
+from tagbot.inputs import Trace
 from tagbot.inputs.stamps import sample_instants
 from tagbot.metrics import (
     DENSITY,
@@ -409,3 +410,15 @@ def test_turning_is_the_array_codes(seed):
     walks = [np.cumsum(rng.normal(size=(n, 2)), axis=0) for n in (30, 1, 2, 12)]
     walks[0][5:8] = walks[0][5]  # a pen at rest
     assert turning_of(walks) == pytest.approx(_turning(walks), rel=1e-12)
+
+
+def test_fit_report_of_untimed_traces_has_no_velocity_figures():
+    """Traces without timestamps have no speed to compare with: the report's velocity SNRs are
+    None (reported as such), and its shape figures are the array codes'."""
+    trace, model = _timed_case(4)
+    untimed = Trace(trace.xy)
+    report = fit_report([untimed], model)
+    assert report.velocity_snr_db is None
+    assert report.velocity_snr_clock_db is None and report.velocity_snr_trace_db is None
+    mean, largest = _shape_error([trace.xy], [ink_polyline(model.plans[0], model.size)])
+    assert (report.shape.mean, report.shape.max) == pytest.approx((mean, largest), rel=1e-9)

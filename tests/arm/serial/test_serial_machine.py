@@ -737,3 +737,15 @@ def test_the_approach_takes_what_the_slowest_joint_needs_at_least_0_2_s(ticks, s
     bound_slow = math.sqrt(16.0 * d / (3.0 * math.radians(20.0)))
     assert _approach_time(present, small, profile) == pytest.approx(bound, rel=1e-9)
     assert _approach_time(present, small, slow) == pytest.approx(bound_slow, rel=1e-9)
+
+
+def test_a_planned_instant_at_a_pauses_start_is_drawn_after_the_pause() -> None:
+    """A pause that starts exactly at a planned instant (1 s, as the pause clock reads it) holds
+    that instant too: it is drawn 0.25 s later, with everything after it."""
+    executed = np.column_stack([np.linspace(0, 3, 31), np.zeros(31), np.zeros(31), np.ones(31)])
+    executed[5, 3] = 0.0  # off the paper at 0.5 s only, before the pause: no planned step there
+    run = (np.array([0.0, 1.0, 2.0]), np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]))
+    (paused,) = contact_figures([run], executed, np.zeros((0, 2)), [(1.0, 0.25)])
+    assert paused["contact_kept_pct"] == 100.0  # steps around 0.625 s and 1.75 s
+    (late,) = contact_figures([run], executed, np.zeros((0, 2)), [(1.0 + 1e-6, 0.25)])
+    assert late["contact_kept_pct"] == 50.0  # the instant before the pause: a step around 0.5 s
