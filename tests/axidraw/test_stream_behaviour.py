@@ -339,3 +339,28 @@ def test_a_resumed_run_with_two_planned_samples_left_is_still_compared():
     np.testing.assert_array_equal(kept[0], t[j : j + 2])
     np.testing.assert_array_equal(kept[1], xy[j : j + 2])
     assert _runs_from([(t[: j + 1], xy[: j + 1])], job.job, first) == []
+
+
+def test_a_job_lifts_a_pen_left_down_before_its_first_step(tmp_path):
+    """A board an earlier session left with its pen lowered: a new job (from home, not a
+    resume) lifts the pen before the motors take their first step, not across the paper."""
+    device = SimulatedEBB()
+    link = serial.serial_for_url(_url(device), timeout=0.01)
+    link.write(b"SP,0,300\r")
+    while b"OK" not in link.read(100):
+        pass
+    link.close()
+    job = prepare(load_plan(LETTER_B), port=_url(device))
+    profile = job.profile
+    up = profile.servo_position(profile["pen.up"])
+    assert device.pen_position() != up
+
+    def progress(done: int, total: int) -> None:
+        if done >= 2:  # the first travel under way: enough
+            raise KeyboardInterrupt
+
+    assert isinstance(job.run(tmp_path, progress=progress).error, Interrupted)
+    trace = device.recorder.trace()
+    moved = (trace.motor1 != trace.motor1[0]) | (trace.motor2 != trace.motor2[0])
+    first = int(np.flatnonzero(moved)[0])
+    assert trace.pen[first] == up
