@@ -23,6 +23,7 @@ from tagbot.axidraw.machine import (
     resume_point,
     timeline,
 )
+from tagbot.axidraw.moves import build_job
 from tagbot.axidraw.profile import load_profile
 from tagbot.axidraw.stream import RESYNC_TIMEOUT, EBBStreamer, StreamReport, entry_end_ticks
 from tagbot.draw import draw
@@ -35,6 +36,7 @@ from tagbot.errors import (
     Interrupted,
 )
 from tagbot.io.planfile import load_plan
+from tagbot.plotter.place import place
 
 from .conftest import LETTER_B
 
@@ -364,3 +366,14 @@ def test_a_job_lifts_a_pen_left_down_before_its_first_step(tmp_path):
     moved = (trace.motor1 != trace.motor1[0]) | (trace.motor2 != trace.motor2[0])
     first = int(np.flatnonzero(moved)[0])
     assert trace.pen[first] == up
+
+
+def test_the_timeline_of_an_empty_job_is_one_still_sample_at_home():
+    """A job with nothing to do (no runs, no travel, no park): motion.csv holds one sample, at
+    0 s, home, still, pen up."""
+    tag = load_plan(LETTER_B)
+    profile = load_profile(overrides=["motion.park=false"])
+    setpoints = replace(place(tag, profile.placement()), runs=())
+    table = timeline(build_job(tag, setpoints, profile), 0.01)
+    assert table.t.tolist() == [0.0] and table.xy.tolist() == [[0.0, 0.0]]
+    assert table.v.tolist() == [[0.0, 0.0]] and table.pen.tolist() == [0]
