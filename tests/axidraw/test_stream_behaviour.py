@@ -34,6 +34,7 @@ from tagbot.errors import (
     DeviceTimeout,
     InputError,
     Interrupted,
+    PortError,
 )
 from tagbot.io.planfile import load_plan
 from tagbot.plotter.place import place
@@ -180,6 +181,23 @@ def test_port_auto_takes_the_board_the_makers_finder_names(monkeypatch):
 
     monkeypatch.setattr(ebb_serial, "findPort", lambda: "/dev/ttyACM7")
     assert find_port() == "/dev/ttyACM7"
+
+
+@pytest.mark.parametrize(
+    ("found", "message"),
+    [
+        (None, r"--port auto: no EiBotBoard found on USB \(is the AxiDraw plugged in\?\)"),
+        ("/dev/ttyACM7", r"--port /dev/ttyACM7: no such device"),
+    ],
+)
+def test_prepare_with_port_auto_checks_the_board_found_or_says_none_is(monkeypatch, found, message):
+    """``--port auto`` is looked up on USB before anything is built or sent: none found is
+    said as such; the port found is the one checked (here absent)."""
+    from plotink import ebb_serial
+
+    monkeypatch.setattr(ebb_serial, "findPort", lambda: found)
+    with pytest.raises(PortError, match=rf"^{message}"):
+        prepare(load_plan(LETTER_B), port="auto")
 
 
 def test_a_fault_on_a_garbled_command_still_names_it(streamer):
