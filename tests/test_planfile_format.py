@@ -138,6 +138,16 @@ def test_a_long_value_is_shown_cut_to_40_characters() -> None:
     assert _message(d) == f'version: unsupported "{"v" * 38}" (this tagbot reads 1 and 2)'
 
 
+def test_a_value_is_shown_in_ascii_on_one_line() -> None:
+    """A shown string's non-ASCII characters are escaped, a line separator among them, so the
+    message stays one ASCII line."""
+    d = _doc()
+    d["model"] = "sigma\u2028gamma \u00e4"
+    message = _message(d)
+    assert message == 'model: unknown "sigma\\u2028gamma \\u00e4" (expected "gamma" or "sigma")'
+    assert message.isascii() and len(message.splitlines()) == 1
+
+
 def test_a_value_json_cannot_write_is_shown_as_python_writes_it() -> None:
     """tag_from_dict takes any mapping: a value no JSON text holds (bytes) is still shown."""
     d = _doc()
