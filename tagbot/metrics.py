@@ -552,6 +552,10 @@ class RunAlignment:
     deviation_max: float = math.nan
     """Largest distance either way between this run's executed and planned paths, mm (NaN
     where it is not measured)."""
+    cut_short: bool = False
+    """The run was drawing when the machine stopped: its figures cover the part drawn, and its
+    speed ends where the machine stopped while the plan's went on, so its SNR is no fidelity
+    figure (the budgets do not judge it)."""
 
 
 @dataclass(frozen=True)
@@ -595,6 +599,7 @@ class ExecutionComparison:
                     "executed_duration": r.executed_duration,
                     "speed_snr_db": r.snr_db,
                     "path_deviation_max_mm": r.deviation_max,
+                    "cut_short": r.cut_short,
                 }
                 for r in self.runs
             ],
@@ -655,16 +660,17 @@ def compare_execution(
     starts = [start - gone[k] for k, (start, _) in enumerate(sorted(pauses))]
     skip = [(t - dt, t + ramp + dt) for t in starts] if ramp > 0 else []
     plans = list(range(len(planned))) if plans is None else list(plans)
+    cut = [False] * len(planned)
     if until is not None:
-        planned, plans = planned_until(planned, plans, until)
-    pairs = list(zip(planned, runs_e, plans, strict=False))
+        planned, plans, cut = planned_until(planned, plans, until)
+    pairs = list(zip(planned, runs_e, plans, cut, strict=False))
     if not pairs:
         raise ValueError("compare_execution: no pen-down run was executed")
     to_path: list[Array] = []
     from_path: list[Array] = []
     signal = noise = 0.0
     alignments: list[RunAlignment] = []
-    for (tp, xyp), run, plan in pairs:
+    for (tp, xyp), run, plan, cut_short in pairs:
         tp, xyp = np.asarray(tp, dtype=float), np.asarray(xyp, dtype=float)
         te, xye = run[:, 0], run[:, 1:3]
         path = densify(xyp, spacing)
@@ -685,6 +691,7 @@ def compare_execution(
                 executed_duration=float(e_end - e_onset),
                 snr_db=_db(a, b),
                 deviation_max=float(max(d_exec.max(), d_plan.max())),
+                cut_short=cut_short,
             )
         )
     d_exec_all = np.concatenate(to_path)
@@ -713,12 +720,14 @@ def without_pauses(executed: ArrayLike, pauses: Sequence[tuple[float, float]]) -
 
 def planned_until(
     planned: Sequence[tuple[ArrayLike, ArrayLike]], plans: Sequence[int], until: float
-) -> tuple[list[tuple[Array, Array]], list[int]]:
+) -> tuple[list[tuple[Array, Array]], list[int], list[bool]]:
     """The planned runs cut at planned time ``until`` (a segment it falls in ends there, at the
     planned position then; runs with fewer than two samples before it left out, and a run cut
-    before it has moved :data:`MOVED` from its first point: not begun), and their plans."""
+    before it has moved :data:`MOVED` from its first point: not begun), their plans, and
+    whether each was cut short (planned to go on after ``until``)."""
     kept: list[tuple[Array, Array]] = []
     kept_plans: list[int] = []
+    kept_cut: list[bool] = []
     for (t, xy), plan in zip(planned, plans, strict=True):
         t, xy = np.asarray(t, dtype=float), np.asarray(xy, dtype=float)
         inside = t <= until + 1e-9
@@ -732,7 +741,8 @@ def planned_until(
         if inside.sum() >= 2:
             kept.append((t[inside], xy[inside]))
             kept_plans.append(int(plan))
-    return kept, kept_plans
+            kept_cut.append(bool(cut_short))
+    return kept, kept_plans, kept_cut
 
 
 def _db(signal: float, noise: float) -> float:

@@ -65,8 +65,9 @@ def test_execution_report_keys_and_values() -> None:
         "executed_duration",
         "speed_snr_db",
         "path_deviation_max_mm",
+        "cut_short",
     }
-    assert run["plan"] == 0 and run["speed_snr_db"] > 40.0
+    assert run["plan"] == 0 and run["speed_snr_db"] > 40.0 and run["cut_short"] is False
     assert run["planned_start"] == pytest.approx(0.0)
     assert run["executed_start"] == pytest.approx(0.5, abs=0.02)
 
@@ -111,3 +112,15 @@ def test_a_run_stopped_before_it_began_is_not_compared() -> None:
     # Cut 0.3 s in (0.3 mm drawn), the second run is compared.
     later = compare_execution([first, second], executed, until=2.3)
     assert later.planned_runs == 2 and len(later.runs) == 2
+    # The stop came during the second run, after the first had ended.
+    assert [r["cut_short"] for r in later.as_dict()["runs"]] == [False, True]
+
+
+def test_a_run_the_stop_ends_on_its_last_planned_instant_is_not_cut_short() -> None:
+    """A stop exactly when a run's plan ends leaves that run whole; a millisecond earlier, it
+    was cut short."""
+    run = _run(0.0)
+    executed = np.column_stack([run[0], run[1], np.ones(101)])
+    (whole,) = compare_execution([run], executed, until=1.0).runs
+    (cut,) = compare_execution([run], executed, until=0.999).runs
+    assert (whole.cut_short, cut.cut_short) == (False, True)

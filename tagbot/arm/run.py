@@ -463,11 +463,12 @@ class Budget:
                     f" motion.max_deviation {follow:g} mm beyond the goals' rounding to whole"
                     f" ticks, {rounding:.3f} mm)"
                 )
-            if snr is not None and snr < MIN_SPEED_SNR_DB:
+            slow = snr is not None and snr < MIN_SPEED_SNR_DB and not run.get("cut_short")
+            if slow:
                 over.append(f"speed SNR {snr:.1f} dB below {MIN_SPEED_SNR_DB:g} dB")
             if over:
                 far = deviation is not None and deviation > budget
-                cause = self.cause(run, far, snr is not None and snr < MIN_SPEED_SNR_DB)
+                cause = self.cause(run, far, slow)
                 out.append(f"run {i + 1} (plan {run['plan']}): {' and '.join(over)}: {cause}")
                 log.warning("%s", out[-1])
         return out

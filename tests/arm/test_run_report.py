@@ -211,6 +211,16 @@ def test_the_budget_names_a_run_below_the_speed_snr_and_keeps_its_bounds(small) 
         f" rounding to whole ticks, {rounding:.3f} mm) and speed SNR 20.0 dB below 25 dB:"
         f" {stall}"
     ]
+    # A run the stop cut short: its speed ends where the arm stopped, so it is not judged on it.
+    cut = report(limit + 0.01, 20.0)
+    cut["runs"][1]["cut_short"] = True
+    assert budget(cut) == [
+        f"run 2 (plan 0): path deviation {limit + 0.01:.3f} mm over its budget ({limit:.3f} mm:"
+        f" motion.max_deviation {small.profile['motion.max_deviation']:g} mm beyond the goals'"
+        f" rounding to whole ticks, {rounding:.3f} mm): {stall}"
+    ]
+    cut["runs"][1]["path_deviation_max_mm"] = 0.0
+    assert budget(cut) == []
 
 
 @pytest.mark.parametrize(

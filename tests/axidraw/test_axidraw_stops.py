@@ -295,3 +295,21 @@ def test_a_reply_waiting_when_a_descheduled_host_wakes_is_no_timeout(job):
     # Nothing there even after reading past the deadline: a timeout, naming the command.
     with pytest.raises(DeviceTimeout, match=r"^QM: no reply from the EBB in 2 s"):
         EBBStreamer(_DescheduledLink([]), job.profile, {}).ask("QM", data=True, ok=False)
+
+
+def test_the_budget_judges_a_run_cut_short_by_a_stop_on_its_path_alone(job) -> None:
+    """The AxiDraw's budgets: a run under 25 dB is named with its cause; the same run cut short
+    by a stop (its speed ends where the board stopped) is named for its path only."""
+    from tagbot.axidraw.machine import Budget
+
+    budget = Budget(job.job, [])
+    run = {"plan": 0, "executed_start": 0.0, "executed_duration": 1.0}
+    slow = {**run, "path_deviation_max_mm": 0.0, "speed_snr_db": 20.0}
+    assert budget({"runs": [slow]}) == [
+        "run 1 (plan 0): speed SNR 20.0 dB below 25 dB: the executed motion beyond its moves'"
+        f" stated {job.job.run_error[0]:.3f} mm"
+    ]
+    assert budget({"runs": [{**slow, "cut_short": True}]}) == []
+    far = {**slow, "path_deviation_max_mm": 0.05, "cut_short": True}
+    (warning,) = budget({"runs": [far]})
+    assert warning.startswith("run 1 (plan 0): path deviation 0.050 mm over 0.02 mm: ")

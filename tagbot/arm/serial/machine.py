@@ -454,7 +454,7 @@ class SerialBudget:
             deviation, snr = run.get("path_deviation_max_mm"), run.get("speed_snr_db")
             if deviation is not None and deviation > MAX_DEVIATION_MM:
                 over.append(f"path deviation {deviation:.3f} mm over {MAX_DEVIATION_MM:g} mm")
-            if snr is not None and snr < MIN_SPEED_SNR_DB:
+            if snr is not None and snr < MIN_SPEED_SNR_DB and not run.get("cut_short"):
                 why = ""
                 if i < len(self.lengths) and self.lengths[i] < SHORT_RUN_MM:
                     why = (

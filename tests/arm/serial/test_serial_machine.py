@@ -285,6 +285,11 @@ def test_a_fault_mid_run_lifts_the_pen_by_the_arm_and_stops_safely(letter_b, tmp
     assert isinstance(error, DeviceError) and "hardware error" in str(error)
     assert not report["completed"] and report["details"]["lifted_by_arm_at_stop"]
     assert fired <= report["executed"] < len(job.program)
+    # the run the fault cut short is marked so, and not judged on its speed
+    *whole, cut = report["runs"]
+    assert cut["cut_short"] is True and not any(r["cut_short"] for r in whole)
+    cut_run = f"run {len(report['runs'])} "
+    assert not any(w.startswith(cut_run) and "speed SNR" in w for w in report["warnings"])
     trace = physics.pen_trace()
     profile = job.profile
     # inked up to the fault, then off the paper and up at the pen-up height, arm holding
@@ -710,6 +715,10 @@ def test_the_budgets_at_their_limits_and_without_figures_warn_of_nothing() -> No
     warnings = SerialBudget([])({"runs": [past]})
     assert warnings == [
         "run 1 (plan 0): path deviation 0.301 mm over 0.3 mm and speed SNR 24.9 dB below 25 dB"
+    ]
+    # cut short by a stop: its speed is not judged, its path still is
+    assert SerialBudget([])({"runs": [{**past, "cut_short": True}]}) == [
+        "run 1 (plan 0): path deviation 0.301 mm over 0.3 mm"
     ]
 
 
