@@ -417,3 +417,37 @@ def test_a_runs_lift_off_mirrors_its_touch_down() -> None:
         assert len(lowering) == len(lifting)
         assert lowering[0] == pytest.approx(10.0, abs=1e-3)
         np.testing.assert_allclose(lifting[::-1], lowering, atol=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("into", "kind", "side"), [(7, "approach", "before"), (0, "retreat", "after")]
+)
+def test_a_refusal_in_a_pen_move_names_the_move_and_the_time_into_it(monkeypatch, into, kind, side):
+    """Where the arm cannot follow a point of a run's approach or retreat, the refusal names
+    the plan, the move and how far into it the point is (seconds at the profile's period)."""
+    from tagbot.arm.serial.kinematics import SerialArm
+    from tagbot.errors import ReachError
+
+    profile = load_serial_profile("openmanipulator-x")
+    real, calls = SerialArm.solve_path, []
+
+    def refuse(self, points, *args, **kwargs):
+        calls.append(len(points))
+        q = real(self, points, *args, **kwargs)
+        if len(calls) == 2:  # the second run's approach, ink and retreat, in one path
+            n = len(points) - 1 - into if kind == "retreat" else into
+            raise ReachError("out of reach (test)", n, "reach")
+        return q
+
+    monkeypatch.setattr(SerialArm, "solve_path", refuse)
+    cae = load_plan(Path(tagbot.__file__).parent / "examples" / "cae.json")
+    with pytest.raises(ReachError) as raised:
+        build_serial_program(cae, profile)
+    message = str(raised.value)
+    assert message.startswith(f"plan 1, {kind} {side} it, t = ")
+    assert message.endswith(" s into the move: out of reach (test)")
+    seconds = float(message.split("t = ")[1].split(" s")[0])
+    if kind == "approach":
+        assert seconds == pytest.approx(into * profile.period)
+    else:  # the retreat's last point: its length, under the 5 s cap of any pen move
+        assert 0.0 < seconds < 5.0
