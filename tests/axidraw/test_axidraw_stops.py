@@ -17,7 +17,7 @@ import pytest
 
 from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device, serve_pty
-from tagbot.axidraw.machine import prepare
+from tagbot.axidraw.machine import Budget, prepare
 from tagbot.control import RunControl
 from tagbot.draw import draw
 from tagbot.errors import DeviceError, Interrupted, PlacementError
@@ -313,3 +313,29 @@ def test_the_budget_judges_a_run_cut_short_by_a_stop_on_its_path_alone(job) -> N
     far = {**slow, "path_deviation_max_mm": 0.05, "cut_short": True}
     (warning,) = budget({"runs": [far]})
     assert warning.startswith("run 1 (plan 0): path deviation 0.050 mm over 0.02 mm: ")
+
+
+def test_the_budget_warns_for_each_run_over_it_naming_its_figures_and_cause(cae_job):
+    """The judge of a three-run report: a run within both budgets has no warning (and the runs
+    after it are still judged); one over both names both; one with a host stall in it names
+    the stall as the cause."""
+    job = cae_job[3]
+    stated = job.run_error[1]
+    assert stated < 0.02
+
+    def run(plan: int, deviation: float, snr: float, start: float) -> dict:
+        return {
+            "plan": plan,
+            "path_deviation_max_mm": deviation,
+            "speed_snr_db": snr,
+            "executed_start": start,
+            "executed_duration": 2.0,
+        }
+
+    report = {"runs": [run(0, 0.01, 40.0, 1.0), run(1, 0.03, 20.0, 5.0), run(2, 0.01, 24.0, 9.0)]}
+    assert Budget(job, [(10.0, 0.1)])(report) == [
+        "run 2 (plan 1): path deviation 0.030 mm over 0.02 mm and speed SNR 20.0 dB below"
+        f" 25 dB: the executed motion beyond its moves' stated {stated:.3f} mm",
+        "run 3 (plan 2): speed SNR 24.0 dB below 25 dB: 1 host stall (100 ms) with the pen"
+        " down: the board ran dry",
+    ]
