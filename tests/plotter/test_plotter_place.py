@@ -170,6 +170,31 @@ def test_junction_limit_on_curves(tiny_file):
     assert place(tag, loose).limits["junction"] == 1.0
 
 
+def test_each_junction_limit_uses_the_acceleration_along_its_own_junction(tiny_file):
+    """Two 45-degree turns whose junction vectors lean to different axes: each corner's limit
+    uses Grbl's acceleration along its own junction vector, min(a_x/|u_x|, a_y/|u_y|)."""
+    from tagbot.plotter.place import junction_speed
+
+    profile = load_profile(
+        tiny_file,
+        [
+            "limits.x_acceleration=100",
+            "limits.y_acceleration=400",
+            "limits.junction_deviation=0.01",
+        ],
+    )
+    xy = np.array([[0.0, 0.0], [10.0, 0.0], [20.0, 10.0], [20.0, 20.0]])
+    entry, limit, deflection = junction_speed(xy, profile, 1.0)
+    assert deflection == pytest.approx([math.pi / 4, math.pi / 4])
+    assert entry == pytest.approx([10.0, 10.0])  # the shorter side: 10 mm in 1 s
+    # Junction vectors point at 112.5 and 157.5 degrees: mostly y, then mostly x.
+    eighth = math.radians(22.5)
+    a = [100.0 / math.sin(eighth), 100.0 / math.cos(eighth)]
+    s = math.sin(math.radians(67.5))  # sin(theta/2), theta = 135 degrees between the moves
+    expected = [math.sqrt(a_k * 0.01 * s / (1.0 - s)) for a_k in a]
+    assert limit == pytest.approx(expected, rel=1e-9)
+
+
 def _exact(tag, placed, run, instants):
     p, _ = evaluate_plan(tag.plans[run.plan], instants, tag.size)
     return p @ placed.matrix.T + placed.offset
