@@ -508,6 +508,7 @@ def test_ink_windows_round_trip_as_version_2(tmp_path: Path) -> None:
     [
         ([0.1], r"plans\[0\].ink: expected \[down, up\] seconds, got \[0.1\]"),
         ("soon", r"plans\[0\].ink: expected \[down, up\] seconds"),
+        (["x", 0.5], r"plans\[0\].ink\[0\]: expected a number, got \"x\"$"),
         ([0.1, "x"], r"plans\[0\].ink\[1\]: expected a number"),
         ([0.4, 0.1], r"plans\[0\].ink: need 0 <= down < up"),
         ([0.1, 1e300], r"plans\[0\].ink: need 0 <= down < up <= 14400 s"),
