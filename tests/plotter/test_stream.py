@@ -286,6 +286,25 @@ def test_options_are_checked():
             StreamOptions(**bad)
 
 
+def test_a_line_filling_the_receive_buffer_less_one_byte_is_the_longest_sent():
+    """At most rx_buffer - 1 unacknowledged bytes go out: a line of exactly that length (its
+    newline counted) is streamed; one byte more is refused before anything is sent."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, wire = connected(device, rx_buffer=24)
+    longest = "G1X1.00000000000Y2F600\n"
+    assert len(longest) == 23
+    try:
+        before = len(wire.lines_sent())
+        with pytest.raises(ValueError, match=r"longer than Grbl's receive buffer: 'G1X1\.00000"):
+            streamer.stream(["G21\n", "G90\n", longest.replace("X1.0", "X1.00"), "M2\n"])
+        assert len(wire.lines_sent()) == before
+        report = streamer.stream(["G21\n", "G90\n", longest, "M2\n"])
+    finally:
+        port.close()
+    assert report.lines_acknowledged == 4 and report.errors == []
+    assert device.position_mm[:2] == pytest.approx((1.0, 2.0))
+
+
 def test_a_slow_line_starves_the_planner_and_the_simulator_counts_it():
     device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
     port = open_device(device, baud=9600)  # ~27 ms per line, for 10 ms of motion each
