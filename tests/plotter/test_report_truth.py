@@ -163,6 +163,34 @@ def test_an_outside_feed_hold_is_a_named_pause():
     assert report.stall_spans == []
 
 
+def test_an_outside_feed_hold_names_the_line_it_stopped():
+    """The button pressed 2 s into a 5 s line: the warning names that line (the 7th sent)."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, wire = connected(device)
+    lines = ["G21\n", "G90\n", "G94\n", "M3S30\n", "G4P0.1\n", "G93\n"]
+    lines += ["G1X10Y0F12\n", "G1X10Y10F12\n", "G94\n", *PEN_UP, "M5\n", "M2\n"]
+    start, held = device.now, {}
+
+    def button(direction: str, data: bytes) -> None:  # checked at each byte on the wire
+        wire(direction, data)
+        if "at" not in held and device.now > start + 2.0:
+            device.write(b"!")
+            held["at"] = device.now
+        elif "at" in held and "off" not in held and device.now > held["at"] + 1.0:
+            device.write(b"~")
+            held["off"] = device.now
+
+    streamer._trace = button
+    try:
+        report = streamer.stream(lines, drawing=[text.startswith("G1") for text in lines])
+    finally:
+        port.close()
+    assert held["at"] < start + 5.0  # still inside line 7, which ends 0.1 s + 5 s in
+    assert report.outside_holds == 1 and len(report.warnings) == 1
+    assert " at line 7, " in report.warnings[0]
+    assert device.position_mm[:2] == pytest.approx((10.0, 10.0))
+
+
 def test_a_starved_planner_is_a_named_stall():
     device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
     port, streamer, _ = connected(device)
