@@ -295,7 +295,10 @@ ERROR_CASES = [
     ),
     (put((*P0, "targets", 1), [1, 2, 3]), rf"^plans\[0\]\.targets\[1\]: {NUMBERS}"),
     (put((*P0, "targets", 1), {"x": 1, "y": 2}), rf"^plans\[0\]\.targets\[1\]: {NUMBERS}"),
-    (put((*P0, "targets"), "0,0 1,1"), r"^plans\[0\]\.targets: expected a list of \[x, y\]"),
+    (
+        put((*P0, "targets"), "0,0 1,1"),
+        r"^plans\[0\]\.targets: expected a list of \[x, y\], got a string$",
+    ),
     (put((*S01, "dt"), "0.2"), r'^plans\[0\]\.strokes\[1\]\.dt: expected a number, got "0.2"$'),
     (
         put((*S01, "sigma"), False),
