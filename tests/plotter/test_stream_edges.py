@@ -7,6 +7,7 @@ import pytest
 
 from firmware_protocols.grbl import State, parse_message
 from sim.grbl import SimulatedGrbl
+from tagbot.errors import DeviceTimeout
 from tagbot.plotter.stream import GrblStreamer, StreamOptions, _xy_of, resume_lines
 
 from .test_stream import PEN_UP, SETTINGS, connected, open_device, square_program
@@ -53,6 +54,23 @@ def test_a_hold_asked_between_jobs_goes_straight_to_the_machine():
         streamer.resume()
         assert wire.tx[-2:] == [b"!", b"~"]
         assert streamer.query_state().state == State.IDLE
+    finally:
+        port.close()
+
+
+def test_a_status_query_gives_up_after_one_second_of_silence():
+    """A machine that stops answering: query_state waits 1 s (its default) on the port's
+    clock, then says what it waited for. (A report already on the wire, answering connect's
+    last poll, is still read by the first query.)"""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, _ = connected(device)
+    try:
+        device.go_silent()
+        with pytest.raises(DeviceTimeout, match=r"^no status report within 1 s$"):
+            for _ in range(3):
+                start = streamer.clock.now()
+                streamer.query_state()
+        assert streamer.clock.now() - start == pytest.approx(1.0, abs=0.1)
     finally:
         port.close()
 
