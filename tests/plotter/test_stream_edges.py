@@ -45,6 +45,23 @@ def test_the_machine_position_at_connect_is_where_the_job_starts():
         port.close()
 
 
+def test_a_second_job_starts_from_where_the_first_left_the_machine():
+    """Two jobs on one connection: the second's first move starts where the first job ended
+    (its last status report), so progress names that move from the first report on."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, _ = connected(device)
+    seen: list[int] = []
+    try:
+        streamer.stream(["G21\n", "G90\n", "G94\n", "G1X40Y30F3000\n", "M2\n"])
+        second = ["G21\n", "G90\n", "G94\n", "G1X60Y30F300\n", "G1X60Y40F300\n", "M2\n"]
+        report = streamer.stream(second, progress=lambda done, total: seen.append(done))
+    finally:
+        port.close()
+    # 20 mm at 5 mm/s: about 4 s of reports on line 4 (3 lines done), then 2 s on line 5.
+    assert report.executing[0] == 3 and report.executing.count(3) >= 15
+    assert seen == [0, 3, 4, 6]
+
+
 def test_a_hold_asked_between_jobs_goes_straight_to_the_machine():
     """Outside a job (no stream loop to queue it), hold and resume are written at once."""
     device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
