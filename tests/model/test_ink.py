@@ -3,6 +3,8 @@ the run clocks machines draw it with (tagbot.model.easing)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -157,3 +159,23 @@ def test_runs_at_rest_keep_the_identity_clock() -> None:
     short = run_clock(lifted((0.15, 0.2)), 0.65, 0.7, size)
     assert short.ease_in == short.ease_out == pytest.approx(0.05)
     assert short.duration == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("trimmed", ["start", "end"])
+def test_a_run_trimmed_at_one_end_eases_there_and_keeps_the_plans_speed_at_the_other(trimmed):
+    """With ``ease_trimmed``, a run of an inkless plan cut after the plan's start eases in and
+    ends at the plan's own end at the plan's speed (no ramp there), and the other way round."""
+    plan = replace(lifted(), ink=None)
+    size = Tag((plan,)).size
+    end = plan.end(size)
+    on, off = (plan.start + 0.2, end) if trimmed == "start" else (plan.start, end - 0.2)
+    clock = run_clock(plan, on, off, size, ease_trimmed=True)
+    eased = (clock.ease_in, clock.ease_out)
+    assert eased == ((EASE, 0.0) if trimmed == "start" else (0.0, EASE))
+    assert clock.duration == pytest.approx(off - on + EASE / 2)
+    u = np.linspace(0.0, clock.duration, 4001)
+    rate = clock.rate(u)
+    plain = rate[-1] if trimmed == "start" else rate[0]
+    ramped = rate[0] if trimmed == "start" else rate[-1]
+    assert (plain, ramped) == (1.0, 0.0)
+    assert clock.tag_time(u)[[0, -1]] == pytest.approx([on, off])
