@@ -124,3 +124,21 @@ def test_a_run_the_stop_ends_on_its_last_planned_instant_is_not_cut_short() -> N
     (whole,) = compare_execution([run], executed, until=1.0).runs
     (cut,) = compare_execution([run], executed, until=0.999).runs
     assert (whole.cut_short, cut.cut_short) == (False, True)
+
+
+def test_the_speed_snr_is_a_ratio_free_of_units_and_unbounded_for_an_exact_run() -> None:
+    """The speed SNR compares energies: the same runs in metres score what they score in mm,
+    and a run executed exactly as planned scores far above any machine's (rounding alone)."""
+    t = np.linspace(0.0, 1.0, 201)
+    planned = [(t, np.column_stack([10.0 * t**2, 4.0 * np.sin(3.0 * t)]))]
+    wobbly = planned[0][1] + np.column_stack([0.05 * np.sin(40.0 * t), np.zeros_like(t)])
+    mm = compare_execution(planned, np.column_stack([t, wobbly, np.ones_like(t)]))
+    m = compare_execution(
+        [(t, planned[0][1] / 1000.0)], np.column_stack([t, wobbly / 1000.0, np.ones_like(t)])
+    )
+    assert 10.0 < mm.speed_snr_db < 40.0
+    assert m.speed_snr_db == pytest.approx(mm.speed_snr_db, abs=1e-6)
+    assert m.runs[0].snr_db == pytest.approx(mm.runs[0].snr_db, abs=1e-6)
+    line = _run(0.0)
+    exact = compare_execution([line], np.column_stack([line[0], line[1], np.ones(101)]))
+    assert exact.speed_snr_db > 200.0

@@ -348,3 +348,26 @@ def test_a_serial_arm_that_fails_while_lowering_its_pen_names_the_resume(record,
             driver.lower_pen(on_paper)
     assert caught.value.where == "resume"
     assert str(caught.value) == f"resume: {sim.url}: goal positions: the adapter went away"
+
+
+@pytest.mark.parametrize(("rate", "fits"), [(60.0, True), (64.0, False)])
+def test_the_bus_check_counts_ten_bits_a_byte_for_a_ticks_goals_and_read_back(rate, fits):
+    """At 57600 bps a tick of the planar arm's three servos takes 91 bytes on the bus: the sync
+    write (14 + 5 per servo), the sync read (14 + 1 per servo) and three 15-byte replies, each
+    byte 10 bits on the UART (start, 8 data, stop): 15.8 ms, within 60 Hz's period, over 64 Hz's."""
+    from tagbot.arm.run import check_bus
+    from tagbot.errors import ProfileError
+
+    profile = load_profile(
+        None, ["bus.baud=57600", f"motion.rate={rate:g}", "bus.readback_rate=50"]
+    )
+    busy = ((14 + 5 * 3) + (14 + 3) + 3 * 15) * 10 / 57600
+    assert (busy <= 1 / rate) == fits
+    if fits:
+        check_bus(profile)
+    else:
+        with pytest.raises(ProfileError) as raised:
+            check_bus(profile)
+        assert f"take {1e3 * busy:.1f} ms on the bus, more than the {1e3 / rate:g} ms" in str(
+            raised.value
+        )
