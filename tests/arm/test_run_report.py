@@ -366,3 +366,19 @@ def test_a_simulated_run_leaves_no_simulated_bus_behind(tmp_path) -> None:
     before = transport._attached.names()
     prepare(small_tag()).run(tmp_path)
     assert transport._attached.names() == before
+
+
+def test_the_executed_trace_spans_the_first_goals_due_time_to_the_streams_end_both_kept(
+    small,
+) -> None:
+    """``executed.csv`` holds the samples from when the first goal sent was due (0 on the
+    executed clock) to when the stream ended, both instants included, no sample outside."""
+    from tagbot.arm.driver import StreamResult
+    from tagbot.arm.run import _executed
+
+    result = StreamResult(start=10.0, lead=0.05, end=12.0)
+    t = np.array([9.9, 10.05 - 1e-6, 10.05, 11.0, 12.0, 12.0 + 1e-6])
+    trace = np.column_stack([t, np.zeros((6, 2)), np.ones(6)])
+    kept = _executed(trace, result, small.program)
+    zero = 10.05 - float(small.program.joints[0, 0])
+    np.testing.assert_allclose(kept[:, 0], [10.05 - zero, 11.0 - zero, 12.0 - zero])
