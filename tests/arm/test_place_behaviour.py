@@ -133,3 +133,15 @@ def test_the_box_a_placement_checks_is_the_unit_squares_edge_densely_and_its_ins
     inside = points[np.abs(points).max(axis=1) < 0.5]
     assert len(inside) == 36 and len(points) == 4 * 48 + 4 * 6 + 36  # the grid meets the edges too
     assert np.diff(np.unique(inside[:, 0])) == pytest.approx(np.full(5, 1 / 7))
+
+
+@pytest.mark.parametrize("boundary", [1 / 3, 0.5 + 1e-7, 0.9876543])
+def test_a_boundary_is_found_to_a_nanosecond_below_it(boundary) -> None:
+    """Where a run is trimmed (a predicate true below an instant, false above it) is found from
+    below, within 1e-9 of the instant (relative to it above 1 s), never beyond it."""
+    from tagbot.arm.place import _bisect
+
+    for scale in (1.0, 40.0):
+        b = boundary * scale
+        found = _bisect(lambda t, b=b: t < b, 0.0, scale)
+        assert found < b and b - found <= 1e-9 * max(1.0, b)
