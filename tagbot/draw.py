@@ -273,6 +273,7 @@ def run_report(run: MachineRun, recorded: Sequence[Any] | None = None) -> dict[s
                     without_pauses(run.executed, run.pauses),
                     np.asarray(run.executed_runs)[kept],
                     plans=run.plans,
+                    until=run.until,
                 )
             else:
                 comparison = compare_execution(

@@ -844,6 +844,7 @@ def compare_reports(
     *,
     plans: Sequence[int] | None = None,
     spacing: float = 0.005,
+    until: float | None = None,
 ) -> ExecutionComparison:
     """Positions a machine reported a few times a second against the plan, like with like.
 
@@ -862,6 +863,9 @@ def compare_reports(
       changes many times between two of them. The figures the reports support are the positions
       and the timing at the reported instants (offset and drift, each within the reports'
       spacing), never a path or a speed densified from the 5 Hz polyline.
+
+    ``until``: after a stop, the planned time the machine had drawn to; a run planned to go on
+    after it is ``cut_short``.
     """
     data = np.asarray(executed, dtype=float).reshape(-1, 4)
     run_of = np.asarray(run_of, dtype=int)
@@ -904,6 +908,7 @@ def compare_reports(
                 planned_duration=float(p_end - p_onset),
                 executed_duration=float(p_end - p_onset + drift),
                 snr_db=None,
+                cut_short=until is not None and until + 1e-9 < float(tp[-1]),
             )
         )
     if not distances:

@@ -263,6 +263,12 @@ def test_compare_reports_measures_like_with_like():
     assert comparison.duration_ratio == pytest.approx(1.1, abs=0.03)
     with pytest.raises(ValueError, match="no report while the pen was down"):
         compare_reports([(t, xy)], executed, np.full(len(te), -1))
+    # A stop: a run planned past the time drawn to is cut short; one ending there is not.
+    assert comparison.runs[0].cut_short is False
+    run_of = np.zeros(len(te), dtype=int)
+    for until, cut in ((2.0, True), (float(t[-1]), False)):
+        stopped = compare_reports([(t, xy)], executed, run_of, until=until)
+        assert stopped.runs[0].cut_short is cut
 
 
 def test_compare_execution_recovers_offsets_and_measures_deviation():
