@@ -68,7 +68,13 @@ SIGMA = """\
 """
 
 
-@pytest.mark.parametrize("text", [GAMMA, SIGMA], ids=["gamma-ink", "sigma"])
+SIGMA_INK = SIGMA.replace('"version": 1', '"version": 2').replace(
+    '"start": 2.0,', '"start": 2.0,\n      "ink": [0.0625, 0.25],'
+)
+"""The ΣΛ file with an ink window (the pen touches down and lifts off moving): version 2."""
+
+
+@pytest.mark.parametrize("text", [GAMMA, SIGMA, SIGMA_INK], ids=["gamma-ink", "sigma", "sigma-ink"])
 def test_a_plan_file_loads_and_saves_back_byte_for_byte(text: str, tmp_path: Path) -> None:
     source = tmp_path / "in.json"
     source.write_text(text, encoding="utf-8")
@@ -182,3 +188,12 @@ def test_a_stroke_number_is_checked_where_it_is() -> None:
     d = _doc()
     del d["plans"][1]["strokes"]
     assert _message(d) == "plans[1].strokes: missing"
+
+
+def test_a_sigma_plans_ink_window_is_kept(tmp_path: Path) -> None:
+    """A ΣΛ plan's ink window is read as it is written, like a gamma plan's."""
+    path = tmp_path / "sigma_ink.json"
+    path.write_text(SIGMA_INK, encoding="utf-8")
+    (plan,) = load_plan(path).plans
+    assert plan.ink == (0.0625, 0.25) and plan.start == 2.0
+    assert np.array_equal(plan.phi1, -plan.phi2) and plan.phi2.tolist() == [0.2]

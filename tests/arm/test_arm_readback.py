@@ -333,6 +333,15 @@ def test_latency_timer_warning_resolves_symlinks_and_names_the_fix(tmp_path) -> 
     assert latency_timer_warning("dxlsim://arm", sysfs) is None
 
 
+def test_a_url_port_gets_no_latency_timer_warning_whatever_it_names(tmp_path) -> None:
+    """A URL port is no local tty: even a simulated chain named like the slow adapter beside it
+    (its last part reads ``ttyUSB0``) gets no latency-timer warning; the adapter itself does."""
+    sysfs = _fake_sysfs(tmp_path / "sys", "ttyUSB0", 16)
+    (tmp_path / "ttyUSB0").touch()
+    assert latency_timer_warning(str(tmp_path / "ttyUSB0"), sysfs) is not None
+    assert latency_timer_warning("dxlsim://ttyUSB0", sysfs) is None
+
+
 def test_over_a_pty_with_late_and_lost_replies_and_a_slow_adapter(record, tmp_path, caplog):
     """Real time: replies 50 ms late, 2 % lost; the pty posing as a 16 ms FTDI adapter."""
     profile = load_profile(None, FAST)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tagbot.arm import load_profile, prepare
-from tagbot.arm.run import simulated_chain
+from tagbot.arm.run import check_resume, simulated_chain
 from tagbot.cli import main
 from tagbot.draw import run_report
 from tagbot.errors import InputError, Interrupted
@@ -101,6 +101,22 @@ def test_resume_is_checked_before_anything_is_sent(record) -> None:
     with pytest.raises(InputError, match=rf"\(ticks 2 to {len(job.program)}\)$"):
         prepare(two_plan_tag(), port=sim.url, resume_from=len(job.program) + 1)
     assert sim.writes == []
+
+
+def test_resume_from_the_programs_last_tick_is_accepted_one_past_it_refused() -> None:
+    """``--resume-from`` takes ticks 2 to the program's last (resuming its last tick alone);
+    one past the last, and tick 1 (a fresh run), are refused with the range."""
+    program = prepare(two_plan_tag()).program
+    n = len(program)
+    assert prepare(two_plan_tag(), resume_from=n).resume_from == n
+    for tick in (2, n - 1, n):
+        check_resume(tick, program)
+    for tick in (1, n + 1):
+        with pytest.raises(InputError) as refused:
+            check_resume(tick, program)
+        assert str(refused.value) == (
+            f"--resume-from: tick {tick} is not in the program (ticks 2 to {n})"
+        )
 
 
 def test_the_cli_takes_the_arms_resume_without_position_known(tmp_path) -> None:

@@ -13,7 +13,7 @@ from tagbot.arm.place import safe
 from tagbot.errors import PlacementError
 from tagbot.model import Plan, Tag
 
-from .conftest import small_tag
+from .conftest import small_tag, two_plan_tag
 
 # The default arm: links of 150 mm from (0, 0), reach margin 5 mm, so the safe reach ends at
 # 295 mm; a tall area lets the reach (not the paper) be the limit straight up the y axis.
@@ -145,3 +145,21 @@ def test_a_boundary_is_found_to_a_nanosecond_below_it(boundary) -> None:
         b = boundary * scale
         found = _bisect(lambda t, b=b: t < b, 0.0, scale)
         assert found < b and b - found <= 1e-9 * max(1.0, b)
+
+
+def test_each_part_of_the_program_is_described_by_its_kind() -> None:
+    """A refusal names the part of the program a tick is in: the travel and pen moves before a
+    plan, the plan itself, and the final travel to park."""
+    program = build_program(two_plan_tag(), load_profile())
+    expected = {
+        "travel": "travel at plan {k}",
+        "pen": "pen move at plan {k}",
+        "draw": "plan {k}",
+        "park": "travel to park",
+    }
+    seen = []
+    for kind, k, first, stop in program.segments:
+        for tick in (first, stop - 1):
+            assert program.describe(tick) == expected[kind].format(k=k)
+        seen.append(kind)
+    assert seen[-1] == "park" and {"travel", "pen", "draw"} <= set(seen)

@@ -223,11 +223,40 @@ def test_the_budget_names_a_run_below_the_speed_snr_and_keeps_its_bounds(small) 
     assert budget(cut) == []
 
 
+def test_a_slow_run_also_over_its_path_budget_names_both_causes(small) -> None:
+    """No stall, no late goal: a run of the small tag below the speed SNR is blamed on the goals'
+    rounding, and when its path is also over budget, on the servos' follow as well; a run with
+    no path figure is judged on its speed alone."""
+    budget = Budget(small.program, small.profile, [], np.zeros((0, 2)))
+    rounding, snr = budget.rounded(0)
+    limit = small.profile["motion.max_deviation"] + rounding
+    because = (
+        f"the goals' rounding to whole ticks ({TICK_DEG:.3f}°): the plan's speed, rounded so,"
+        f" has {snr:.1f} dB (a small or slow run)"
+    )
+    follow = "the servos' follow beyond the retiming's model (motion.max_deviation)"
+
+    def warnings(deviation: float | None) -> list[str]:
+        run = {**RUN, "path_deviation_max_mm": deviation, "speed_snr_db": 20.0}
+        return budget({"runs": [run]})
+
+    assert warnings(None) == [f"run 1 (plan 0): speed SNR 20.0 dB below 25 dB: {because}"]
+    assert warnings(limit) == warnings(None)  # at its budget the path is no cause
+    assert warnings(limit + 0.01) == [
+        f"run 1 (plan 0): path deviation {limit + 0.01:.3f} mm over its budget ({limit:.3f} mm:"
+        f" motion.max_deviation {small.profile['motion.max_deviation']:g} mm beyond the goals'"
+        f" rounding to whole ticks, {rounding:.3f} mm) and speed SNR 20.0 dB below 25 dB:"
+        f" {because}; the path, {follow}"
+    ]
+
+
 @pytest.mark.parametrize(
     ("error", "message"),
     [
         (ConnectionLost("the studio's link dropped"), "the studio's link dropped"),
         (DeviceError("went away", "studio"), "went away"),
+        # With no place of its own, a message is kept whole, whatever its first characters.
+        (ConnectionLost("XXXX: the link dropped"), "XXXX: the link dropped"),
     ],
 )
 def test_a_device_error_from_the_callers_progress_names_the_resume(
