@@ -351,8 +351,9 @@ class ReadBack:
     from one before it, belongs to a later request and closes that one (what it still lacks was
     lost). A late reply is therefore never taken for a later read: it is kept with its own
     request's sampling time, and counted late when it came after the next request was sent.
-    Replies that match nothing open (after a request was given up), or are no read-back, are
-    discarded as stale.
+    No request is given up on a timer (an adapter may hold a burst of replies back): a servo's
+    silence is counted from the first request it has not answered. Replies that match nothing
+    open, or are no read-back, are discarded as stale.
 
     Faults (``where`` names the tick): a servo that misses more than ``bus.max_missed``
     read-backs in a row while others answer, or no reply from a servo for ``bus.silence_timeout``
@@ -467,10 +468,6 @@ class ReadBack:
                 f" (bus.silence_timeout: {self.silence:g} s{host})",
                 where,
             )
-        while self.open and now - self.open[0].sent - self.host_stalled(self.open[0].sent, now) > (
-            self.silence
-        ):
-            self._close(self.open.popleft(), where)  # given up: what it lacks counts as lost
 
     def _parse(self, now: float, where: str) -> None:
         buf = self.buffer
@@ -523,13 +520,15 @@ class ReadBack:
                 break
             self._close(self.open.popleft(), where)  # a later request's reply
         else:
-            self.stale += 1  # its request was given up already
+            self.stale += 1  # no open request left for it (a duplicate, or no read-back)
             self.heard[id] = now
             self.in_a_row[id] = 0
             return
         for j in range(r.last + 1, i):
             self._lost(self.ids[j], where)
         r.last = i
+        # Its next unanswered request is the one after this (replies come in request order).
+        self.asked[id] = self.open[1].sent if len(self.open) > 1 else None
         self.heard[id] = now
         self.replies += 1
         self.delays.append(now - r.sent)
