@@ -91,6 +91,9 @@ def test_a_whole_tag_follows_the_plan(drawn, job):
     # Streamed ahead by the FIFO's depth and never beyond (one executing, eleven queued).
     assert report["details"]["most_on_board"] == 12
     assert report["stalls"] == 0  # the board never ran dry
+    # The moves' own stated error against the plan, per run (letter-b has one), in mm.
+    assert report["details"]["run_error_mm"] == job.job.run_error
+    assert len(job.job.run_error) == 1 and 0.0 < job.job.run_error[0] <= 0.02
     # What was sent, one command a line, the job's own.
     sent = (out / "moves.txt").read_text().splitlines()
     assert sent == [e.line.decode().rstrip("\r") for e in job.job.entries]

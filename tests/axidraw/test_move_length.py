@@ -99,9 +99,14 @@ def _exact_speed_snr(tag, job, setpoints, run: int) -> tuple[float, float]:
     return 10 * math.log10(signal / (error**2).sum()), 10 * math.log10(signal / steps)
 
 
-def test_the_stated_speed_figures_are_the_moves_exact_motions():
-    tag = load_plan(CAE)
-    prepared = prepare(tag, overrides=LONG)
+@pytest.mark.parametrize(
+    ("plan", "overrides"), [(CAE, LONG), (LETTER_B, ("motion.jerk=false",))], ids=["T3", "LT"]
+)
+def test_the_stated_speed_figures_are_the_moves_exact_motions(plan, overrides):
+    """With ``T3`` and with ``LT`` moves (no jerk: the board's rate changes by the same
+    acceleration every tick)."""
+    tag = load_plan(plan)
+    prepared = prepare(tag, overrides=overrides)
     job = prepared.job
     for run in range(len(job.runs)):
         moves_db, steps_db = _exact_speed_snr(tag, job, prepared.setpoints, run)

@@ -6,14 +6,19 @@ from __future__ import annotations
 
 import json
 import os
+from dataclasses import replace
 from itertools import count
 from pathlib import Path
+from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
+from firmware_protocols.ebb.motion import TICK_HZ, Move, execute
 from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device
-from tagbot.axidraw.machine import prepare, resume_point
+from tagbot.axidraw.machine import AxiDrawJob, prepare, resume_point
+from tagbot.axidraw.moves import Entry, Job
 from tagbot.axidraw.stream import StreamReport
 from tagbot.cli import main
 from tagbot.draw import draw
@@ -125,3 +130,65 @@ def test_a_stop_during_the_first_travel_says_the_motors_had_left_home(tmp_path):
     report = json.loads((tmp_path / "r" / "report.json").read_text())
     assert report["executed"] == 0 and report["resume_from"] == 2
     assert report["details"]["stopped_at_steps"] != [0, 0]
+
+
+def test_a_resume_lifts_the_pen_travels_pen_up_and_lowers_it_where_the_move_starts(tmp_path):
+    """``--resume-from`` the last drawing move of letter-b's run, on a board at home: before
+    any motor turns the board gets the job's own pen lift (its servo time as the command's
+    delay, so the travel waits for it), the travel (``LM`` only) ends where the move before
+    it ended, the pen goes down there, then the job's lines from that move on."""
+    job = prepare(load_plan(LETTER_B))
+    entries = job.job.entries
+    last = max(i for i, e in enumerate(entries) if e.kind == "draw")
+    assert entries[last - 1].kind == "draw" and entries[last - 1].pen
+    up, down = (next(e.line.rstrip(b"\r") for e in entries if e.kind == "pen" and e.pen == d)
+                for d in (False, True))  # fmt: skip
+    device = SimulatedEBB()
+    run = replace(job, port=_url(device), resume_from=last + 1).run(tmp_path)
+    assert run.error is None and run.executed_steps == len(entries)
+    done = [s for s in device.recorder.segments if s.kind != "enable"]
+    assert done[0].kind == "servo" and done[0].line == up
+    lowered = next(i for i, s in enumerate(done) if s.line == down)
+    travel = done[1:lowered]
+    assert travel and all(s.line.startswith(b"LM,") for s in travel)
+    assert tuple(travel[-1].positions()[-1]) == entries[last - 1].steps
+    assert [s.line for s in done[lowered + 1 :]] == [e.line.rstrip(b"\r") for e in entries[last:]]
+    # The travel ran with the pen all the way up (it starts once the lift has ended).
+    assert travel[0].load_tick >= done[0].load_tick + done[0].ticks
+    during = np.arange(travel[0].load_tick, travel[-1].end_tick) / 25_000
+    assert np.all(device.recorder.pen_at(during) == device.recorder.pen_at(during[:1]))
+
+
+def test_a_stop_off_the_plan_during_a_one_tick_first_move_counts_it_cut_short():
+    """A job whose first motion (move 2, after the pen goes down where the motors are) lasts a
+    single tick, resumed from it: the board, its accumulators left by the resume's travel,
+    took a step in that tick where the plan took none, and stopped there, off the plan's tick
+    record. The move counts as cut short, as any started move does, and the resume point
+    skips it (move 3); motors where the plan's tick left them (no step: the same place) count
+    it executed, and the resume point is move 3 again."""
+    half = 2**30  # motor 2: half a step a tick (motor 1: just under one)
+    specs = [("pen", None), ("draw", 1), ("draw", 4), ("draw", 4)]
+    entries, parts, here, accumulators, time = [], [], (0, 0), (0, 0), 0.0
+    for kind, ticks in specs:
+        move = None
+        if ticks is not None:
+            move = Move(command="LT", rate=(2**31 - 1, half), ticks=ticks)
+            relative, accumulators = execute(move, accumulators)
+            parts.append(relative + np.asarray(here))
+            here = tuple(int(v) for v in parts[-1][-1])
+        duration = ticks / TICK_HZ if ticks else 0.1
+        line = move.line() if move else b"SP,0,100,1\r"
+        entries.append(Entry(kind, line, time, duration, 0, here, True, move))
+        time += duration
+    ticks = np.concatenate(parts)
+    job = Job(entries, [], [], ticks, np.arange(1, len(ticks) + 1) / TICK_HZ,
+              np.zeros(len(entries)), [], 80.0)  # fmt: skip
+    machine = SimpleNamespace(job=job)
+    off = (1, 0)  # a step from where move 2 ends on the plan (its one tick takes none)
+    assert not (ticks == np.asarray(off)).all(axis=1).any()
+    report = StreamReport(first=1, sent=3, executed=1, stopped_at=off)
+    assert AxiDrawJob._executed_moves(machine, report) == (1, 1)
+    assert entries[1].steps == (0, 0) and resume_point(job, 1, 1) == 3
+    report = StreamReport(first=1, sent=3, executed=1, stopped_at=(0, 0))
+    assert AxiDrawJob._executed_moves(machine, report) == (2, 0)
+    assert resume_point(job, 2, 0) == 3
