@@ -294,6 +294,35 @@ def test_outside_its_limits_at_start_is_a_warning_and_the_arm_goes_back(tmp_path
     assert not any(w.startswith("shoulder") for w in run.warnings)
 
 
+# A float elbow.max_deg whose radians, plus the 1e-9 rad tolerance, is exactly tick 3868's angle.
+AT_TICK_3868 = 159.96093744270422
+
+
+@pytest.mark.parametrize(("tick", "warned"), [(3868, False), (3869, True)])
+def test_a_joint_starting_at_its_limit_is_no_warning_one_tick_beyond_is(
+    tmp_path, record, tick: int, warned: bool
+) -> None:
+    from tagbot.arm.run import simulated_chain
+
+    assert math.radians(AT_TICK_3868) + 1e-9 == (3868 - 2048) * 2 * math.pi / 4096
+    profile = load_profile(None, [f"elbow.max_deg={AT_TICK_3868!r}"])
+    chain = simulated_chain(profile)
+    chain.set_position(profile.joints[1].id, float(tick))
+    sim = record(chain)
+    job = prepare(small_tag(), port=sim.url, overrides=(f"elbow.max_deg={AT_TICK_3868!r}",))
+
+    def progress(done: int, total: int) -> None:  # the warning comes before the first tick
+        raise ConnectionLost("enough")
+
+    warnings = job.run(tmp_path, progress=progress).warnings
+    message = (
+        f"elbow starts at {(tick - 2048) * 360 / 4096:.1f}° outside elbow.min_deg..max_deg"
+        f" (10..160°): moving it back"
+    )
+    assert (message in warnings) is warned
+    assert not any("starts at" in w for w in warnings if w != message)
+
+
 class _PausedFirst(RunControl):
     """Paused for the first ``checks`` times the loop asks (a count, not a clock)."""
 
