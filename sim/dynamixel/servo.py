@@ -385,6 +385,9 @@ class SimulatedServo:
         self.profile_type = PROFILE_STEP
         self.registered: tuple[int, bytes] | None = None
         self.booted_at = t
+        self.clock_rate = 1.0
+        """How fast the servo's own clock (Realtime Tick) runs against true time: an oscillator's
+        tolerance (1.01: 1 % fast)."""
         self.deaf_until = -math.inf
         self.input_voltage = SUPPLY.get(self.table.model_number, 120)
         """Present Input Voltage, 0.1 V units (set it to simulate a supply)."""
@@ -561,7 +564,7 @@ class SimulatedServo:
             and abs(present - self.get("goal_position")) < 1.0
         ):
             status |= IN_POSITION
-        self._put("realtime_tick", int((t - self.booted_at) * 1000.0) % 32768)
+        self._put("realtime_tick", int((t - self.booted_at) * 1000.0 * self.clock_rate) % 32768)
         self.memory[122] = int(moving)
         self.memory[123] = status
         pwm, current = (0.0, 0.0) if self.plant is None else self.plant.output()

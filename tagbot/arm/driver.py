@@ -38,7 +38,8 @@ as a resync) instead of bursting the backlog, which would overspeed the joints.
 ticks (about ``bus.readback_rate``, 100 Hz by default). The read-back only watches (goals are
 sync-written and need no reply), so it never holds the loop: :class:`ReadBack` sends the
 request and takes the replies whenever they have arrived, at the following ticks, matching each
-to its own request (a late reply is not taken for a later read). A round trip through a USB
+to its own request by the servo's Realtime Tick (a late reply is not taken for a later read, nor
+a reply for an earlier one when a whole read-back was lost). A round trip through a USB
 adapter takes 1 to 2 ms with a 1 ms FTDI latency timer and 16+ ms at its default; on a loaded
 host replies come tens of ms late. Late and lost replies are counted; only a servo missing more
 than ``bus.max_missed`` read-backs in a row, or no reply for ``bus.silence_timeout``, is a fault.
@@ -117,7 +118,12 @@ POSITION_PID = (84, 82, 80)
 PROFILE_ACCELERATION = 108
 PROFILE_VELOCITY = 112
 GOAL_POSITION = 116
+REALTIME_TICK = 120
+"""The servo's own clock: ms since power-on, modulo 32768 (2 bytes)."""
 PRESENT_POSITION = 132
+READBACK_LENGTH = PRESENT_POSITION + 4 - REALTIME_TICK
+"""Bytes one read-back takes from each servo: Realtime Tick through Present Position (16)."""
+TICK_WRAP = 32768
 
 READ_WAIT = 0.001
 """Read timeout of the port, s. The SDK polls ``read`` in a loop until its packet timeout; with
@@ -333,6 +339,10 @@ class _Request:
     tick: int
     sent: float
     sampled: float
+    ms: float = 0.0
+    """``sent`` in ms on the host's clock (compared with the servos' Realtime Ticks)."""
+    span: float = 0.0
+    """Ms the request took to write: it reached the servos in ``ms`` to ``ms + span``."""
     got: dict[int, int] = field(default_factory=dict)
     late: bool = False
     """Still open when the next request was sent."""
@@ -341,19 +351,38 @@ class _Request:
     corrupt: bool = False
 
 
+def _miss(late: float, span: float) -> float:
+    """Ms a servo's tick is outside its request's writing (``late`` ms after it began, modulo
+    the tick's wrap; ``span`` ms long): negative before, 0 within, positive after."""
+    late = (late + TICK_WRAP / 2) % TICK_WRAP - TICK_WRAP / 2
+    return late - min(max(late, 0.0), span)
+
+
+def readback_bus_time(servos: int, baud: float, return_delay_us: float) -> float:
+    """Seconds one read-back takes on the (half-duplex) bus: the SYNC_READ (14 bytes + 1 per
+    servo), then each servo's Return Delay Time and its status (11 + :data:`READBACK_LENGTH`
+    bytes); a byte is 10 bits on the UART (start, 8 data, stop)."""
+    byte = 10.0 / baud
+    return (14 + servos) * byte + servos * ((11 + READBACK_LENGTH) * byte + 1e-6 * return_delay_us)
+
+
 class ReadBack:
     """Present positions, read without ever holding up the goal stream.
 
-    :meth:`request` sends one ``GroupSyncRead`` (the SDK's packet) and returns at once;
-    :meth:`poll` takes whatever status bytes have arrived (``in_waiting``, never a blocking read)
-    and matches each reply to its request: replies come in the order of the requests and, within
-    one, of the IDs, so a reply from a servo that already answered the oldest open request, or
-    from one before it, belongs to a later request and closes that one (what it still lacks was
-    lost). A late reply is therefore never taken for a later read: it is kept with its own
-    request's sampling time, and counted late when it came after the next request was sent.
-    No request is given up on a timer (an adapter may hold a burst of replies back): a servo's
-    silence is counted from the first request it has not answered. Replies that match nothing
-    open, or are no read-back, are discarded as stale.
+    :meth:`request` sends one ``GroupSyncRead`` (the SDK's packet) of Realtime Tick through
+    Present Position and returns at once; :meth:`poll` takes whatever status bytes have arrived
+    (``in_waiting``, never a blocking read) and matches each reply to its request. Status packets
+    carry no sequence number, and order alone cannot tell a late reply from a lost request's
+    successor, so each reply is matched by the servo's own clock: its Realtime Tick, less the
+    servo's offset from the host's clock (measured when streaming starts, then followed for
+    drift), names the open request sent at that instant. Replies come in the order of the
+    requests, so the requests before it are over (what they lack was lost). A late reply is
+    therefore never taken for a later read, nor a reply for an earlier one after a whole request
+    was lost: it keeps its own request's sampling time, and is counted late when it came after
+    the next request was sent. A corrupt reply (no clock to trust) goes by order: to the oldest
+    open request its servo has not answered. No request is given up on a timer (an adapter may
+    hold a burst of replies back): a servo's silence is counted from the first request it has
+    not answered. Replies that match no open request, or are no read-back, are stale.
 
     Faults (``where`` names the tick): a servo that misses more than ``bus.max_missed``
     read-backs in a row while others answer, or no reply from a servo for ``bus.silence_timeout``
@@ -361,7 +390,7 @@ class ReadBack:
     more than ``bus.max_corrupt`` read-backs in a row with a corrupt reply (:class:`DeviceError`).
     """
 
-    def __init__(self, driver: ArmDriver, started: float) -> None:
+    def __init__(self, driver: ArmDriver, started: float, offsets: dict[int, float]) -> None:
         p = driver.profile
         self.driver = driver
         self.ids = list(driver.ids)
@@ -373,15 +402,12 @@ class ReadBack:
         self.max_corrupt = int(p["bus.max_corrupt"])
         assert driver.port is not None
         self.port = driver.port
-        self.group = sdk.GroupSyncRead(self.port, driver.ph, PRESENT_POSITION, 4)
+        self.group = sdk.GroupSyncRead(self.port, driver.ph, REALTIME_TICK, READBACK_LENGTH)
         for id in self.ids:
             self.group.addParam(id)
-        byte = 10.0 / p["bus.baud"]
-        self.request_time = (14 + len(self.ids)) * byte
+        self.request_time = (14 + len(self.ids)) * 10.0 / p["bus.baud"]
         """Seconds the request takes on the bus: the servos sample when it has arrived."""
-        self.busy = self.request_time + len(self.ids) * (
-            15 * byte + 1e-6 * float(p["bus.return_delay_us"])
-        )
+        self.busy = readback_bus_time(len(self.ids), p["bus.baud"], p["bus.return_delay_us"])
         """Seconds the bus is taken by a request and its replies (half duplex: the next goals
         wait for the end, see :attr:`bus_free`)."""
         self.bus_free = -math.inf
@@ -390,6 +416,11 @@ class ReadBack:
         """Seconds after a request when its replies can be there (bus time, and an adapter's
         1 ms): when the loop looks again, before the next tick."""
         self.open: deque[_Request] = deque()
+        self.offset = dict(offsets)
+        """Per servo, its Realtime Tick less the host's clock in ms, when it reads a request."""
+        self.tolerance = max(500.0 * p.readback_every * p.period, 2.0)
+        """Half the interval between requests, ms (at least 2: the ticks are whole ms): how far
+        a servo's tick may be from its request's."""
         self.buffer = bytearray()
         self.heard = dict.fromkeys(self.ids, started)
         """Clock time of each servo's last reply (the stream's start before the first)."""
@@ -403,6 +434,8 @@ class ReadBack:
         """``(from, to)`` clock times the host did not look at the bus (a stall): no servo's
         silence is counted there, the replies waiting in the port's buffer."""
         self.in_a_row = dict.fromkeys(self.ids, 0)
+        self.unmatched = dict.fromkeys(self.ids, 0)
+        """Per servo, replies since its last read-back whose tick matched no open request."""
         self.samples: list[tuple[float, int, int, int]] = []
         self.requests = 0
         self.replies = 0
@@ -425,10 +458,11 @@ class ReadBack:
         result = d._guard(self.group.txPacket, "read-back", where)
         self.port.is_using = False  # the SDK keeps it for a reply it is not going to wait for
         d._check(result, 0, None, "SYNC_READ of present positions", where)
+        span = 1e3 * (d.clock.now() - now)
         for id in self.ids:
             if self.asked[id] is None:
                 self.asked[id] = now
-        self.open.append(_Request(tick, now, now + self.request_time))
+        self.open.append(_Request(tick, now, now + self.request_time, 1e3 * now, span))
         self.bus_free = now + self.busy + BUS_MARGIN
         self.requests += 1
 
@@ -462,10 +496,16 @@ class ReadBack:
             first = min(self.asked[id] or now for id in silent)
             stalled = self.host_stalled(first, now)
             host = f"; the host stalled {stalled:.2f} s meanwhile, not counted" if stalled else ""
+            strays = "".join(
+                f"; {d.who(id)} replied {self.unmatched[id]} times meanwhile, its Realtime Tick"
+                " matching no request (its clock restarted?)"
+                for id in silent
+                if self.unmatched[id]
+            )
             raise DeviceTimeout(
                 f"{names} did not answer SYNC_READ of present positions for"
                 f" {max(quiet[id] for id in silent):.2f} s while requests were flowing"
-                f" (bus.silence_timeout: {self.silence:g} s{host})",
+                f" (bus.silence_timeout: {self.silence:g} s{host}){strays}",
                 where,
             )
 
@@ -494,38 +534,60 @@ class ReadBack:
                 log.debug("%s: corrupt read-back reply (ID byte %d)", where, packet[4])
                 del buf[:1]  # its other bytes hold no header: skipped by the scan
                 if packet[4] in self.index:
-                    self._answer(packet[4], None, 0, now, where)
+                    self._answer(packet[4], None, None, 0, now, where)
                 continue
             del buf[: 7 + length]
             packet = ph.removeStuffing(packet)
             id, error = packet[4], packet[8]
-            if id not in self.index or (length != 8 and not error):
+            data = bytes(packet[9 : 9 + (packet[5] | (packet[6] << 8)) - 4])
+            if id not in self.index or (len(data) != READBACK_LENGTH and not error):
                 self.stale += 1  # not a read-back (a late status from the setup)
                 continue
-            value = int.from_bytes(bytes(packet[9:13]), "little", signed=True) if length == 8 else 0
-            self._answer(id, value, error, now, where)
+            if len(data) == READBACK_LENGTH:
+                tick = int.from_bytes(data[:2], "little")
+                value = int.from_bytes(data[-4:], "little", signed=True)
+                self._answer(id, value, tick, error, now, where)
+            else:  # an error status carries no data: matched by order
+                self._answer(id, 0, None, error, now, where)
 
     def host_stalled(self, start: float, end: float) -> float:
         """Seconds of host stalls between clock times ``start`` and ``end``."""
         return sum(max(0.0, min(b, end) - max(a, start)) for a, b in self.host_stalls)
 
-    def _answer(self, id: int, value: int | None, error: int, now: float, where: str) -> None:
-        """A reply from ``id`` (``value`` None: corrupt) seen at ``now``."""
+    def _match(self, i: int, id: int, tick: int | None) -> int | None:
+        """Index in :attr:`open` of the request servo ``i`` (``id``) answers with ``tick``
+        (None: by order, its oldest open one it has not answered), or None if no open one."""
+        if tick is None:
+            return next((k for k, r in enumerate(self.open) if i > r.last), None)
+        off = self.offset[id]
+        misses = [_miss(tick - off - r.ms, r.span) for r in self.open]
+        if not misses:
+            return None
+        k = min(range(len(misses)), key=lambda k: abs(misses[k]))
+        if abs(misses[k]) > self.tolerance or i <= self.open[k].last:
+            return None
+        self.offset[id] = off + 0.1 * misses[k]  # the servo's clock drifts: follow it
+        return k
+
+    def _answer(
+        self, id: int, value: int | None, tick: int | None, error: int, now: float, where: str
+    ) -> None:
+        """A reply from ``id`` (``value`` None: corrupt) with its Realtime Tick (None: none to
+        trust), seen at ``now``."""
         d = self.driver
         i = self.index[id]
-        self.asked[id] = None
-        while self.open:
-            r = self.open[0]
-            if i > r.last:
-                break
-            self._close(self.open.popleft(), where)  # a later request's reply
-        else:
-            self.stale += 1  # no open request left for it (a duplicate, or no read-back)
+        k = self._match(i, id, tick)
+        if k is None:
+            self.stale += 1  # no open request for it (a duplicate, or no read-back)
+            self.unmatched[id] += tick is not None
             self.heard[id] = now
             self.in_a_row[id] = 0
             return
-        for j in range(r.last + 1, i):
-            self._lost(self.ids[j], where)
+        self.unmatched[id] = 0
+        for _ in range(k):
+            self._close(self.open.popleft(), where)  # over: a later request's reply came
+        r = self.open[0]
+        self._lost(self.ids[r.last + 1 : i], where)
         r.last = i
         # Its next unanswered request is the one after this (replies come in request order).
         self.asked[id] = self.open[1].sent if len(self.open) > 1 else None
@@ -552,8 +614,7 @@ class ReadBack:
             self._close(self.open.popleft(), where)
 
     def _close(self, r: _Request, where: str) -> None:
-        for j in range(r.last + 1, len(self.ids)):
-            self._lost(self.ids[j], where)
+        self._lost(self.ids[r.last + 1 :], where)
         if len(r.got) == len(self.ids):
             self.samples.append((r.sampled, *(r.got[id] for id in self.ids)))
         if r.corrupt:
@@ -567,15 +628,19 @@ class ReadBack:
         elif len(r.got) == len(self.ids):
             self.corrupt_in_a_row = 0
 
-    def _lost(self, id: int, where: str) -> None:
-        self.missed += 1
-        self.in_a_row[id] += 1
-        n = self.in_a_row[id]
-        self.most_in_a_row = max(self.most_in_a_row, n)
-        if n > self.max_missed:
+    def _lost(self, ids: list[int], where: str) -> None:
+        """Servos ``ids`` did not answer one read-back."""
+        for id in ids:
+            self.in_a_row[id] += 1
+        self.missed += len(ids)
+        self.most_in_a_row = max([self.most_in_a_row, *(self.in_a_row[id] for id in ids)])
+        over = [id for id in ids if self.in_a_row[id] > self.max_missed]
+        if over:
+            others = "" if len(ids) == len(self.ids) else " while the others did"
             raise DeviceTimeout(
-                f"{self.driver.who(id)} did not answer SYNC_READ of present positions {n} times"
-                f" in a row (more than bus.max_missed = {self.max_missed}) while the others did",
+                f"{_and([self.driver.who(id) for id in over])} did not answer SYNC_READ of"
+                f" present positions {max(self.in_a_row[id] for id in over)} times in a row"
+                f" (more than bus.max_missed = {self.max_missed}){others}",
                 where,
             )
 
@@ -884,6 +949,22 @@ class ArmDriver:
             else:
                 self.clock.sleep_until(min(end, self.clock.now() + 0.001))
 
+    def _clock_offsets(self, where: str) -> dict[int, float]:
+        """Per servo, its Realtime Tick less the host's clock (ms) when a request reaches it:
+        one SYNC_READ awaited (a single request open, so every reply is its own)."""
+        group = sdk.GroupSyncRead(self.port, self.ph, REALTIME_TICK, 2)
+        for id in self.ids:
+            group.addParam(id)
+        sent = [0.0]
+
+        def read() -> tuple[int, int]:
+            sent[0] = self.clock.now()
+            return group.txRxPacket(), 0
+
+        result, _ = self._transact(read, "SYNC_READ of Realtime Tick", where)
+        self._check(result, 0, None, "SYNC_READ of Realtime Tick", where)
+        return {id: group.getData(id, REALTIME_TICK, 2) - 1e3 * sent[0] for id in self.ids}
+
     def _read(self, id: int, address: int, size: int, where: str) -> int:
         call = {1: self.ph.read1ByteTxRx, 2: self.ph.read2ByteTxRx, 4: self.ph.read4ByteTxRx}[size]
         value, result, error = self._transact(
@@ -1052,13 +1133,14 @@ class ArmDriver:
         dropped = self.drain()  # late replies from the setup
         if dropped:
             log.debug("dropped %d stale bytes before streaming", dropped)
+        offsets = self._clock_offsets(f"tick {first}")
         now = self.clock.now()
         if first:  # resumed where the arm stands: the row before is due now, as after a pause
             out.start = scheduler.start(now - lead + period)
             scheduler.floor = now
         else:
             out.start = scheduler.start(now + period)
-        readback = ReadBack(self, now)
+        readback = ReadBack(self, now, offsets)
         out.readback = readback
         ids = self.ids
         log.info("streaming %d ticks at %g Hz, read-back every %d", total, p["motion.rate"], every)

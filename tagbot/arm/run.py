@@ -38,7 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from tagbot.arm.driver import ArmDriver, StreamResult
+from tagbot.arm.driver import ArmDriver, StreamResult, readback_bus_time
 from tagbot.arm.kinematics import RAD_PER_TICK, Arm, angles_to_ticks, ticks_to_angles
 from tagbot.arm.place import ArmProgram, Setpoints, approach, build_program
 from tagbot.arm.profile import ArmProfile, load_profile
@@ -575,11 +575,11 @@ def planned_motion(program: ArmProgram) -> MotionTable:
 
 def check_bus(profile: ArmProfile) -> None:
     """Refuse (ProfileError) a bus too slow for the loop: a tick that sends its goals and a
-    read-back (the request and three replies, half duplex) must fit in one period."""
+    read-back (the request and a reply per servo, half duplex) must fit in one period."""
     byte = 10.0 / profile["bus.baud"]
     n = len(profile.servos)
     write = (14 + 5 * n) * byte
-    read = (14 + n) * byte + n * (15 * byte + 1e-6 * profile["bus.return_delay_us"])
+    read = readback_bus_time(n, profile["bus.baud"], profile["bus.return_delay_us"])
     busy = write + read
     if busy > profile.period:
         raise ProfileError(

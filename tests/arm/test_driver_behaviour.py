@@ -252,15 +252,15 @@ class _PauseAtTick(RunControl):
         return self.tick < self.asked <= self.tick + 1 + self.looks
 
 
-@pytest.mark.parametrize("looks", [5, 6])
+@pytest.mark.parametrize("looks", [5, 6, 7])
 def test_no_goal_is_sent_while_a_read_backs_replies_may_be_on_the_bus(
     record, tmp_path, monkeypatch, looks
 ):
     """The bus is half duplex: after a SYNC_READ, goals (the stream's and a pause's pen lift)
     wait until the request and every servo's reply could have passed, at the bus's bit rate.
-    At 57,600 baud a read-back takes 10.8 ms; a pause looks every 10 ms and reads back every
-    other look, so whichever look ends it, the pen's lowering comes soon after a request."""
-    overrides = ("bus.baud=57600", "motion.rate=50", "bus.readback_rate=50")
+    At 57,600 baud a read-back takes 17.0 ms; a pause looks every 10 ms and reads back every
+    25 ms, so whichever look ends it, the pen's lowering comes soon after a request."""
+    overrides = ("bus.baud=57600", "motion.rate=40", "bus.readback_rate=40", "servo.profile_ms=40")
     profile = load_profile(overrides=overrides)
     sim = record(simulated_chain(profile))
     job = prepare(two_plan_tag(), port=sim.url, overrides=overrides)
@@ -279,8 +279,8 @@ def test_no_goal_is_sent_while_a_read_backs_replies_may_be_on_the_bus(
     byte = 10.0 / 57600
     free, reads, goals = -1.0, 0, 0
     for t, instruction, length in sent:  # in the order sent
-        if instruction == 0x82:  # SYNC_READ: its bytes, one a servo, and 15 from each servo
-            free, reads = t + (length + 15 * (length - 14)) * byte, reads + 1
+        if instruction == 0x82:  # SYNC_READ: its bytes, one a servo, and 27 from each servo
+            free, reads = t + (length + 27 * (length - 14)) * byte, reads + 1
         elif instruction in (0x03, 0x83):  # WRITE, SYNC_WRITE of goals
             assert t >= free - 1e-9
             goals += 1
@@ -288,7 +288,7 @@ def test_no_goal_is_sent_while_a_read_backs_replies_may_be_on_the_bus(
 
 
 def test_noise_like_a_status_header_of_an_impossible_length_is_skipped(record, tmp_path):
-    """A read-back reply is 15 bytes: bytes on the line that look like a status header but
+    """A read-back reply is 27 bytes: bytes on the line that look like a status header but
     claim 65,535 are noise, skipped at once; the replies after them are read as usual (not held
     back until that many bytes came, the servos taken for silent)."""
     profile = load_profile()
@@ -350,18 +350,20 @@ def test_a_serial_arm_that_fails_while_lowering_its_pen_names_the_resume(record,
     assert str(caught.value) == f"resume: {sim.url}: goal positions: the adapter went away"
 
 
-@pytest.mark.parametrize(("rate", "fits"), [(60.0, True), (64.0, False)])
+@pytest.mark.parametrize(("rate", "fits"), [(45.0, True), (46.0, False)])
 def test_the_bus_check_counts_ten_bits_a_byte_for_a_ticks_goals_and_read_back(rate, fits):
-    """At 57600 bps a tick of the planar arm's three servos takes 91 bytes on the bus: the sync
-    write (14 + 5 per servo), the sync read (14 + 1 per servo) and three 15-byte replies, each
-    byte 10 bits on the UART (start, 8 data, stop): 15.8 ms, within 60 Hz's period, over 64 Hz's."""
+    """At 57600 bps a tick of the planar arm's three servos takes 127 bytes on the bus: the sync
+    write (14 + 5 per servo), the sync read (14 + 1 per servo) and three 27-byte replies (11 +
+    Realtime Tick through Present Position, 16), each byte 10 bits on the UART (start, 8 data,
+    stop): 22.0 ms, within 45 Hz's period, over 46 Hz's."""
     from tagbot.arm.run import check_bus
     from tagbot.errors import ProfileError
 
     profile = load_profile(
-        None, ["bus.baud=57600", f"motion.rate={rate:g}", "bus.readback_rate=50"]
+        None,
+        ["bus.baud=57600", f"motion.rate={rate:g}", "bus.readback_rate=40", "servo.profile_ms=80"],
     )
-    busy = ((14 + 5 * 3) + (14 + 3) + 3 * 15) * 10 / 57600
+    busy = ((14 + 5 * 3) + (14 + 3) + 3 * 27) * 10 / 57600
     assert (busy <= 1 / rate) == fits
     if fits:
         check_bus(profile)

@@ -17,24 +17,38 @@ from tagbot.errors import DeviceTimeout
 from .conftest import two_plan_tag
 
 
-def _held_once(record, tmp_path, hold: float):
-    """The two-plan tag, replies 50 ms late, one of them held ``hold`` s after tick 300 (those
-    behind it wait: the adapter keeps them in order)."""
-    profile = load_profile()
+def _faulty_once(record, tmp_path, *, hold=0.05, drop=0.0, overrides=(), setup=None, fault=None):
+    """The two-plan tag, replies 50 ms late; after tick 300, for 10 ticks (the progress
+    callback's step), replies are held ``hold`` s (those behind them wait: the adapter keeps
+    them in order) or lost with probability ``drop``, or ``fault(chain)`` is done then instead.
+    ``setup(chain)`` first, if given; the simulated time the stream started is then in
+    ``chain.streamed``. Returns (job, run, that tick)."""
+    profile = load_profile(None, overrides)
     sim = record(simulated_chain(profile))
     sim.chain.set_reply_faults(latency=0.05)
+    if setup is not None:
+        setup(sim.chain)
     phase: list[int] = []
 
     def progress(done: int, total: int) -> None:
+        if not hasattr(sim.chain, "streamed"):
+            sim.chain.streamed = sim.chain.now()
         if done > 300 and not phase:
             phase.append(done)
-            sim.chain.set_reply_faults(latency=hold)
+            if fault is not None:
+                fault(sim.chain)
+            else:
+                sim.chain.set_reply_faults(latency=hold, drop=drop)
         elif len(phase) == 1 and done > phase[0]:
             phase.append(done)
             sim.chain.set_reply_faults(latency=0.05)
 
-    job = prepare(two_plan_tag(), port=sim.url)
+    job = prepare(two_plan_tag(), port=sim.url, overrides=tuple(overrides))
     return job, job.run(tmp_path, progress=progress), phase[0]
+
+
+def _held_once(record, tmp_path, hold: float):
+    return _faulty_once(record, tmp_path, hold=hold)
 
 
 @pytest.mark.parametrize("hold", [0.05, 0.2, 0.25])
@@ -64,3 +78,88 @@ def test_a_hold_past_the_silence_timeout_is_a_fault_not_a_shifted_trace(record, 
     assert d["reply_delay_p50_ms"] >= 50 and d["reply_delay_max_ms"] < 60
     assert d["readback_missed_replies"] == d["readback_stale_replies"] == 0
     assert d["joint_tracking_error"]["max"] < 0.5
+
+
+def test_whole_read_backs_lost_do_not_shift_the_later_ones(record, tmp_path) -> None:
+    """Ten read-backs lost whole (a noisy line can do this to the request): by order alone,
+    every later reply would be taken for the request before its own."""
+    job, run, _ = _faulty_once(record, tmp_path, drop=1.0, overrides=["bus.max_missed=20"])
+    assert run.error is None, run.error
+    d = run.details
+    assert d["readback_missed_replies"] == 3 * 10
+    assert d["readback_requests"] == len(job.program)
+    assert d["readback_replies"] == 3 * d["readbacks"]
+    assert d["readback_stale_replies"] == 0
+    assert d["reply_delay_p50_ms"] >= 50 and d["reply_delay_max_ms"] < 55
+    assert d["joint_tracking_error"]["max"] < 0.5
+
+
+def test_more_lost_in_a_row_than_allowed_names_every_silent_servo(record, tmp_path) -> None:
+    _, run, lost = _faulty_once(record, tmp_path, drop=1.0)
+    error = run.error
+    assert isinstance(error, DeviceTimeout)
+    assert str(error) == (
+        f"{error.where}: servo 1 (shoulder), servo 2 (elbow) and servo 3 (pen) did not answer"
+        " SYNC_READ of present positions 6 times in a row (more than bus.max_missed = 5)"
+    )
+    # The read-backs lost (10 ticks of them) are known lost when the next one's replies come,
+    # 50 ms (5 ticks) after it was sent: then the run stops, before anything more is sent.
+    tick = int(error.where.split()[1])
+    assert lost + 15 <= tick <= lost + 17
+    assert run.sent == tick
+
+
+def test_each_servos_clock_is_followed_as_it_drifts(record, tmp_path) -> None:
+    """The servos' oscillators are not the host's: one clock 1 % fast, one 1 % slow drift 100 ms
+    apart over the tag's 10 s, ten read-back intervals."""
+
+    def drift(chain) -> None:
+        chain.servo(2).clock_rate = 1.01
+        chain.servo(3).clock_rate = 0.99
+
+    job, run, _ = _faulty_once(record, tmp_path, setup=drift)
+    assert run.error is None, run.error
+    d = run.details
+    assert d["readback_replies"] == 3 * d["readbacks"] >= 3 * (len(job.program) - 5)
+    assert d["readback_missed_replies"] == d["readback_stale_replies"] == 0
+    assert d["joint_tracking_error"]["max"] < 0.5
+
+
+def test_a_servos_clock_wrapping_round_mid_stream_changes_nothing(record, tmp_path) -> None:
+    """Realtime Tick counts ms modulo 32768: each servo's wraps round at another moment."""
+    wraps, chains = [], []
+
+    def near_wrap(chain) -> None:
+        chains.append(chain)
+        for id, later in ((1, 4.0), (2, 7.0), (3, 10.0)):
+            chain.servo(id).booted_at = chain.now() + later - 32.768
+            wraps.append(chain.now() + later)
+
+    job, run, _ = _faulty_once(record, tmp_path, setup=near_wrap)
+    assert run.error is None, run.error
+    chain = chains[0]
+    assert sum(chain.streamed < w < chain.now() - 0.1 for w in wraps) >= 2
+    d = run.details
+    assert d["readback_replies"] == 3 * d["readbacks"] >= 3 * (len(job.program) - 5)
+    assert d["readback_missed_replies"] == d["readback_stale_replies"] == 0
+    assert d["joint_tracking_error"]["max"] < 0.5
+
+
+def test_a_servo_whose_clock_restarts_is_named_with_its_unmatched_replies(record, tmp_path):
+    def restart(chain) -> None:
+        chain.servo(2).booted_at = chain.now()  # its Realtime Tick from 0 again
+
+    _, run, at = _faulty_once(record, tmp_path, fault=restart)
+    error = run.error
+    assert isinstance(error, DeviceTimeout)
+    message = str(error)
+    assert message.startswith(
+        f"{error.where}: servo 2 (elbow) did not answer SYNC_READ of present positions for 0.25 s"
+    )
+    n = int(message.split("servo 2 (elbow) replied ")[1].split()[0])
+    assert message.endswith(
+        f"; servo 2 (elbow) replied {n} times meanwhile, its Realtime Tick matching no request"
+        " (its clock restarted?)"
+    )
+    assert 20 <= n <= 26  # one a tick, for the quarter second
+    assert at + 24 <= int(error.where.split()[1]) <= at + 26
