@@ -163,3 +163,20 @@ def test_each_part_of_the_program_is_described_by_its_kind() -> None:
             assert program.describe(tick) == expected[kind].format(k=k)
         seen.append(kind)
     assert seen[-1] == "park" and {"travel", "pen", "draw"} <= set(seen)
+
+
+def test_a_tag_that_inks_only_before_it_moves_has_no_extent_to_place() -> None:
+    """A plan whose pen is down only for its first 10 ms, while the stroke has not yet moved
+    (the lognormal's onset: less than 1e-20 units), leaves a dot: there is nothing to scale."""
+    plan = Plan(
+        targets=[[0.0, 0.0], [10.0, 0.0]],
+        dt=[0.0],
+        mu=[math.log(0.2)],
+        sigma=[0.3],
+        phi1=[0.0],
+        phi2=[0.0],
+        ink=(0.0, 0.01),
+    )
+    with pytest.raises(PlacementError) as refused:
+        place(Tag(plans=(plan,)), load_profile())
+    assert str(refused.value) == "place.scale: the tag has no extent to place"
