@@ -440,3 +440,23 @@ def test_the_executed_trace_spans_the_first_goals_due_time_to_the_streams_end_bo
     kept = _executed(trace, result, small.program)
     zero = 10.05 - float(small.program.joints[0, 0])
     np.testing.assert_allclose(kept[:, 0], [10.05 - zero, 11.0 - zero, 12.0 - zero])
+
+
+def test_joints_csv_holds_every_ticks_goals_under_its_header(tmp_path) -> None:
+    """The run folder's joints.csv, written before anything is sent: the header, then one row
+    per tick (row k is tick k), time to the microsecond and whole goal ticks."""
+    job = prepare(small_tag())
+
+    def progress(done: int, total: int) -> None:  # the file is written before the first tick
+        raise ConnectionLost("enough")
+
+    job.run(tmp_path, progress=progress)
+    text = (tmp_path / "joints.csv").read_text(encoding="utf-8")
+    lines = text.split("\n")
+    assert lines[0] == "t,shoulder,elbow,pen" and lines[-1] == "" and "\r" not in text
+    rows = [line.split(",") for line in lines[1:-1]]
+    joints = job.program.joints
+    assert len(rows) == len(job.program) == len(joints)
+    for row, (t, shoulder, elbow, pen) in zip(rows, joints, strict=True):
+        assert abs(float(row[0]) - t) <= 5e-7 and len(row[0].split(".")[1]) == 6
+        assert [int(v) for v in row[1:]] == [shoulder, elbow, pen]
