@@ -8,7 +8,14 @@ import pytest
 from firmware_protocols.grbl import State, parse_message
 from sim.grbl import SimulatedGrbl
 from tagbot.errors import DeviceTimeout
-from tagbot.plotter.stream import GrblStreamer, StreamOptions, _xy_of, resume_lines
+from tagbot.plotter.stream import (
+    GrblStreamer,
+    StreamOptions,
+    StreamReport,
+    _xy_of,
+    executed_where,
+    resume_lines,
+)
 
 from .test_stream import PEN_UP, SETTINGS, connected, open_device, square_program
 
@@ -156,3 +163,27 @@ def test_the_tracker_names_its_evidence_and_the_trace_hook_its_direction():
         port.close()
     assert report.tracking == "status Bf"
     assert directions == {"tx", "rx"}
+
+
+@pytest.mark.parametrize(
+    ("first", "done", "lost", "where"),
+    [
+        (0, 0, False, "before line 1 (nothing of the program was executed)"),
+        (0, 3, False, "after line 3 (the last line the machine executed; resume with"
+         " --resume-from 4 --position-known)"),
+        (4, 2, False, "after line 6 (the last line the machine executed; resume with"
+         " --resume-from 7 --position-known)"),
+        (0, 10, False, "after the last line"),
+        (0, 0, True, "after no line at least (the last line known executed; lines up to 5 were"
+         " sent and the machine may have gone on to line 5: check where the pen stands, then"
+         " resume with --resume-from 1 --position-known, or from the line after the one it"
+         " reached)"),
+    ],
+)  # fmt: skip
+def test_where_the_machine_stopped_is_named_in_the_programs_line_numbers(
+    first: int, done: int, lost: bool, where: str
+) -> None:
+    """A 10-line program (or its resumed rest from line ``first + 1``), 5 lines sent, ``done``
+    finished: where it stopped, as the error message says it."""
+    report = StreamReport(lines_total=10, first_line=first, lines_sent=5)
+    assert executed_where(report, done, lost=lost) == where
