@@ -187,3 +187,20 @@ def test_where_the_machine_stopped_is_named_in_the_programs_line_numbers(
     finished: where it stopped, as the error message says it."""
     report = StreamReport(lines_total=10, first_line=first, lines_sent=5)
     assert executed_where(report, done, lost=lost) == where
+
+
+def test_a_dwell_longer_than_the_stall_timeout_is_waited_out_not_a_stall():
+    """A 12.5 s dwell (G4P12.5) among queued lines: the machine reports no motion for 12.5 s,
+    longer than the 2 s stall timeout, and the job still completes (the watchdog allows 1.5
+    times the longest dwell plus a second)."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, _ = connected(device)
+    lines = square_program(40)
+    lines.insert(6, "G4P12.5\n")
+    try:
+        report = streamer.stream(lines)
+    finally:
+        port.close()
+    assert streamer.options.stall_timeout == 2.0
+    assert report.stopped_at is None and report.errors == []
+    assert report.lines_executed == len(lines) and report.finished - report.started > 12.5
