@@ -180,3 +180,23 @@ def test_a_tag_that_inks_only_before_it_moves_has_no_extent_to_place() -> None:
     with pytest.raises(PlacementError) as refused:
         place(Tag(plans=(plan,)), load_profile())
     assert str(refused.value) == "place.scale: the tag has no extent to place"
+
+
+def test_a_three_tick_program_is_held_to_the_acceleration_limit(profile) -> None:
+    """Three ticks are the fewest with an acceleration: an elbow standing, then moving 0.01
+    rad in one 10 ms tick (1 rad/s, within its speed) accelerates at 100 rad/s², above its
+    3000°/s² (52.4 rad/s²): refused; 0.005 rad (50 rad/s²) is accepted."""
+    program = build_program(small_tag(), profile)
+    for step, refused in ((0.005, False), (0.01, True)):
+        angles = np.repeat(program.angles[:1], 3, axis=0)
+        angles[2, 1] += step
+        changed = replace(program, angles=angles)
+        if refused:
+            with pytest.raises(PlacementError) as raised:
+                check_program(changed, profile)
+            assert str(raised.value).endswith(
+                "elbow acceleration 5730°/s² above elbow.max_acceleration = 3000°/s²"
+            )
+            assert str(raised.value).startswith("tick 1 (t = 0.010 s, ")
+        else:
+            check_program(changed, profile)
