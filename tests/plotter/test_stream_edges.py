@@ -204,3 +204,17 @@ def test_a_dwell_longer_than_the_stall_timeout_is_waited_out_not_a_stall():
     assert streamer.options.stall_timeout == 2.0
     assert report.stopped_at is None and report.errors == []
     assert report.lines_executed == len(lines) and report.finished - report.started > 12.5
+
+
+@pytest.mark.parametrize(
+    ("rate", "accepted"), [(0.0, False), (1e-9, True), (5.0, True), (5.01, False)]
+)
+def test_the_poll_rate_is_above_zero_and_at_most_five_hertz(rate: float, accepted: bool) -> None:
+    """Status polls: some (a rate of 0 never asks, and the watchdog would never hear), at most
+    Grbl's recommended 5 Hz."""
+    if accepted:
+        assert StreamOptions(poll_rate=rate).poll_rate == rate
+    else:
+        with pytest.raises(ValueError) as refused:
+            StreamOptions(poll_rate=rate)
+        assert str(refused.value) == f"poll_rate: must be in (0, 5.0] Hz, got {rate}"
