@@ -264,14 +264,19 @@ def test_the_stopped_position_names_the_moves_executed(job):
     assert locate(job.job, middle, inside - 2, inside + 2) == inside
     # Nowhere on the record after the executed moves: as many as the board said.
     assert locate(job.job, (10**6, 10**6), 5, 9) == 5
+    # Nothing sent: nothing executed, wherever the motors stand (even on a later move's end).
+    assert locate(job.job, entries[inside].steps, 0, 0) == 0
 
 
-@pytest.mark.parametrize("end", [0.397, 0.3960000000000001, 0.396 + 4e-7, 15.16, 0.0005])
+@pytest.mark.parametrize("end", [0.397, 0.3960000000000001, 0.396 + 4e-7, 15.16, 0.0005, 0.001001])
 def test_the_plans_samples_never_repeat_an_instant(end):
     """A run's plan every 1 ms and at its end, on the job's clock: never two samples at one
-    instant (their velocity would be 0/0), however close the end falls to a sample."""
+    instant (their velocity would be 0/0), however close the end falls to a sample; a sample
+    1 us or less before the end is left out (0.001001: the one at 1 ms, exactly 1 us)."""
     from tagbot.axidraw.machine import PLAN_STEP, _grid
 
+    grid = _grid(end, PLAN_STEP)
+    assert len(grid) == 1 or grid[-2] < end - 1e-6
     t = 28.2844 + _grid(end, PLAN_STEP)
     assert np.all(np.diff(t) > 0) and t[-1] == 28.2844 + end and t[0] == 28.2844
     assert np.diff(t).max() <= PLAN_STEP + 1e-6

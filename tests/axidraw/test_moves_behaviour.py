@@ -26,6 +26,7 @@ from tagbot.axidraw.moves import (
     SPEED_MARGIN_DB,
     _axis,
     _check_rates,
+    _db,
     _travel_moves,
     build_job,
     fifo_depth,
@@ -401,3 +402,14 @@ def test_a_t3_from_rest_to_rest_starts_and_ends_at_rest(n):
         at = r + a * k + j * k * (k + 1) / 2
         assert abs(at) / ACCUMULATOR_STEP * TICK_HZ < 1.0
     assert axis_final(n, rate, accel, j)[0] == goal and j < 0
+
+
+def test_an_snr_is_its_ratio_in_db_down_to_minus_infinity_at_no_signal():
+    """The stated SNRs (``run_*_speed_snr_db``): ``10·log10(signal / noise)``, below 0 dB too
+    (a signal weaker than 1, steps²/s², is still a figure), -inf without signal, inf without
+    noise (the report writes both as null)."""
+    assert _db(0.5, 1.0) == pytest.approx(10 * math.log10(0.5))
+    assert _db(1.0, 4.0) == pytest.approx(-6.0206, abs=1e-4)
+    assert _db(1000.0, 1.0) == pytest.approx(30.0)
+    assert _db(0.0, 1.0) == -math.inf
+    assert _db(5.0, 0.0) == math.inf

@@ -13,13 +13,15 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import serial
 
 from firmware_protocols.ebb.motion import TICK_HZ, Move, execute
 from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device
 from tagbot.axidraw.machine import AxiDrawJob, prepare, resume_point
-from tagbot.axidraw.moves import Entry, Job
-from tagbot.axidraw.stream import StreamReport
+from tagbot.axidraw.moves import Entry, Job, _travel_moves
+from tagbot.axidraw.profile import load_profile
+from tagbot.axidraw.stream import EBBStreamer, StreamReport
 from tagbot.cli import main
 from tagbot.draw import draw
 from tagbot.errors import InputError, Interrupted
@@ -192,3 +194,26 @@ def test_a_stop_off_the_plan_during_a_one_tick_first_move_counts_it_cut_short():
     report = StreamReport(first=1, sent=3, executed=1, stopped_at=(0, 0))
     assert AxiDrawJob._executed_moves(machine, report) == (2, 0)
     assert resume_point(job, 2, 0) == 3
+
+
+def test_a_new_job_counts_steps_from_where_the_motors_stand_and_a_resume_keeps_the_count():
+    """A board whose motors a stopped job left away from home (its counters at 1500, -700): a
+    new job (no ``--resume-from``) counts its steps from where they stand (``EM`` zeroes the
+    counters there); a resume (``keep_position``) goes on counting from the old job's home."""
+    profile = load_profile()
+    for keep, expected in ((False, (0, 0)), (True, (1500, -700))):
+        device = SimulatedEBB()
+        link = serial.serial_for_url(_url(device), timeout=0.01)
+        first = EBBStreamer(link, profile, {})
+        first.connect()
+        for move in _travel_moves((1500, -700), profile):
+            first.ask(move.line())
+        first._drain(first.clock.now())
+        assert first.position() == (1500, -700)
+        link.close()
+        link = serial.serial_for_url(_url(device), timeout=0.01)
+        streamer = EBBStreamer(link, profile, {})
+        streamer.connect(keep_position=keep)
+        assert streamer.position() == expected
+        link.close()
+        assert device.motor_position() == (1500, -700)  # the motors never moved
