@@ -14,6 +14,7 @@ from tagbot.plotter.stream import (
     StreamReport,
     _xy_of,
     executed_where,
+    line_effects,
     resume_lines,
 )
 
@@ -218,3 +219,12 @@ def test_the_poll_rate_is_above_zero_and_at_most_five_hertz(rate: float, accepte
         with pytest.raises(ValueError) as refused:
             StreamOptions(poll_rate=rate)
         assert str(refused.value) == f"poll_rate: must be in (0, 5.0] Hz, got {rate}"
+
+
+def test_a_z_move_to_where_the_pen_already_stands_plans_no_block() -> None:
+    """From the start (z = 0 at the given x, y), ``G1Z0`` and a move to the start itself plan
+    no moving block; lowering to z = -2 does, once."""
+    lines = ["G21\n", "G90\n", "G1Z0F300\n", "G1X5Y7F600\n", "G1Z-2F300\n", "G1Z-2F300\n"]
+    moves, targets = line_effects(lines, start=(5.0, 7.0))
+    assert moves == [False, False, False, False, True, False]
+    assert targets == [(5.0, 7.0)] * len(lines)
