@@ -228,3 +228,16 @@ def test_a_z_move_to_where_the_pen_already_stands_plans_no_block() -> None:
     moves, targets = line_effects(lines, start=(5.0, 7.0))
     assert moves == [False, False, False, False, True, False]
     assert targets == [(5.0, 7.0)] * len(lines)
+
+
+def test_a_startup_line_grbl_refuses_at_connect_is_a_warning_naming_it(caplog):
+    """Grbl runs its stored startup lines ($N0) after the reset: one it refuses is logged as a
+    warning naming the line and Grbl's error, and the connection goes on."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    device.startup_lines[0] = "G5"  # not a Grbl command
+    with caplog.at_level("WARNING", logger="tagbot.plotter.stream"):
+        port, streamer, _ = connected(device)
+        port.close()
+    warnings = [r.getMessage() for r in caplog.records if r.name == "tagbot.plotter.stream"]
+    assert len(warnings) == 1 and warnings[0].startswith("grbl: startup line 'G5' failed: ")
+    assert streamer.settings[100] == SETTINGS[100]
