@@ -5,6 +5,12 @@ the master side and a device; any program (pyserial, a G-code sender, the dynami
 slave ``path`` like a USB adapter. A device's server fills in two hooks: :meth:`wait_time` (how
 long to wait for the host's bytes) and :meth:`exchange` (feed them to the device, return what it
 printed, or None when the device hung up). ``stop()`` ends the thread and closes the terminal.
+
+A device has a processor of its own, which a busy host cannot take from it: the thread runs with
+real-time scheduling (``SCHED_FIFO``, :data:`DEVICE_PRIORITY`) where the system permits it (root,
+``CAP_SYS_NICE``, an ``rtprio`` limit), so that other programs do not hold the device back for
+milliseconds (a servo's Realtime Tick or a status report stamped late); quietly not elsewhere
+(:attr:`PtyServer.realtime` says which).
 """
 
 from __future__ import annotations
@@ -14,7 +20,10 @@ import select
 import threading
 import tty
 
-__all__ = ["PtyServer"]
+__all__ = ["DEVICE_PRIORITY", "PtyServer"]
+
+DEVICE_PRIORITY = 20
+"""``SCHED_FIFO`` priority of the pump thread (above a host loop's, as a device's own CPU)."""
 
 
 class PtyServer:
@@ -33,6 +42,8 @@ class PtyServer:
         self._unsent = b""
         self._stop = threading.Event()
         self.error: BaseException | None = None
+        self.realtime = threading.Event()
+        """Set once the pump runs with real-time scheduling."""
         self._thread = threading.Thread(target=self._run, name=self.name, daemon=True)
         self._thread.start()
 
@@ -48,6 +59,12 @@ class PtyServer:
         master = self._master
         assert master is not None
         hung_up = False
+        try:  # this thread only (Linux: 0 is the calling thread)
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(DEVICE_PRIORITY))
+        except (OSError, AttributeError):  # not permitted, or no such call: ordinary scheduling
+            pass
+        else:
+            self.realtime.set()
         try:
             while not self._stop.is_set():
                 wait = self.wait_time()

@@ -14,6 +14,7 @@ import serial
 import sim.dynamixel  # registers dxlsim://
 from sim.dynamixel import PtyServer, SimulatedChain, attach_chain, detach_chain, serve_pty
 from sim.dynamixel.protocol_dxlsim import Serial as DxlSimSerial
+from sim.pty import DEVICE_PRIORITY
 
 ALERT = 0x80
 
@@ -239,6 +240,34 @@ def test_pty_with_the_unmodified_sdk(ph):
     assert server._master is None and server._slave is None
     with pytest.raises(OSError):  # the pseudo-terminal is gone
         os.close(os.open(server.path, os.O_RDWR | os.O_NOCTTY))
+
+
+def _may_run_real_time() -> bool:
+    """Whether this process may use SCHED_FIFO (root, CAP_SYS_NICE or an rtprio limit)."""
+    try:
+        before = (os.sched_getscheduler(0), os.sched_getparam(0))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+    except OSError:
+        return False
+    os.sched_setscheduler(0, *before)
+    return True
+
+
+def test_the_pty_pump_runs_real_time_like_a_devices_own_processor_where_permitted():
+    chain = SimulatedChain({1: "XL430-W250"}, clock="real")
+    server = PtyServer(chain)
+    try:
+        if _may_run_real_time():
+            assert server.realtime.wait(2.0)
+            native = server._thread.native_id
+            assert os.sched_getscheduler(native) == os.SCHED_FIFO
+            assert os.sched_getparam(native).sched_priority == DEVICE_PRIORITY
+        else:
+            time.sleep(0.05)
+            assert not server.realtime.is_set()
+    finally:
+        server.stop()
+    assert os.sched_getscheduler(0) != os.SCHED_FIFO  # the caller's own thread is untouched
 
 
 def test_serve_pty_needs_a_real_time_chain():
