@@ -241,3 +241,16 @@ def test_a_startup_line_grbl_refuses_at_connect_is_a_warning_naming_it(caplog):
     warnings = [r.getMessage() for r in caplog.records if r.name == "tagbot.plotter.stream"]
     assert len(warnings) == 1 and warnings[0].startswith("grbl: startup line 'G5' failed: ")
     assert streamer.settings[100] == SETTINGS[100]
+
+
+def test_the_settings_are_empty_until_connect_reads_them():
+    """``GrblStreamer.settings`` (public): an empty mapping before :meth:`connect`, Grbl's ``$$``
+    after it."""
+    port = open_device(SimulatedGrbl(SETTINGS, pen_servo=(30, 50)))
+    try:
+        streamer = GrblStreamer(port, StreamOptions())
+        assert streamer.settings == {} and len(streamer.settings) == 0
+        streamer.connect()
+        assert streamer.settings[100] == SETTINGS[100]
+    finally:
+        port.close()
