@@ -23,9 +23,15 @@ from tagbot.axidraw.machine import (
     resume_point,
     timeline,
 )
-from tagbot.axidraw.moves import build_job
+from tagbot.axidraw.moves import _travel_moves, build_job
 from tagbot.axidraw.profile import load_profile
-from tagbot.axidraw.stream import RESYNC_TIMEOUT, EBBStreamer, StreamReport, entry_end_ticks
+from tagbot.axidraw.stream import (
+    RESYNC_TIMEOUT,
+    EBBStreamer,
+    StreamReport,
+    entry_end_ticks,
+    parse_version,
+)
 from tagbot.draw import draw
 from tagbot.errors import (
     ConnectionLost,
@@ -395,3 +401,44 @@ def test_the_timeline_of_an_empty_job_is_one_still_sample_at_home():
     table = timeline(build_job(tag, setpoints, profile), 0.01)
     assert table.t.tolist() == [0.0] and table.xy.tolist() == [[0.0, 0.0]]
     assert table.v.tolist() == [[0.0, 0.0]] and table.pen.tolist() == [0]
+
+
+def test_a_reply_to_v_that_is_not_an_ebbs_is_refused_quoting_it():
+    """A port that is not an EiBotBoard (here a Grbl's banner) is named as such, its reply
+    quoted; an EBB's reply gives its version."""
+    with pytest.raises(DeviceError, match=r"^V: not an EiBotBoard's version reply: b\"Grbl 1.1h"):
+        parse_version(b"Grbl 1.1h ['$' for help]")
+    assert parse_version(b"EBBv13_and_above EB Firmware Version 3.0.2\r\n") == (3, 0, 2)
+
+
+def test_waiting_for_the_board_the_host_asks_again_a_millisecond_after_each_answer(streamer):
+    """While the board finishes what it holds (a pause, a stop's pen lift, a resume's travel)
+    the host asks ``QM``/``QU,6`` every 1 ms after each answer, not back to back: the
+    board's USB is not flooded with queries."""
+    streamer.connect()
+    for move in _travel_moves((8000, 3000), streamer.profile):
+        streamer.ask(move.line())
+    link, clock, events = streamer.link, streamer.clock, []
+    write, read = link.write, link.read
+
+    def logged_write(data: bytes) -> int:
+        events.append((clock.now(), bytes(data)))
+        return write(data)
+
+    def logged_read(*args: object, **kwargs: object) -> bytes:
+        got = read(*args, **kwargs)
+        if got:
+            events.append((clock.now(), None))
+        return got
+
+    link.write, link.read = logged_write, logged_read
+    start = clock.now()
+    streamer._drain(start)
+    assert clock.now() - start > 0.5  # the travel took that long
+    answered, gaps = None, []
+    for t, data in events:
+        if data is None:
+            answered = t
+        elif data.startswith(b"QM") and answered is not None:
+            gaps.append(t - answered)
+    assert len(gaps) > 100 and min(gaps) >= 0.001 - 1e-9
