@@ -163,3 +163,35 @@ def test_a_servo_whose_clock_restarts_is_named_with_its_unmatched_replies(record
     )
     assert 20 <= n <= 26  # one a tick, for the quarter second
     assert at + 24 <= int(error.where.split()[1]) <= at + 26
+
+
+def test_a_small_jump_of_a_servos_clock_is_within_the_match_and_followed(record, tmp_path):
+    """A tick 3 ms off (less than half the 10 ms between requests) still names its request."""
+
+    def jump(chain) -> None:
+        chain.servo(2).booted_at -= 0.003
+
+    job, run, _ = _faulty_once(record, tmp_path, fault=jump)
+    assert run.error is None, run.error
+    d = run.details
+    assert d["readback_replies"] == 3 * d["readbacks"] >= 3 * (len(job.program) - 5)
+    assert d["readback_missed_replies"] == d["readback_stale_replies"] == 0
+    assert d["joint_tracking_error"]["max"] < 0.5
+
+
+@pytest.mark.parametrize(
+    ("late", "span", "miss"),
+    [
+        (0.0, 0.0, 0.0),
+        (0.4, 0.5, 0.0),  # within the request's writing
+        (0.5, 0.5, 0.0),
+        (1.5, 0.5, 1.0),  # after it
+        (-2.0, 0.5, -2.0),  # before it began
+        (32767.0, 0.0, -1.0),  # the tick wrapped round below the request's
+        (-32767.5, 0.5, 0.0),  # the request's ms wrapped round below the tick
+    ],
+)
+def test_a_ticks_miss_is_its_distance_outside_the_requests_writing(late, span, miss) -> None:
+    from tagbot.arm.driver import _miss
+
+    assert _miss(late, span) == pytest.approx(miss)
