@@ -951,19 +951,12 @@ class ArmDriver:
 
     def _clock_offsets(self, where: str) -> dict[int, float]:
         """Per servo, its Realtime Tick less the host's clock (ms) when a request reaches it:
-        one SYNC_READ awaited (a single request open, so every reply is its own)."""
-        group = sdk.GroupSyncRead(self.port, self.ph, REALTIME_TICK, 2)
+        one READ each, awaited (a single request open, so the reply is its own)."""
+        offsets = {}
         for id in self.ids:
-            group.addParam(id)
-        sent = [0.0]
-
-        def read() -> tuple[int, int]:
-            sent[0] = self.clock.now()
-            return group.txRxPacket(), 0
-
-        result, _ = self._transact(read, "SYNC_READ of Realtime Tick", where)
-        self._check(result, 0, None, "SYNC_READ of Realtime Tick", where)
-        return {id: group.getData(id, REALTIME_TICK, 2) - 1e3 * sent[0] for id in self.ids}
+            sent = self.clock.now()
+            offsets[id] = self._read(id, REALTIME_TICK, 2, where) - 1e3 * sent
+        return offsets
 
     def _read(self, id: int, address: int, size: int, where: str) -> int:
         call = {1: self.ph.read1ByteTxRx, 2: self.ph.read2ByteTxRx, 4: self.ph.read4ByteTxRx}[size]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import pytest
 
 from tagbot.arm import load_profile, prepare
+from tagbot.arm.driver import ArmDriver
 from tagbot.arm.run import simulated_chain
 from tagbot.errors import DeviceTimeout
 
@@ -195,3 +196,26 @@ def test_a_ticks_miss_is_its_distance_outside_the_requests_writing(late, span, m
     from tagbot.arm.driver import _miss
 
     assert _miss(late, span) == pytest.approx(miss)
+
+
+def test_a_servo_silent_when_its_clock_is_read_stops_the_run_before_the_first_tick(
+    record, tmp_path, monkeypatch
+):
+    profile = load_profile()
+    sim = record(simulated_chain(profile))
+    read = ArmDriver._clock_offsets
+
+    def silenced_then_read(driver, where):
+        sim.chain.silence(2)
+        return read(driver, where)
+
+    monkeypatch.setattr(ArmDriver, "_clock_offsets", silenced_then_read)
+    run = prepare(two_plan_tag(), port=sim.url).run(tmp_path)
+    error = run.error
+    assert isinstance(error, DeviceTimeout)
+    assert str(error) == (
+        "tick 0: servo 2 (elbow) did not answer READ of address 120 (no status packet before"
+        " the SDK's timeout)"
+    )
+    assert run.sent == 0
+    assert sim.chain.servo(3).get("goal_position") == profile["pen.up"]
