@@ -385,9 +385,10 @@ class ReadBack:
     not answered. Replies that match no open request, or are no read-back, are stale.
 
     Faults (``where`` names the tick): a servo that misses more than ``bus.max_missed``
-    read-backs in a row while others answer, or no reply from a servo for ``bus.silence_timeout``
-    (:class:`DeviceTimeout`); a status error (:class:`DeviceFault`, naming the hardware error);
-    more than ``bus.max_corrupt`` read-backs in a row with a corrupt reply (:class:`DeviceError`).
+    read-backs in a row (known when a later one's reply comes), or no reply from a servo for
+    ``bus.silence_timeout`` (:class:`DeviceTimeout`); a status error (:class:`DeviceFault`,
+    naming the hardware error); more than ``bus.max_corrupt`` read-backs in a row with a corrupt
+    reply (:class:`DeviceError`).
     """
 
     def __init__(self, driver: ArmDriver, started: float, offsets: dict[int, float]) -> None:
