@@ -190,6 +190,8 @@ def test_a_small_jump_of_a_servos_clock_is_within_the_match_and_followed(record,
         (-2.0, 0.5, -2.0),  # before it began
         (32767.0, 0.0, -1.0),  # the tick wrapped round below the request's
         (-32767.5, 0.5, 0.0),  # the request's ms wrapped round below the tick
+        (20000.0, 0.0, -12768.0),  # nearer the tick after a wrap than before it
+        (-20000.0, 0.0, 12768.0),
     ],
 )
 def test_a_ticks_miss_is_its_distance_outside_the_requests_writing(late, span, miss) -> None:
