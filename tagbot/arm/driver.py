@@ -336,7 +336,6 @@ class StreamResult:
 class _Request:
     """One SYNC_READ of present positions on its way."""
 
-    tick: int
     sent: float
     sampled: float
     ms: float = 0.0
@@ -449,7 +448,7 @@ class ReadBack:
         self.delays: list[float] = []
         """Per reply, seconds from its request until the loop saw it (to within a tick)."""
 
-    def request(self, tick: int, where: str) -> None:
+    def request(self, where: str) -> None:
         """Send one SYNC_READ (no waiting)."""
         d = self.driver
         now = d.clock.now()
@@ -463,7 +462,7 @@ class ReadBack:
         for id in self.ids:
             if self.asked[id] is None:
                 self.asked[id] = now
-        self.open.append(_Request(tick, now, now + self.request_time, 1e3 * now, span))
+        self.open.append(_Request(now, now + self.request_time, 1e3 * now, span))
         self.bus_free = now + self.busy + BUS_MARGIN
         self.requests += 1
 
@@ -1159,7 +1158,7 @@ class ArmDriver:
                 out.ticks_sent = k + 1
                 readback.poll(where)
                 if k % every == 0:
-                    readback.request(k + 1, where)
+                    readback.request(where)
                     # Look again once the replies could be here, if that leaves half the
                     # period before the next deadline (else at the next tick).
                     settle = readback.open[-1].sent + readback.window
@@ -1243,7 +1242,7 @@ class ArmDriver:
         while control.paused:
             now = clock.now()
             if now >= next_read:
-                readback.request(k, where)
+                readback.request(where)
                 next_read = now + interval
             readback.poll(where)
             clock.sleep_until(min(next_read, clock.now() + 0.01))
