@@ -202,3 +202,20 @@ def test_a_limit_alarm_is_reset_after_grbls_delay():
     report = streamer.last_report
     assert not any("safe stop incomplete" in e for e in report.errors), report.errors
     assert device.state == State.ALARM  # reset taken (banner), left locked for the operator
+
+
+def test_the_tracker_names_the_evidence_it_went_by():
+    """What told which line ran (a report's ``tracking``): the acknowledgements alone until a
+    status report comes, then that report's Bf, Ln or position."""
+    lines = ["G93\n", "G1X1Y0F6000\n", "G1X2Y0F6000\n"]
+    tracker = ExecutionTracker(entries(lines), 0, 0, 15, (0.0, 0.0))
+    tracker.acknowledge()
+    tracker.finish()
+    assert tracker.source == "acknowledgements" and tracker.done == 1
+    tracker.update(Status(State.RUN, buffer=(15, 128)), None)
+    assert tracker.source == "status Bf"
+    tracker.update(Status(State.RUN), (0.5, 0.0))
+    assert tracker.source == "status position"
+    numbered = ExecutionTracker(entries(lines), 0, 0, 15, (0.0, 0.0), numbered=True)
+    numbered.update(Status(State.RUN, line=1), None)
+    assert numbered.source == "status Ln"
