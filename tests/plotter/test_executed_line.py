@@ -219,3 +219,15 @@ def test_the_tracker_names_the_evidence_it_went_by():
     numbered = ExecutionTracker(entries(lines), 0, 0, 15, (0.0, 0.0), numbered=True)
     numbered.update(Status(State.RUN, line=1), None)
     assert numbered.source == "status Ln"
+
+
+def test_finishing_empties_the_planner_blocks_the_last_report_counted():
+    """Bf said two blocks wait; once the machine is idle with nothing in flight, none do."""
+    lines = ["G93\n", "G1X1Y0F6000\n", "G1X2Y0F6000\n", "G1X3Y0F6000\n"]
+    tracker = ExecutionTracker(entries(lines), 0, 0, 15, (0.0, 0.0))
+    for _ in lines:
+        tracker.acknowledge()
+    tracker.update(Status(State.RUN, buffer=(13, 128)), None)
+    assert tracker.queued_blocks() == 2
+    tracker.finish()
+    assert tracker.queued_blocks() == 0 and tracker.done == len(lines)
