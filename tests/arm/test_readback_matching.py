@@ -13,7 +13,7 @@ import pytest
 from tagbot.arm import load_profile, prepare
 from tagbot.arm.driver import ArmDriver
 from tagbot.arm.run import simulated_chain
-from tagbot.errors import DeviceTimeout
+from tagbot.errors import DeviceFault, DeviceTimeout
 
 from .conftest import two_plan_tag
 
@@ -221,3 +221,21 @@ def test_a_servo_silent_when_its_clock_is_read_stops_the_run_before_the_first_ti
     )
     assert run.sent == 0
     assert sim.chain.servo(3).get("goal_position") == profile["pen.up"]
+
+
+def test_a_read_back_answered_with_an_error_and_no_data_is_a_fault_naming_it(record, tmp_path):
+    """A status carrying an error byte and no data (the servo refused the read) has no clock to
+    match by: it answers the oldest open request by order, and the run stops naming the error."""
+    from firmware_protocols.dynamixel.packets import StatusPacket, encode_status
+
+    def refused(chain) -> None:
+        with chain.lock:  # on the simulator's bus, as if servo 2 had sent it
+            chain._schedule(encode_status(StatusPacket(2, 7, b"")), chain.now())
+
+    _, run, at = _faulty_once(record, tmp_path, fault=refused)
+    error = run.error
+    assert isinstance(error, DeviceFault)
+    assert str(error).endswith(
+        ": servo 2 (elbow) answered SYNC_READ of present positions with access error (7)"
+    )
+    assert at + 5 <= int(error.where.split()[1]) <= at + 7  # delivered 50 ms late, as all
