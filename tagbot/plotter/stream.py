@@ -368,7 +368,13 @@ class GrblStreamer:
                 ):
                     alarmed = True
                 elif isinstance(message, StartupResult) and isinstance(message.result, Error):
-                    log.warning("grbl: startup line %r failed: %s", message.line, message.result)
+                    code = message.result.code
+                    log.warning(
+                        "grbl: startup line %r failed: error:%d (%s)",
+                        message.line,
+                        code,
+                        message.result.description,
+                    )
         return alarmed
 
     def _unlock(self) -> None:

@@ -239,7 +239,7 @@ def test_a_startup_line_grbl_refuses_at_connect_is_a_warning_naming_it(caplog):
         port, streamer, _ = connected(device)
         port.close()
     warnings = [r.getMessage() for r in caplog.records if r.name == "tagbot.plotter.stream"]
-    assert len(warnings) == 1 and warnings[0].startswith("grbl: startup line 'G5' failed: ")
+    assert warnings == ["grbl: startup line 'G5' failed: error:20 (unsupported G-code command)"]
     assert streamer.settings[100] == SETTINGS[100]
 
 
