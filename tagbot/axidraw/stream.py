@@ -4,8 +4,9 @@
 before any motion command (``LT``/``T3``, the settable FIFO and ``QU,6`` need 3.0.1). Then
 ``QU,2`` (the largest FIFO the firmware has) and ``CU,4,n`` (the depth asked, capped there),
 ``EM`` (motors on, the profile's microstepping; it also zeroes the step counters),
-``SC,8`` (servo channels: the pen servo's pulse period), ``SC,4``/``SC,5``/``SC,11``/``SC,12``
-(pen positions and rates) and a pen-up ``SP,1``. A profile may ask a later firmware
+``SC,8`` (servo channels: the pen servo's pulse period) and ``SC,4``/``SC,5``/``SC,11``/
+``SC,12`` (pen positions and rates); the job's first line is then a pen-up ``SP,1`` (see
+:mod:`tagbot.axidraw.machine`). A profile may ask a later firmware
 (``machine.min_firmware``: 3.0.2 for the NextDraws, as the makers' NextDraw software does).
 
 **Stream.** A motion command is sent only while the board has room for it (one executing, ``n``
