@@ -164,8 +164,11 @@ def tracking_error(reads: Array, program: ArmProgram, profile: ArmProfile) -> di
 
 def latency_timer_warning(port: str, sysfs: str | os.PathLike[str] = "/sys") -> str | None:
     """A warning, with the fix, when ``port`` is a Linux USB serial adapter (``ttyUSBn``, also
-    through a symlink such as ``/dev/serial/by-id/…``) whose latency timer is above 1 ms; else
-    None. ``sysfs`` is where sysfs is mounted (tests give a fake one)."""
+    through a symlink such as ``/dev/serial/by-id/…``, or watched by pyserial's ``spy://``)
+    whose latency timer is above 1 ms; else None. ``sysfs`` is where sysfs is mounted (tests
+    give a fake one)."""
+    if port.startswith("spy://"):
+        port = port.removeprefix("spy://").split("?", 1)[0]
     if "://" in port:
         return None
     name = os.path.basename(os.path.realpath(port))

@@ -333,6 +333,15 @@ def test_latency_timer_warning_resolves_symlinks_and_names_the_fix(tmp_path) -> 
     assert latency_timer_warning("dxlsim://arm", sysfs) is None
 
 
+def test_an_adapter_watched_by_pyserials_spy_gets_the_latency_timer_warning(tmp_path) -> None:
+    sysfs = _fake_sysfs(tmp_path / "sys", "ttyUSB0", 16)
+    device = tmp_path / "ttyUSB0"
+    device.touch()
+    warning = latency_timer_warning(f"spy://{device}?file=spy.log", sysfs)
+    assert warning is not None
+    assert warning.startswith(f"{device} is a USB serial adapter (ttyUSB0) with a 16 ms latency")
+
+
 def test_a_url_port_gets_no_latency_timer_warning_whatever_it_names(tmp_path) -> None:
     """A URL port is no local tty: even a simulated chain named like the slow adapter beside it
     (its last part reads ``ttyUSB0``) gets no latency-timer warning; the adapter itself does."""
