@@ -326,7 +326,11 @@ def test_latency_timer_warning_resolves_symlinks_and_names_the_fix(tmp_path) -> 
     assert warning is not None
     assert warning.startswith(f"{link} is a USB serial adapter (ttyUSB0) with a 16 ms latency")
     timer = sysfs / "bus" / "usb-serial" / "devices" / "ttyUSB0" / "latency_timer"
-    assert f"echo 1 | sudo tee {timer}" in warning and "udev" in warning
+    assert warning.endswith(
+        f"Set it to 1 ms: echo 1 | sudo tee {timer} (until it is unplugged; for good, a udev"
+        ' rule: ACTION=="add", SUBSYSTEM=="usb-serial", DRIVERS=="ftdi_sio",'
+        ' ATTR{latency_timer}="1")'
+    )
     (timer).write_text("1\n")
     assert latency_timer_warning(str(link), sysfs) is None
     assert latency_timer_warning(str(dev / "ttyACM0"), sysfs) is None  # not a usb-serial one

@@ -264,6 +264,7 @@ def test_include_is_never_followed(tmp_path) -> None:
         (".POINTS_PER_SECOND -100\n", "line 1: .POINTS_PER_SECOND must be positive"),
         (".POINTS_PER_SECOND nan\n", "line 1: .POINTS_PER_SECOND is not a finite number"),
         (".POINTS_PER_SECOND\n", "line 1: .POINTS_PER_SECOND has no value"),
+        (".POINTS_PER_SECOND 0,5\n", "line 1: .POINTS_PER_SECOND is not a finite number"),
         (f".POINTS_PER_SECOND {MAX_RATE * 1.01:g}\n",
          "line 1: .POINTS_PER_SECOND 1.01e+06 is above 1e+06 samples/s"),
         (".X_POINTS_PER_MM 0\n", "line 1: .X_POINTS_PER_MM must be positive"),
