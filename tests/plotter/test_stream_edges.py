@@ -18,7 +18,7 @@ from tagbot.plotter.stream import (
     resume_lines,
 )
 
-from .test_stream import PEN_UP, SETTINGS, connected, open_device, square_program
+from .test_stream import PEN_UP, SETTINGS, Wire, connected, open_device, square_program
 
 
 def test_a_line_numbered_firmware_gets_numbered_lines():
@@ -254,3 +254,128 @@ def test_the_settings_are_empty_until_connect_reads_them():
         assert streamer.settings[100] == SETTINGS[100]
     finally:
         port.close()
+
+
+def test_an_answer_no_one_waits_for_is_logged_at_debug_with_its_kind(caplog):
+    """Before any job, an ``ok`` to a line someone else sent is not counted: the debug log
+    shows it as ``grbl: Ok()`` (prefix and the message's kind)."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, _ = connected(device)
+    try:
+        with caplog.at_level("DEBUG", logger="tagbot.plotter.stream"):
+            port.write(b"G4P0\n")  # another program's line
+            for _ in range(3):  # its ok arrives during one of these waits
+                streamer.query_state()
+    finally:
+        port.close()
+    logged = [r.getMessage() for r in caplog.records if r.name == "tagbot.plotter.stream"]
+    assert "grbl: Ok()" in logged
+
+
+def test_the_planner_size_comes_from_the_build_options():
+    """``$I`` says ``[OPT:VN,14,128]`` on the line-numbered build: 14 planner blocks, not the
+    stock 15; the stock build says 15."""
+    port, streamer, _ = connected(SimulatedGrbl(SETTINGS, pen_servo=(30, 50), line_numbers=True))
+    port.close()
+    assert streamer.blocks == 14
+    port, streamer, _ = connected(SimulatedGrbl(SETTINGS, pen_servo=(30, 50)))
+    port.close()
+    assert streamer.blocks == 15
+
+
+def test_a_resume_without_a_hold_is_no_pause():
+    """``resume()`` asked during a job that was never held: nothing to end, no pause span."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, wire = connected(device)
+    lines = square_program(40)
+    wire.at[len(wire.lines_sent()) + 10] = streamer.resume
+    try:
+        report = streamer.stream(lines)
+    finally:
+        port.close()
+    assert b"~" in wire.tx
+    assert report.pause_spans == [] and report.pauses == 0 and report.paused_s == 0.0
+
+
+def test_a_second_hold_while_held_does_not_end_the_pause():
+    """Two ``hold()`` calls, then one ``resume()``: one pause, from the first hold to the
+    resume, and the held machine is never taken for someone else's hold."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port = open_device(device)
+    wire = Wire()
+    polls_held = 0
+
+    def trace(direction: str, data: bytes) -> None:
+        nonlocal polls_held
+        wire(direction, data)
+        if direction == "tx" and data == b"?" and b"!" in wire.tx and b"~" not in wire.tx:
+            polls_held += 1
+            if polls_held == 10:  # about 2 s held
+                streamer.resume()
+
+    streamer = GrblStreamer(port, StreamOptions(), trace=trace)
+    streamer.connect()
+    base = len(wire.lines_sent())
+    wire.at[base + 20] = streamer.hold
+    wire.at[base + 21] = streamer.hold
+    try:
+        report = streamer.stream(square_program(200))
+    finally:
+        port.close()
+    assert wire.tx.count(b"!") == 2 and wire.tx.count(b"~") == 1
+    assert report.outside_holds == 0
+    assert not any("not asked for" in w for w in report.warnings)
+    assert report.pauses == 1 and 1.5 < report.paused_s < 2.5
+
+
+def test_a_host_stall_before_the_second_drawing_line_is_named():
+    """One line at a time (``mode="wait"``): the host stands still 0.5 s after sending the
+    first of two pen-down lines of one run; the report names a host stall before line 2."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, wire = connected(device, mode="wait")
+    lines = ["G1X10Y0F600\n", "G1X20Y0F600\n", "G1X30Y0F600\n"]
+    wire.at[len(wire.lines_sent()) + 1] = lambda: device.advance(0.5)  # descheduled
+    try:
+        report = streamer.stream(lines, drawing=[True, True, True])
+    finally:
+        port.close()
+    stalls = [w for w in report.warnings if w.startswith("host stall")]
+    assert len(stalls) == 1 and "before line 2," in stalls[0]
+    assert len(report.stall_spans) == 1 and report.stall_spans[0][1] >= 0.5
+
+
+def test_a_safe_stop_without_an_alarm_holds_resets_and_lifts_the_pen():
+    """``safe_stop(pen_up)`` called by itself (no alarm): feed hold, soft reset, then the
+    pen-up lines are sent, after the reset."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, wire = connected(device)
+    before = len(wire.tx)
+    try:
+        streamer.safe_stop(PEN_UP)
+    finally:
+        port.close()
+    tx = wire.tx[before:]
+    assert tx[0] == b"!"
+    reset = tx.index(b"\x18")
+    assert [d for d in tx[reset:] if d.endswith(b"\n")] == [b"M3S50\n", b"G4P0.1\n"]
+
+
+def test_a_streamer_that_saw_no_status_starts_the_job_from_the_origin():
+    """A streamer used without :meth:`connect` (its banner already read by the caller) has no
+    status yet: the job starts from the origin, so while the machine still runs out along its
+    first line (0,0)->(20,0), no report says that line is done, though the second line comes
+    back over the same path."""
+    device = SimulatedGrbl(SETTINGS)
+    device.read()  # the boot banner, taken by whoever opened the port
+    port = open_device(device)
+    streamer = GrblStreamer(port, StreamOptions())
+    lines = ["G1X20Y0F600\n", "G1X10Y0F600\n", "G1X10Y20F600\n"]
+    try:
+        assert streamer.state is None
+        report = streamer.stream(lines)
+    finally:
+        port.close()
+    xs = [status.mpos[0] for _, status in report.statuses]
+    turn = xs.index(max(xs))  # the report nearest the far end of line 1
+    assert xs[turn] > 19.5 and turn >= 5
+    assert report.executing[: turn + 1] == [0] * (turn + 1)
