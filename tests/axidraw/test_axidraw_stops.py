@@ -339,3 +339,18 @@ def test_the_budget_warns_for_each_run_over_it_naming_its_figures_and_cause(cae_
         "run 3 (plan 2): speed SNR 24.0 dB below 25 dB: 1 host stall (100 ms) with the pen"
         " down: the board ran dry",
     ]
+
+
+@pytest.mark.parametrize(("stall_at", "named"), [(0.96, True), (3.9, True), (4.1, False)])
+def test_a_stall_is_the_cause_of_a_runs_warning_from_just_before_it_to_a_second_after(
+    job, stall_at, named
+) -> None:
+    """A run executed from 1 s for 2 s: a host stall starting from 50 ms before it to 1 s after
+    its end (the board's queue still held its moves) is named as the cause; a later one not."""
+    from tagbot.axidraw.machine import Budget
+
+    run = {"plan": 0, "executed_start": 1.0, "executed_duration": 2.0}
+    slow = {**run, "path_deviation_max_mm": 0.0, "speed_snr_db": 20.0}
+    (warning,) = Budget(job.job, [(stall_at, 0.2)])({"runs": [slow]})
+    stall = "1 host stall (200 ms) with the pen down: the board ran dry"
+    assert warning.endswith(stall) == named

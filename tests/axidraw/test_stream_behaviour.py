@@ -62,6 +62,13 @@ def streamer():
     link.close()
 
 
+def test_ask_returns_the_data_line_asked_for_and_nothing_else(streamer):
+    """``ask`` gives the command's data line when asked for one, else empty bytes (the ``OK``
+    is checked, not returned)."""
+    assert streamer.ask("QM", data=True, ok=False) == b"QM,0,0,0,0"
+    assert streamer.ask("SC,8,8") == b""
+
+
 def test_an_error_reply_is_a_fault_naming_the_command_and_kept_in_the_report(streamer):
     with pytest.raises(DeviceFault, match=r"^XY: the EBB replied !8 Err: Unknown command 'XY"):
         streamer.ask("XY")
@@ -442,3 +449,37 @@ def test_waiting_for_the_board_the_host_asks_again_a_millisecond_after_each_answ
         elif data.startswith(b"QM") and answered is not None:
             gaps.append(t - answered)
     assert len(gaps) > 100 and min(gaps) >= 0.001 - 1e-9
+
+
+class _Recording:
+    """A serial link that keeps every line written to it."""
+
+    def __init__(self, link) -> None:
+        self.link, self.written = link, []
+
+    def write(self, data: bytes) -> int:
+        self.written.append(bytes(data))
+        return self.link.write(data)
+
+    def __getattr__(self, name: str):
+        return getattr(self.link, name)
+
+
+def test_a_stop_waits_out_the_pens_rise_before_asking_the_board_again():
+    """A stop lifts the pen (the job's own SP line, 0.2 s of servo travel) and waits that long
+    before one look (QM, QU) finds the board idle: it does not keep asking while the pen rises."""
+    link = serial.serial_for_url(_url(SimulatedEBB()), timeout=0.01)
+    try:
+        wire = _Recording(link)
+        up = b"SP,1,200,1\r"
+        streamer = EBBStreamer(
+            wire, load_profile(), {False: (up, 0.2), True: (b"SP,0,200,1\r", 0.2)}
+        )
+        streamer.connect()
+        before = streamer.clock.now()
+        assert streamer.stop() == (0, 0)
+        assert streamer.clock.now() - before >= 0.2
+        after = wire.written[wire.written.index(up) + 1 :]
+        assert after == [b"QM\r", b"QU,6\r"]  # one look at the board's state: idle
+    finally:
+        link.close()
