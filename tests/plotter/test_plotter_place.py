@@ -362,3 +362,13 @@ def test_lines_never_slower_than_grbl_steps(tiny_file):
     )
     d = np.diff(fixed.runs[0].t)
     assert np.all(d <= profile.dt * (1 + 1e-9))
+
+
+def test_a_segment_of_no_duration_has_speed_zero_and_every_speed_is_a_number() -> None:
+    """Speeds per segment in mm/s: 10 mm in 0.5 s is 20; a repeated instant (no time) has no
+    speed, 0, rather than an infinity or a missing value."""
+    profile = load_profile(None, ["motion.min_buffer=0"])
+    xy = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 0.0], [10.0, 5.0]])
+    speed, cap = segment_speed_cap(xy, np.array([0.0, 0.5, 0.5, 1.0]), profile)
+    assert speed.dtype == np.float64 and speed.tolist() == [20.0, 0.0, 10.0]
+    assert len(cap) == 3 and np.all(np.isfinite(cap))
