@@ -15,8 +15,10 @@ from tagbot.plotter import build_program, load_profile, place
 from tagbot.plotter.place import (
     FINE_STEP,
     RX_LINES,
+    _junction_excess,
     buffered,
     limit_scale,
+    segment_excess,
     segment_speed_cap,
     slowest_durations,
     step_box,
@@ -372,3 +374,43 @@ def test_a_segment_of_no_duration_has_speed_zero_and_every_speed_is_a_number() -
     speed, cap = segment_speed_cap(xy, np.array([0.0, 0.5, 0.5, 1.0]), profile)
     assert speed.dtype == np.float64 and speed.tolist() == [20.0, 0.0, 10.0]
     assert len(cap) == 3 and np.all(np.isfinite(cap))
+
+
+def test_a_single_too_fast_segment_is_slowed_and_a_run_without_corner_has_no_excess(tiny) -> None:
+    """One move of 100 mm in 0.01 s (10 m/s) is far above the axis speeds: the time scale must
+    grow by its speed over the axis limit; a lone point needs nothing. A run with no gentle
+    corner (two points: no junction; a right angle: a cusp, where Grbl stops anyway) needs no
+    slowing for its junctions: its junction excess is 0."""
+    xy = np.array([[0.0, 0.0], [100.0, 0.0]])
+    t = np.array([0.0, 0.01])
+    vx = float(np.max(np.abs(tiny.axes @ np.array([1.0, 0.0])) / np.asarray(tiny.max_speed)))
+    assert segment_excess(xy, t, tiny) >= 10_000.0 * vx > 1.0
+    assert segment_excess(xy[:1], t[:1], tiny) == 0.0
+    assert _junction_excess(xy, t, tiny) == 0.0
+    corner = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]])
+    assert _junction_excess(corner, np.array([0.0, 0.01, 0.02]), tiny) == 0.0
+
+
+def test_the_buffer_rule_is_met_at_equality_and_slows_just_beyond() -> None:
+    """motion.min_buffer set to exactly the least time any 18 consecutive lines hold at the
+    tag's natural timing is met: nothing is slowed. Set 0.1 % above it, the run holding that
+    least time is slowed (and the buffer becomes a limit), the others are left alone."""
+    tag = tagbot.load_plan(EXAMPLES / "cae.json")
+    base = ["motion.tolerance=0.05"]
+    blocks = 15 - 1 + RX_LINES
+    free = place(tag, load_profile(None, [*base, "motion.min_buffer=0"]))
+    held = [buffered(r.t, blocks) for r in free.runs]
+    least = min(held)
+    assert math.isfinite(least)
+    at = place(tag, load_profile(None, [*base, f"motion.min_buffer={least!r}"]))
+    assert [r.scale for r in at.runs] == [r.scale for r in free.runs]
+    assert at.duration == free.duration and at.limits["buffer"] == 1.0
+    above = place(tag, load_profile(None, [*base, f"motion.min_buffer={least * 1.001!r}"]))
+    k = held.index(least)
+    for i, (a, f) in enumerate(zip(above.runs, free.runs, strict=True)):
+        if i == k:
+            assert a.scale > f.scale and buffered(a.t, blocks) >= least * 1.001 * (1 - 1e-6)
+            assert a.limits["buffer"] == a.scale
+        else:
+            assert a.scale == f.scale
+    assert above.duration > free.duration
