@@ -455,3 +455,22 @@ def test_a_stroke_is_split_only_inside_its_10_90_interval_less_a_tenth_at_each_e
             assert len(split.onsets) == 2
             near = np.abs(rec.t - at) <= 0.011  # the new target: where the recording was then
             assert np.min(np.hypot(*(rec.xy[near] - split.targets[1]).T)) < 1e-9
+
+
+def test_per_stroke_snr_without_low_pass_maps_a_late_clock_at_that_cutoff() -> None:
+    """A one-stroke recording 13 ms late with 0.2 mm of noise, compared unfiltered (cutoff None):
+    its stroke's velocity SNR is the best mapping's unfiltered figure (velocity_snr), well above
+    the 13 ms-off shared clock's, not the shared clock picked because it looks better
+    low-passed."""
+    one = Plan([[0.0, 0.0], [80.0, 0.0]], [0.0], [np.log(0.3)], [0.35], [0.0], [0.0])
+    tag = Tag((one,))
+    t, xy = _stamped(one)
+    xy = xy + np.random.default_rng(0).normal(0.0, 0.2, xy.shape)
+    t = t + 0.013
+    mt, _, mv = sample_plan(tag, 0, 0.005)
+    best, _, offset = velocity_snr(t, xy, mt, mv, cutoff=None)
+    shared = clock_velocity_snr(t, xy, mt, mv, None)
+    assert offset == pytest.approx(0.013, abs=0.003) and best > shared + 0.5
+    assert clock_velocity_snr(t, xy, mt, mv) > best  # low-passed, the shared clock looks better
+    [row] = stroke_report([Trace(xy, t)], tag, cutoff=None)
+    assert row.velocity_snr_db == pytest.approx(best, abs=1e-6)
