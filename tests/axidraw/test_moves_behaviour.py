@@ -413,3 +413,14 @@ def test_an_snr_is_its_ratio_in_db_down_to_minus_infinity_at_no_signal():
     assert _db(1000.0, 1.0) == pytest.approx(30.0)
     assert _db(0.0, 1.0) == -math.inf
     assert _db(5.0, 0.0) == math.inf
+
+
+def test_the_jobs_reference_passes_through_every_setpoint_of_its_run(cae_job):
+    """The plan each run's ticks are measured against (run_reference) is the tag as placed: at
+    each setpoint's instant it is that setpoint, to float rounding, up to the run's last one
+    (where its strokes' windows are the tag's, not those of the plan's own smaller extent)."""
+    tag, _profile, setpoints, _job = cae_job
+    assert all(np.ptp(p.targets, axis=0).max() < 0.6 * tag.size for p in tag.plans)
+    for run in setpoints.runs:
+        at = run_reference(tag, run, setpoints.matrix, setpoints.offset)
+        np.testing.assert_allclose(at(run.t), run.xy, rtol=0.0, atol=1e-9)
