@@ -142,3 +142,12 @@ def test_the_speed_snr_is_a_ratio_free_of_units_and_unbounded_for_an_exact_run()
     line = _run(0.0)
     exact = compare_execution([line], np.column_stack([line[0], line[1], np.ones(101)]))
     assert exact.speed_snr_db > 200.0
+
+
+@pytest.mark.parametrize("shape", [(4,), (3, 3), (2, 2, 4)])
+def test_an_executed_trace_not_n_by_4_is_refused_with_its_shape(shape) -> None:
+    from tagbot.metrics import executed_runs
+
+    with pytest.raises(ValueError) as refused:
+        executed_runs(np.zeros(shape))
+    assert str(refused.value) == f"executed: must be an (N, 4) array t, x, y, pen, got {shape}"

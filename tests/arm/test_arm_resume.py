@@ -7,6 +7,7 @@ nothing (``chain.advance`` from the progress callback).
 from __future__ import annotations
 
 import json
+import logging
 import math
 import re
 
@@ -151,8 +152,11 @@ def _stalled_run(record, tmp_path, stall: float):
 
 
 @pytest.mark.parametrize("stall", [0.12, 0.4])
-def test_a_host_stall_mid_ink_is_named_and_blamed_on_the_host(record, tmp_path, stall) -> None:
-    run, report, _ = _stalled_run(record, tmp_path / "stalled", stall)
+def test_a_host_stall_mid_ink_is_named_and_blamed_on_the_host(
+    record, tmp_path, stall, caplog
+) -> None:
+    with caplog.at_level(logging.WARNING, logger="tagbot.arm.run"):
+        run, report, _ = _stalled_run(record, tmp_path / "stalled", stall)
     # Longer than bus.silence_timeout (0.25 s) or not, the servos that answered every request
     # are not blamed: the run completes and the report names the stall with its length.
     assert run.error is None, run.error
@@ -166,6 +170,8 @@ def test_a_host_stall_mid_ink_is_named_and_blamed_on_the_host(record, tmp_path, 
         " down: no goal left for that long and the pen stood on the paper; a busy host (see"
         " details.realtime)"
     ) in report["warnings"]
+    logged = [r.getMessage() for r in caplog.records if "the host stalled" in r.getMessage()]
+    assert logged == [w for w in report["warnings"] if w.startswith("the host stalled")]
     d = report["details"]
     assert d["max_lateness_ms"] >= 1e3 * (stall - 0.01) and d["period_jitter_p99_ms"] >= 0.0
     # The stall stays in the executed clock: the job took that much longer, and the figure

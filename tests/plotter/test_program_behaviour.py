@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -316,6 +317,22 @@ def test_bed_edges(tiny_file):
         place(straight_tag(), wide)
     assert str(refused.value) == (
         "placement: the drawing reaches x = -1.000 mm, beyond bed.x_min = 0 mm by 1.000 mm "
+        "(reduce place.scale or move it)"
+    )
+
+
+def test_a_tag_taller_than_the_bed_is_refused_naming_y(tiny_file):
+    """The same refusal along y: a vertical stroke 2 % taller than the 50 mm bed (no margin,
+    centred) reaches 0.5 mm below it."""
+    (plan,) = straight_tag().plans
+    tall = Tag(plans=(replace(plan, targets=plan.targets[:, ::-1]),))
+    edge = load_profile(tiny_file, ["bed.margin=0", "motion.trim=false"])
+    size = place(tall, edge).size
+    over = load_profile(tiny_file, ["bed.margin=0", f"place.scale={size * 51 / 50}"])
+    with pytest.raises(PlacementError) as refused:
+        place(tall, over)
+    assert str(refused.value) == (
+        "placement: the drawing reaches y = -0.500 mm, beyond bed.y_min = 0 mm by 0.500 mm "
         "(reduce place.scale or move it)"
     )
 
