@@ -151,3 +151,16 @@ def test_an_executed_trace_not_n_by_4_is_refused_with_its_shape(shape) -> None:
     with pytest.raises(ValueError) as refused:
         executed_runs(np.zeros(shape))
     assert str(refused.value) == f"executed: must be an (N, 4) array t, x, y, pen, got {shape}"
+
+
+def test_pauses_are_taken_out_of_an_executed_trace_each_at_its_own_time() -> None:
+    """Samples every second for 10 s, paused 1 s from 2 s and 2 s from 6 s (executed clock):
+    the samples inside each pause go, those after it come back by its length."""
+    from tagbot.metrics import without_pauses
+
+    t = np.arange(11.0)
+    executed = np.column_stack([t, t * 10, np.zeros(11), np.ones(11)])
+    out = without_pauses(executed, [(2.0, 1.0), (6.0, 2.0)])
+    kept = [0, 1, 3, 4, 5, 8, 9, 10]
+    assert out[:, 1].tolist() == [10.0 * k for k in kept]  # which samples stay
+    assert out[:, 0].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]
