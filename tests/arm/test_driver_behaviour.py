@@ -373,3 +373,45 @@ def test_the_bus_check_counts_ten_bits_a_byte_for_a_ticks_goals_and_read_back(ra
         assert f"take {1e3 * busy:.1f} ms on the bus, more than the {1e3 / rate:g} ms" in str(
             raised.value
         )
+
+
+@pytest.mark.parametrize(("failing", "what"), [(1, "profile"), (2, "goal positions")])
+def test_a_write_failing_in_the_move_to_the_start_names_the_move_and_the_write(
+    record, monkeypatch, failing, what
+):
+    """The move to the start writes the pen's profile, then its goal: the adapter failing at
+    either names the approach, the port and that write."""
+    profile = load_profile()
+    sim = record(simulated_chain(profile))
+    with ArmDriver(sim.url, profile) as driver:
+        driver.connect()
+        written = sdk.GroupSyncWrite.txPacket
+        calls = []
+
+        def fails_once_reached(group):
+            calls.append(group)
+            if len(calls) == failing:
+                raise OSError("the adapter went away")
+            return written(group)
+
+        monkeypatch.setattr(sdk.GroupSyncWrite, "txPacket", fails_once_reached)
+        with pytest.raises(ConnectionLost) as caught:
+            driver.move_to(driver.read_present(), 0.5)
+    assert caught.value.where == "approach"
+    assert str(caught.value) == f"approach: {sim.url}: {what}: the adapter went away"
+
+
+def test_a_retried_transaction_is_in_the_debug_log_with_its_result(record, caplog):
+    """A corrupt status while connecting is tried again, and the debug log says which
+    transaction, where, and the SDK's result code."""
+    profile = load_profile()
+    sim = record(simulated_chain(profile))
+    sim.chain.corrupt_next(2)
+    with (
+        caplog.at_level(logging.DEBUG, logger="tagbot.arm.driver"),
+        ArmDriver(sim.url, profile) as driver,
+    ):
+        driver.connect()
+    retried = [r.getMessage() for r in caplog.records if "trying again" in r.getMessage()]
+    assert len(retried) == 1
+    assert re.fullmatch(rf"connect: [\w ]+: result {sdk.COMM_RX_CORRUPT}, trying again", retried[0])

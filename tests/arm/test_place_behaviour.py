@@ -197,3 +197,21 @@ def test_a_three_tick_program_is_held_to_the_acceleration_limit(profile) -> None
             assert str(raised.value).startswith("tick 1 (t = 0.010 s, ")
         else:
             check_program(changed, profile)
+
+
+def test_the_pen_lifts_after_a_run_from_down_to_up_in_equal_steps() -> None:
+    """After each run the pen goes from its down position to up in pen.move_time, one equal
+    step a tick, the arm still: the first goal one step above down, the last at up."""
+    profile = load_profile()
+    program = build_program(two_plan_tag(), profile)
+    up, down = profile["pen.up"], profile["pen.down"]
+    n = math.ceil(profile["pen.move_time"] / profile.period - 1e-9)
+    kinds = [s[0] for s in program.segments]
+    lifts = [s for i, s in enumerate(program.segments) if s[0] == "pen" and kinds[i - 1] == "draw"]
+    assert len(lifts) == 2
+    for _, _, first, stop in lifts:
+        pen = program.joints[first:stop, 3]
+        assert stop - first == n
+        expected = np.rint(down + (up - down) * np.arange(1, n + 1) / n)
+        assert pen.tolist() == expected.tolist()
+        assert np.all(program.joints[first:stop, 1:3] == program.joints[first - 1, 1:3])
