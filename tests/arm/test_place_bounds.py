@@ -100,3 +100,15 @@ def test_the_safe_workspace_holds_its_edges_and_not_a_hair_beyond() -> None:
     outer = np.array([-(300.0 - r), 0.0])  # on the shoulder's -x axis, within its -30..210°
     assert bool(safe(outer, wide))
     assert not bool(safe(np.nextafter(outer, -np.inf), wide))
+
+
+def test_the_inner_reach_circle_keeps_its_margin_and_not_a_hair_less() -> None:
+    """Links of 150 and 100 mm leave a hole of 50 mm radius round the shoulder; with an elbow
+    that folds to 175° the reach margin (5 mm) is what keeps the pen out of it."""
+    folded = load_profile(
+        None,
+        ["arm.l2=100", "elbow.max_deg=175", "area.y_max=400", "area.y_min=-100", "area.x_min=-400"],
+    )
+    inner = np.array([-(55.0 - 1e-6), 0.0])  # on the shoulder's -x axis, within its -30..210°
+    assert bool(safe(inner, folded))
+    assert not bool(safe(np.nextafter(inner, np.inf), folded))
