@@ -1,9 +1,10 @@
-"""Which request a read-back reply answers, when the adapter holds replies back for a while.
+"""Which request a read-back reply answers, whatever the line does to the replies.
 
-Status packets carry no sequence number: the driver matches replies to requests by their order.
-A burst of replies held back by the adapter must still be stamped with their own requests'
-instants, never with later ones; a hold longer than ``bus.silence_timeout`` (0.25 s here),
-counted from the first request a servo has not answered, is a fault. Simulated time.
+Status packets carry no sequence number: the driver matches each reply to its request by the
+servo's own clock (Realtime Tick, read with the position). Replies held back by the adapter, or
+read-backs lost whole, must leave every other reply stamped with its own request's instant; a
+hold longer than ``bus.silence_timeout`` (0.25 s), counted from the first request a servo has not
+answered, is a fault; the servos' clocks drift, jump a little and wrap. Simulated time.
 """
 
 from __future__ import annotations
