@@ -338,10 +338,8 @@ class _Request:
 
     sent: float
     sampled: float
-    ms: float = 0.0
-    """``sent`` in ms on the host's clock (compared with the servos' Realtime Ticks)."""
     span: float = 0.0
-    """Ms the request took to write: it reached the servos in ``ms`` to ``ms + span``."""
+    """Ms the request took to write: it reached the servos from ``sent`` to ``span`` ms later."""
     got: dict[int, int] = field(default_factory=dict)
     late: bool = False
     """Still open when the next request was sent."""
@@ -462,7 +460,7 @@ class ReadBack:
         for id in self.ids:
             if self.asked[id] is None:
                 self.asked[id] = now
-        self.open.append(_Request(now, now + self.request_time, 1e3 * now, span))
+        self.open.append(_Request(now, now + self.request_time, span))
         self.bus_free = now + self.busy + BUS_MARGIN
         self.requests += 1
 
@@ -560,7 +558,7 @@ class ReadBack:
         if tick is None:
             return next((k for k, r in enumerate(self.open) if i > r.last), None)
         off = self.offset[id]
-        misses = [_miss(tick - off - r.ms, r.span) for r in self.open]
+        misses = [_miss(tick - off - 1e3 * r.sent, r.span) for r in self.open]
         if not misses:
             return None
         k = min(range(len(misses)), key=lambda k: abs(misses[k]))
