@@ -652,8 +652,9 @@ def compare_execution(
     offset that best matches their velocities, searched within ±1 s of the offset between their
     movement onsets), then:
     path deviation (closest-point distances, paths densified to ``spacing``), velocity SNR on a
-    ``dt`` grid (executed velocity by central differences), and the time each run takes from
-    its first to its last movement.
+    ``dt`` grid (executed velocity by central differences; none for an executed run too short
+    to have a speed, under three samples over 3·``dt``, which is placed by its onset), and the
+    time each run takes from its first to its last movement.
     """
     runs_e = executed_runs(without_pauses(executed, pauses))
     gone = np.cumsum([0.0, *(length for _, length in sorted(pauses))])
@@ -680,7 +681,9 @@ def compare_execution(
         from_path.append(d_plan)
         p_onset, p_end = _movement(tp, xyp)
         e_onset, e_end = _movement(te, xye)
-        offset, a, b = _align(tp, xyp, te, xye, e_onset - p_onset, dt, skip)
+        aligned = _align(tp, xyp, te, xye, e_onset - p_onset, dt, skip)
+        # Too short for a speed (under three samples over 3·dt): placed by its onset, no SNR.
+        offset, a, b = aligned if aligned is not None else (e_onset - p_onset, 0.0, 0.0)
         signal, noise = signal + a, noise + b
         alignments.append(
             RunAlignment(
@@ -689,7 +692,7 @@ def compare_execution(
                 executed_start=float(tp[0] + offset),
                 planned_duration=float(p_end - p_onset),
                 executed_duration=float(e_end - e_onset),
-                snr_db=_db(a, b),
+                snr_db=None if aligned is None else _db(a, b),
                 deviation_max=float(max(d_exec.max(), d_plan.max())),
                 cut_short=cut_short,
             )
@@ -776,18 +779,19 @@ def _align(
     guess: float,
     dt: float,
     skip: Sequence[tuple[float, float]] = (),
-) -> tuple[float, float, float]:
+) -> tuple[float, float, float] | None:
     """The offset (executed t − planned t) near ``guess`` that best matches the velocities,
-    with the planned velocity's energy and the error energy at that offset.
+    with the planned velocity's energy and the error energy at that offset; None for an
+    executed run with no speed to match (under three samples over 3·dt).
 
     Executed instants inside a ``skip`` window are left out, and each piece between two
     windows is aligned on its own (searched from the previous piece's offset: a machine
     restarting after a pause may come back a little early or late); the first piece's offset
     is returned, with the energies summed over the pieces."""
-    if te[-1] - te[0] >= 3 * dt:
+    try:
         grid, ve = recorded_velocity(te, xye, dt)
-    else:
-        grid, ve = te, np.zeros_like(xye)
+    except ValueError:
+        return None
     vp_full = np.gradient(xyp, tp, axis=0) if len(tp) >= 2 else np.zeros_like(xyp)
     cuts = sorted(skip)
     piece = np.searchsorted([high for _, high in cuts], grid, side="left")
@@ -818,8 +822,10 @@ def _best_offset(
         return float(np.sum(vp * vp)), float(np.sum(err * err))
 
     # The onsets only guess the offset: a machine lags most in a stroke's slow start, so the
-    # search spans ±1 s (10 ms steps) before refining.
-    best = (np.inf, 0.0, 0.0, guess)
+    # search spans ±1 s (10 ms steps) before refining. An offset only displaces the guess by
+    # matching better: where nothing moves (a dot), every offset matches alike.
+    a, b = energies(guess)
+    best = (b, a, b, guess)
     for width, count in ((1.0, 201), (0.01, 21), (0.001, 21)):
         for offset in best[3] + np.linspace(-width, width, count):
             a, b = energies(offset)

@@ -224,12 +224,14 @@ def test_reference_velocity_spreads_repeated_stamps() -> None:
         (np.arange(5.0), np.zeros((4, 2)), "shape (4, 2) for time stamps of shape (5,)"),
         (np.arange(5.0), np.zeros((5, 3)), "positions of shape (5, 3) for time stamps"),
         (np.zeros((5, 1)), np.zeros((5, 2)), "of shape (5, 1) (expected (N, 2) and (N,))"),
+        (np.array([0.0, 0.01]), np.zeros((2, 2)),
+         "velocity: the recording needs at least 3 samples over 3·dt"),
     ],
 )  # fmt: skip
 def test_reference_velocity_refuses_a_recording_it_cannot_read(t, xy, message) -> None:
     with pytest.raises(ValueError) as refused:
         recorded_velocity(t, xy, cutoff=VELOCITY_CUTOFF)
-    assert message in str(refused.value)
+    assert message in str(refused.value) and str(refused.value).startswith("velocity: ")
 
 
 def test_reference_velocity_cost_is_linear() -> None:

@@ -164,3 +164,133 @@ def test_pauses_are_taken_out_of_an_executed_trace_each_at_its_own_time() -> Non
     kept = [0, 1, 3, 4, 5, 8, 9, 10]
     assert out[:, 1].tolist() == [10.0 * k for k in kept]  # which samples stay
     assert out[:, 0].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]
+
+
+def _square(half: float) -> np.ndarray:
+    return np.array([[-half, -half], [half, -half], [half, half], [-half, half], [-half, -half]])
+
+
+def test_a_crowded_scribble_is_measured_exactly_against_a_plain_drawing_with_dots() -> None:
+    """A thousand squares over one another (crowded: their side of the figures through a
+    KD-tree) against a plain drawing, a square 1 mm outside them and dots (single points, four
+    at each place) 2 mm inside them every mm along one side. Every scribble point is 1 mm from
+    the plain square, however far its nearest plain samples are (the plain drawing is not
+    crowded: measured exactly, not near its nearest samples, here dots): the max is the dots'
+    2 mm, and the mean is 1 mm but for the plain drawing's few hundred samples (at most 2 mm
+    off) among the scribble's 50 000."""
+    from tagbot.metrics import DENSITY
+
+    crowded = [_square(49.0)] * 1000
+    dots = [np.array([[x, 47.0]]) for x in np.arange(-40.0, 40.5, 1.0) for _ in range(4)]
+    error = shape_error(crowded, [_square(50.0), *dots])
+    assert error.size == pytest.approx(98.0 * np.sqrt(2.0))
+    assert error.max * error.size == pytest.approx(2.0, abs=0.5 / DENSITY * error.size)
+    assert 1.0 <= error.mean * error.size < 1.01
+
+
+def test_the_executed_speed_against_the_recorded_one_per_run() -> None:
+    """A machine that drew a recording twice as large and twice as slow: time scale 2 (machine
+    s per recorded s), the speed followed (the recorded speed scaled by the path lengths' ratio);
+    a run whose plan has no timed recording is not compared."""
+    from types import SimpleNamespace
+
+    from tagbot.metrics import compare_with_recording
+
+    t = np.linspace(0.0, 1.0, 101)
+    along = t - np.sin(2.0 * np.pi * t) / (2.0 * np.pi)  # speed 1 - cos: at rest at both ends
+    xy = np.column_stack([30.0 * along, 10.0 * np.sin(np.pi * along)])
+    recorded = [SimpleNamespace(xy=xy, t=None), SimpleNamespace(xy=xy, t=t)]
+    te = np.linspace(0.0, 2.0, 2001)
+    drawn = np.column_stack([np.interp(te / 2.0, t, 2.0 * xy[:, i]) for i in (0, 1)])
+    executed = np.vstack(
+        [
+            np.column_stack([te, drawn, np.ones(len(te))]),  # plan 0: untimed
+            [[2.5, 0.0, 0.0, 0.0]],
+            np.column_stack([3.0 + te, drawn, np.ones(len(te))]),  # plan 1
+        ]
+    )
+    report = compare_with_recording(executed, recorded, [0, 1])
+    (run,) = report["recorded_runs"]
+    assert run["plan"] == 1
+    assert run["time_scale"] == pytest.approx(2.0, abs=0.005)
+    assert run["snr_db"] > 40.0
+    assert report["recorded_speed_snr_db"] == pytest.approx(run["snr_db"])
+
+
+def test_a_fit_report_counts_the_traces_their_points_and_the_strokes() -> None:
+    """Two untimed traces of 5 and 7 points, fitted by two one-stroke plans: the report counts
+    2 traces, 12 points, 2 strokes, and says so first in its line."""
+    from tagbot.metrics import fit_report
+    from tagbot.model.plan import Plan, Tag
+
+    one = Plan([[0.0, 0.0], [80.0, 0.0]], [0.0], [np.log(0.3)], [0.35], [0.0], [0.0])
+    two = Plan([[0.0, 10.0], [80.0, 10.0]], [0.0], [np.log(0.3)], [0.35], [0.0], [0.0], start=5.0)
+    traces = [
+        np.column_stack([np.linspace(0.0, 80.0, 5), np.zeros(5)]),
+        np.column_stack([np.linspace(0.0, 80.0, 7), np.full(7, 10.0)]),
+    ]
+    report = fit_report(traces, Tag((one, two)))
+    assert (report.traces, report.points, report.strokes) == (2, 12, 2)
+    assert report.summary().startswith("2 traces (12 points) -> 2 strokes; shape error mean ")
+
+
+def test_a_run_is_timed_from_moving_away_from_its_start_to_arriving_near_its_end() -> None:
+    """8 mm in 1 s at 8 mm/s, sampled every ms, away from the origin: a run counts from its
+    first sample more than 0.02 mm into it (3 ms: 0.024 mm) to its last more than 0.02 mm
+    before its end (997 ms), planned and executed alike."""
+    t = np.linspace(0.0, 1.0, 1001)
+    xy = np.column_stack([100.0 + 8.0 * t, np.full_like(t, 50.0)])
+    report = compare_execution([(t, xy)], np.column_stack([t, xy, np.ones_like(t)]))
+    assert report.planned_duration == pytest.approx(0.994, abs=1e-9)
+    assert report.executed_duration == pytest.approx(0.994, abs=1e-9)
+
+
+def test_reports_of_a_run_the_stop_came_in_are_cut_short() -> None:
+    """Status reports of one run planned over 1 s: a stop at 0.5 s (after the run's second
+    setpoint) cuts it short; a stop at its last planned instant does not."""
+    from tagbot.metrics import compare_reports
+
+    planned = [_run(0.0)]
+    t, xy = _run(0.0, n=6)
+    executed = np.column_stack([t, xy, np.ones(len(t))])
+    run_of = np.zeros(len(t), dtype=int)
+    assert compare_reports(planned, executed, run_of).runs[0].cut_short is False
+    assert compare_reports(planned, executed, run_of, until=0.5).runs[0].cut_short is True
+    assert compare_reports(planned, executed, run_of, until=1.0).runs[0].cut_short is False
+
+
+def test_a_dot_is_reported_executed_when_its_pen_went_down() -> None:
+    """A dot planned at 2 s and drawn from 5 s (the pen down 0.2 s, standing): nothing moves
+    to align, so it was executed 3 s late, when its pen went down (not 1 s before, at the
+    first offset of the search: every offset matches a standstill alike)."""
+    te = 5.0 + np.linspace(0.0, 0.2, 21)
+    executed = np.column_stack([te, np.full_like(te, 3.0), np.full_like(te, 4.0), np.ones(21)])
+    (run,) = compare_execution([(np.array([2.0]), np.array([[3.0, 4.0]]))], executed).runs
+    assert (run.planned_start, run.executed_start) == (2.0, 5.0)
+
+
+@pytest.mark.parametrize(
+    "te",
+    [
+        np.array([0.0, 0.01, 0.02]),  # 20 ms: under 3·dt
+        np.array([0.0, 1.0]),  # a whole second, but two samples
+    ],
+)
+def test_an_executed_run_too_short_for_a_speed_has_no_snr_and_is_placed_by_its_onset(te):
+    """Beside a fully drawn run, a second run of which only two or three samples were taken:
+    its speed cannot be measured, so it has no speed SNR (not an infinite one) and adds
+    nothing to the overall figure; it is placed where its movement began."""
+    tp = np.linspace(0.0, 1.0, 101)
+    line = np.column_stack([10.0 * tp, np.zeros_like(tp)])  # 10 mm/s
+    first = np.column_stack([tp, line, np.ones_like(tp)])
+    moved = 3.0 + te
+    second = np.column_stack([moved, 0.5 * (moved - 3.0), np.full_like(te, 5.0), np.ones_like(te)])
+    gap = np.array([[2.0, 10.0, 0.0, 0.0]])
+    executed = np.vstack([first, gap, second])
+    planned = [(tp, line), (3.0 + tp, np.column_stack([10.0 * tp, np.full_like(tp, 5.0)]))]
+    comparison = compare_execution(planned, executed)
+    alone = compare_execution(planned[:1], first)
+    whole, short = comparison.runs
+    assert short.snr_db is None and np.isfinite(whole.snr_db)
+    assert comparison.speed_snr_db == pytest.approx(alone.speed_snr_db)
+    assert short.executed_start == pytest.approx(3.0, abs=0.05)  # not a second away

@@ -711,6 +711,11 @@ def _u32(value: int) -> list[int]:
     return list(int(value).to_bytes(4, "little", signed=True))
 
 
+def _signed32(value: int) -> int:
+    """A 4-byte item the SDK read as unsigned, as the signed number the servo holds."""
+    return value - (1 << 32) if value >= 1 << 31 else value
+
+
 class ArmDriver:
     """One connection to the arm's bus. Use as a context manager; see the module docstring.
 
@@ -998,8 +1003,9 @@ class ArmDriver:
     # -- streaming ---------------------------------------------------------------------------
 
     def read_present(self, where: str = "connect") -> NDArray[np.int64]:
-        """Present positions of (shoulder, elbow, pen), ticks, one READ each."""
-        return np.array([self._read(id, PRESENT_POSITION, 4, where) for id in self.ids])
+        """Present positions of (shoulder, elbow, pen), ticks, one READ each (signed, as the
+        read-back's: a Homing Offset can put a horn below 0)."""
+        return np.array([_signed32(self._read(id, PRESENT_POSITION, 4, where)) for id in self.ids])
 
     def move_to(self, goals: NDArray[np.int64], duration: float, where: str = "approach") -> None:
         """One smooth move of all three servos to ``goals`` in ``duration`` s, using the servos'

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import serial
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
@@ -165,10 +166,15 @@ def tracking_error(reads: Array, program: ArmProgram, profile: ArmProfile) -> di
 def latency_timer_warning(port: str, sysfs: str | os.PathLike[str] = "/sys") -> str | None:
     """A warning, with the fix, when ``port`` is a Linux USB serial adapter (``ttyUSBn``, also
     through a symlink such as ``/dev/serial/by-id/…``, or watched by pyserial's ``spy://``)
-    whose latency timer is above 1 ms; else None. ``sysfs`` is where sysfs is mounted (tests
-    give a fake one)."""
+    whose latency timer is above 1 ms; else None. ``hwgrep://`` is resolved by pyserial's own
+    search, as opening it would. ``sysfs`` is where sysfs is mounted (tests give a fake one)."""
     if port.startswith("spy://"):
         port = port.removeprefix("spy://").split("?", 1)[0]
+    if port.startswith("hwgrep://"):
+        try:
+            port = serial.serial_for_url(port, do_not_open=True).port
+        except (serial.SerialException, ValueError):
+            return None  # no such adapter: opening it will say so
     if "://" in port:
         return None
     name = os.path.basename(os.path.realpath(port))

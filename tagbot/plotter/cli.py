@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from typing import TYPE_CHECKING, Any
 
 import click
@@ -54,7 +55,7 @@ def gcode_command(
     from tagbot.io.output import check_output_file
     from tagbot.plotter.place import place
     from tagbot.plotter.profile import load_profile
-    from tagbot.plotter.program import build_program
+    from tagbot.plotter.program import build_program, host_pause_warnings
     from tagbot.source import load_tag
 
     machine = load_profile(profile, overrides)
@@ -63,6 +64,8 @@ def gcode_command(
     program = build_program(place(tag, machine), machine)
     program.write(output)
     click.echo(f"wrote {output}: {program.summary()}", err=True)
+    for warning in host_pause_warnings(program, machine):
+        logging.getLogger(__name__).warning("%s", warning)
 
 
 @click.command(name="grbl")

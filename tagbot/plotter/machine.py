@@ -17,6 +17,7 @@ instants (:func:`tagbot.metrics.compare_reports`).
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 import os
 from dataclasses import dataclass, field
@@ -33,7 +34,13 @@ from tagbot.io.motionfile import MotionTable
 from tagbot.model import Tag
 from tagbot.plotter.place import RX_LINES, Setpoints, place
 from tagbot.plotter.profile import Profile, device_settings, load_profile, with_device_settings
-from tagbot.plotter.program import Program, build_program, pen_down, pen_up
+from tagbot.plotter.program import (
+    Program,
+    build_program,
+    host_pause_warnings,
+    pen_down,
+    pen_up,
+)
 from tagbot.plotter.stream import (
     GrblStreamer,
     StreamOptions,
@@ -44,6 +51,8 @@ from tagbot.plotter.stream import (
 )
 from tagbot.ports import check_port
 from tagbot.signals import label, signal_of
+
+log = logging.getLogger(__name__)
 
 __all__ = ["PlotterJob", "executed_from_statuses", "prepare", "simulated_pen"]
 
@@ -102,6 +111,8 @@ def prepare(
         raise InputError(f"stream options: {e}") from None
     setpoints = place(tag, machine)
     program = build_program(setpoints, machine)
+    for warning in host_pause_warnings(program, machine):
+        log.warning("%s", warning)
     if resume_from is not None and not 2 <= resume_from <= len(program.lines):
         raise InputError(
             f"--resume-from: line {resume_from} is not in the program (lines 2 to "
@@ -221,7 +232,10 @@ class PlotterJob:
             placement=placement_of(setpoints, program),
             port="simulator" if device is not None else url,
             details=_details(program, profile, stream, device),
-            warnings=list(stream.warnings) if stream is not None else [],
+            warnings=[
+                *host_pause_warnings(program, profile),
+                *(stream.warnings if stream is not None else []),
+            ],
             error=error,
             pauses=[(a - origin, n) for a, n in stream.pause_spans] if stream is not None else [],
             stalls=[(a - origin, n) for a, n in stream.stall_spans] if stream is not None else [],

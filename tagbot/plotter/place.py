@@ -48,7 +48,8 @@ pen change between), so a per-run scale changes no run's shape, only the job's l
   seconds (0.6 by
   default: more than the 0.39–0.52 s pauses measured on a loaded host). Longer lines come from
   the tolerance: at a fixed tolerance a line's duration grows in proportion to ``s``. Where
-  Grbl's slowest step bounds the lines instead, slowing cannot help and is not done.
+  Grbl's slowest step bounds the lines instead, slowing cannot help and is not done (the job
+  then warns, with the figure it holds: :func:`tagbot.plotter.program.host_pause_warnings`).
 
 The limits are checked on the setpoints as sent (3 decimals); ``s`` grows until all hold.
 ``Setpoints.limits`` / ``Run.limits`` tell which limit set it (``buffer`` for the last one).
@@ -290,7 +291,7 @@ def _retime(
     """Runs of ``plans`` sharing one time scale, grown until every limit holds on them."""
     limits = dict(limits)
     scale = max(limits.values(), default=1.0)
-    buffer = profile["motion.min_buffer"] if profile["motion.setpoints"] == "adaptive" else 0.0
+    buffer = buffer_goal(profile)
     blocks = profile["limits.planner_blocks"] - 1 + RX_LINES
     held: tuple[float, list[Run], float] | None = None  # scale, runs, buffered before a growth
     for _ in range(100):
@@ -325,12 +326,24 @@ def _retime(
                 limits["buffer"] = held[0]
             break
         held = (scale, runs, held_s)
-        scale *= min(4.0, buffer / held_s) * (1.0 + 1e-3)
+        # At least 1 % slower: a step finer than the adaptive lines' own jitter could not tell
+        # a window bounded by Grbl's slowest step from one that grows.
+        scale *= max(BUFFER_GROWTH, min(4.0, buffer / held_s) * (1.0 + 1e-3))
     else:  # pragma: no cover - the segments converge within a few rounds
         raise PlacementError("retiming: did not converge")
     return [
         Run(r.plan, r.t, r.xy, r.v, scale, r.tag_t, dict(limits), r.span, r.clock) for r in runs
     ]
+
+
+BUFFER_GROWTH = 1.01
+"""The least time-scale step taken towards ``motion.min_buffer``."""
+
+
+def buffer_goal(profile: Profile) -> float:
+    """s of motion a host pause must find queued mid-run: ``motion.min_buffer`` with adaptive
+    setpoints, 0 with fixed ones (no rule)."""
+    return profile["motion.min_buffer"] if profile["motion.setpoints"] == "adaptive" else 0.0
 
 
 def _setpoints(

@@ -58,7 +58,14 @@ from numpy.typing import NDArray
 
 from firmware_protocols.grbl import gcode
 from tagbot.io.motionfile import MotionTable
-from tagbot.plotter.place import RX_LINES, Setpoints, buffered, slowest_durations, step_box
+from tagbot.plotter.place import (
+    RX_LINES,
+    Setpoints,
+    buffer_goal,
+    buffered,
+    slowest_durations,
+    step_box,
+)
 from tagbot.plotter.profile import Profile
 
 __all__ = [
@@ -597,6 +604,22 @@ def _min_buffered(run: NDArray[np.int64], durations: NDArray[np.float64], blocks
     runs = np.unique(run[run >= 0])
     times = (np.concatenate([[0.0], np.cumsum(durations[run == k])]) for k in runs)
     return min((buffered(t, blocks) for t in times), default=math.inf)
+
+
+def host_pause_warnings(program: Program, profile: Profile) -> list[str]:
+    """A warning when a host pause mid-run can starve the machine sooner than
+    ``motion.min_buffer`` asks: slowing did not lengthen the lines (module docstring of
+    :mod:`tagbot.plotter.place`), so the placement kept the faster timing."""
+    goal = buffer_goal(profile)
+    held = program.min_buffered_rx
+    if held >= goal * (1.0 - 1e-6):
+        return []
+    return [
+        f"host pauses: the lines hold {held:.3f} s of motion mid-run at least, less than "
+        f"motion.min_buffer = {goal:g} s (slowing the tag did not lengthen them: motion.max_dt "
+        f"or Grbl's slowest step bounds them); a host pause longer than {held:.3f} s there "
+        "starves the planner"
+    ]
 
 
 def resting_share(program: Program, profile: Profile) -> float:

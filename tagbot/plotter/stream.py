@@ -397,7 +397,7 @@ class GrblStreamer:
             if isinstance(message, Ok | Error):
                 return True
             if isinstance(message, Alarm):
-                raise DeviceFault(f"ALARM:{message.code} ({message.description})", line)
+                raise DeviceFault(f"ALARM:{message.code} ({message.description})", repr(line))
             before.append(message)
             return False
 

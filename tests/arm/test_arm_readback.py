@@ -9,19 +9,23 @@ import json
 import logging
 import math
 import os
+import re
 import signal
 import time
 from pathlib import Path
 
+import dynamixel_sdk as sdk
 import numpy as np
 import pytest
 
 from sim.dynamixel import SimulatedChain, serve_pty
 from tagbot.arm import build_program, latency_timer_warning, load_profile, prepare
+from tagbot.arm.driver import ArmDriver
 from tagbot.arm.run import simulated_chain
 from tagbot.control import RunControl
 from tagbot.draw import MachineRun, draw, run_report
 from tagbot.errors import (
+    ConnectionLost,
     DeviceTimeout,
     InputError,
     Interrupted,
@@ -338,10 +342,12 @@ def test_latency_timer_warning_resolves_symlinks_and_names_the_fix(tmp_path) -> 
 
 
 def test_an_adapter_watched_by_pyserials_spy_gets_the_latency_timer_warning(tmp_path) -> None:
+    """spy://PORT?options: the port is what comes before the first '?', whatever the options
+    hold (here a log file name with a '?' of its own)."""
     sysfs = _fake_sysfs(tmp_path / "sys", "ttyUSB0", 16)
     device = tmp_path / "ttyUSB0"
     device.touch()
-    warning = latency_timer_warning(f"spy://{device}?file=spy.log", sysfs)
+    warning = latency_timer_warning(f"spy://{device}?file={tmp_path}/spy?.log", sysfs)
     assert warning is not None
     assert warning.startswith(f"{device} is a USB serial adapter (ttyUSB0) with a 16 ms latency")
 
@@ -415,3 +421,46 @@ def test_the_program_is_what_the_tests_assume(sim_default) -> None:
     profile, _ = sim_default
     program = build_program(two_plan_tag(), profile)
     assert len(program) > 900 and math.isclose(profile.period, 0.01)
+
+
+def test_an_adapter_found_by_hwgrep_gets_the_latency_timer_warning(tmp_path, monkeypatch) -> None:
+    """``hwgrep://FT1234`` is resolved as pyserial resolves it when opening (the first port
+    whose name, description or hardware ID matches): that adapter's latency timer is read. No
+    match: no warning (opening the port will name the problem)."""
+    import serial.tools.list_ports
+
+    sysfs = _fake_sysfs(tmp_path / "sys", "ttyUSB3", 16)
+    device = tmp_path / "ttyUSB3"
+    device.touch()
+    ports = [
+        (str(tmp_path / "ttyACM0"), "Arduino", "USB VID:PID=2341:0043"),
+        (str(device), "FT232R USB UART", "USB VID:PID=0403:6001 SER=FT1234"),
+    ]
+
+    def grep(regexp, include_links=False):
+        return iter([p for p in ports if any(re.search(regexp, f, re.I) for f in p)])
+
+    monkeypatch.setattr(serial.tools.list_ports, "grep", grep)
+    warning = latency_timer_warning("hwgrep://FT1234", sysfs)
+    assert warning is not None
+    assert warning.startswith(f"{device} is a USB serial adapter (ttyUSB3) with a 16 ms latency")
+    assert latency_timer_warning("hwgrep://nothing-like-it", sysfs) is None
+
+
+def test_goal_positions_the_adapter_cannot_write_are_named(record, profile, monkeypatch):
+    """On the way to the start (the servos' own profile), an adapter that refuses the goals'
+    SYNC_WRITE: the error names the approach, that packet and the port."""
+    sim = record(simulated_chain(profile))
+    sent = sdk.GroupSyncWrite.txPacket
+
+    def refuses_goals(group):
+        return sdk.COMM_TX_FAIL if group.start_address == GOAL_POSITION else sent(group)
+
+    with ArmDriver(sim.url, profile) as driver:
+        driver.connect()
+        monkeypatch.setattr(sdk.GroupSyncWrite, "txPacket", refuses_goals)
+        with pytest.raises(ConnectionLost) as caught:
+            driver.move_to(driver.read_present(), 0.1)
+    assert str(caught.value) == (
+        f"approach: could not write SYNC_WRITE of goal positions to {sim.url}"
+    )

@@ -415,3 +415,167 @@ def test_a_retried_transaction_is_in_the_debug_log_with_its_result(record, caplo
     retried = [r.getMessage() for r in caplog.records if "trying again" in r.getMessage()]
     assert len(retried) == 1
     assert re.fullmatch(rf"connect: [\w ]+: result {sdk.COMM_RX_CORRUPT}, trying again", retried[0])
+
+
+@pytest.mark.parametrize(("corrupt", "connects"), [(2, True), (3, False)])
+def test_a_ping_is_tried_three_times_before_corrupt_replies_refuse_the_servo(
+    record, profile, corrupt, connects
+):
+    """While connecting, a transaction whose status is corrupt is tried up to three times: two
+    corrupt replies in a row still connect, a third refuses the servo."""
+    sim = record(simulated_chain(profile))
+    sim.chain.corrupt_next(2, corrupt)
+    with ArmDriver(sim.url, profile) as driver:
+        if connects:
+            driver.connect()
+            assert driver.torque_on and all(sim.servo(i).torque for i in (1, 2, 3))
+        else:
+            with pytest.raises(DeviceError, match=r"^connect: servo 2 \(elbow\): PING: "):
+                driver.connect()
+
+
+def test_the_driver_waits_on_the_clock_it_was_given(record, profile):
+    """A clock given to the driver is the one it waits on, also on a port with a clock of its
+    own (the simulator's): a 5 ms drain passes 5 ms on that clock."""
+    sim = record(simulated_chain(profile))
+    clock = _Clock()
+    with ArmDriver(sim.url, profile, clock=clock) as driver:
+        driver.open()
+        driver.drain(0.005)
+    assert clock.t == pytest.approx(100.005, abs=1e-9)
+
+
+def _streaming(record, overrides=()):
+    """A connected driver on a simulated chain at the start of a slow path, and that path."""
+    from .conftest import goals_path
+
+    profile = load_profile(overrides=overrides)
+    sim = record(simulated_chain(profile))
+    driver = ArmDriver(sim.url, profile)
+    driver.connect()
+    goals = goals_path(60, profile)
+    driver.move_to(goals[0], 0.5)
+    return sim, driver, goals
+
+
+def test_the_end_of_a_stream_is_logged_with_what_it_counted(record, caplog):
+    _, driver, goals = _streaming(record)
+    with driver, caplog.at_level(logging.INFO, logger="tagbot.arm.driver"):
+        result = driver.stream(goals)
+    s, r = result.scheduler, result.readback
+    assert s is not None and r is not None
+    assert (s.late_ticks, s.resyncs, r.missed, r.late, r.corrupt) == (0, 0, 0, 0, 0)
+    ended = [m for m in (r.getMessage() for r in caplog.records) if m.startswith("sent ")]
+    assert ended == [
+        f"sent 60 ticks: 0 late (max {1e3 * s.max_lateness:.2f} ms), 0 resyncs; read-back:"
+        " 0 missed, 0 late, 0 corrupt replies"
+    ]
+
+
+def test_a_servo_silent_mid_stream_is_named_with_nothing_more(record):
+    """A servo that falls silent (no stray replies, no host stall): the message names it, how
+    long and the timeout, and ends there."""
+    sim, driver, goals = _streaming(record, PATIENT)
+
+    def progress(done: int, total: int) -> None:
+        if done == 11:
+            sim.chain.silence(2)
+
+    with driver, pytest.raises(DeviceTimeout) as caught:
+        driver.stream(goals, progress=progress)
+    assert re.fullmatch(
+        r"tick \d+: servo 2 \(elbow\) did not answer SYNC_READ of present positions for"
+        r" 0\.25 s while requests were flowing \(bus\.silence_timeout: 0\.25 s\)",
+        str(caught.value),
+    )
+
+
+def test_a_corrupt_read_back_reply_is_in_the_debug_log_with_its_id(record, caplog):
+    sim, driver, goals = _streaming(record)
+
+    def progress(done: int, total: int) -> None:
+        if done == 11:
+            sim.chain.corrupt_next(2)
+
+    with driver, caplog.at_level(logging.DEBUG, logger="tagbot.arm.driver"):
+        result = driver.stream(goals, progress=progress)
+    assert result.corrupt_replies == 1
+    corrupt = [r.getMessage() for r in caplog.records if "corrupt read-back" in r.getMessage()]
+    assert len(corrupt) == 1
+    assert re.fullmatch(r"tick \d+: corrupt read-back reply \(ID byte 2\)", corrupt[0])
+
+
+def test_a_read_back_request_that_cannot_be_written_names_it(record, monkeypatch):
+    """The adapter refuses the SYNC_READ (the SDK's COMM_TX_FAIL): the run stops at that tick
+    naming the request and the port."""
+    sim, driver, goals = _streaming(record)
+    monkeypatch.setattr(sdk.GroupSyncRead, "txPacket", lambda self: sdk.COMM_TX_FAIL)
+    with driver, pytest.raises(ConnectionLost) as caught:
+        driver.stream(goals)
+    assert (
+        str(caught.value) == f"tick 1: could not write SYNC_READ of present positions to {sim.url}"
+    )
+
+
+def test_a_host_stall_mid_stream_is_recorded_and_the_run_goes_on(record):
+    """The host does not look at the bus for 0.3 s (more than bus.silence_timeout) while
+    replies are on their way (50 ms late): the stall is the host's, recorded from the last look
+    to the next, and no servo is taken for silent."""
+    sim, driver, goals = _streaming(record)
+    sim.chain.set_reply_faults(latency=0.05)
+    stalled = []
+
+    def progress(done: int, total: int) -> None:
+        if done == 21:
+            stalled.append(driver.clock.now())
+            driver.clock.sleep_until(stalled[0] + 0.3)
+
+    with driver:
+        result = driver.stream(goals, progress=progress)
+    assert result.ticks_sent == 60 and result.readback is not None
+    [(start, end)] = result.readback.host_stalls
+    assert start <= stalled[0] and end - start >= 0.3
+
+
+def test_a_read_back_is_stamped_when_its_request_has_reached_the_servos(record, monkeypatch):
+    """The servos sample their positions once the SYNC_READ has arrived: (14 + 1 per servo)
+    bytes of 10 bits after it was sent, at bus.baud (here 57,600 bps: 2.95 ms)."""
+    overrides = ("bus.baud=57600", "motion.rate=40", "bus.readback_rate=40", "servo.profile_ms=40")
+    _, driver, goals = _streaming(record, overrides)
+    requests: list[float] = []
+    write = UrlPortHandler.writePort
+
+    def spy(port: UrlPortHandler, packet: list[int]) -> int:
+        if packet[7] == 0x82:  # SYNC_READ
+            requests.append(port.getCurrentTime() / 1000.0)
+        return write(port, packet)
+
+    monkeypatch.setattr(UrlPortHandler, "writePort", spy)
+    with driver:
+        result = driver.stream(goals)
+    sampled = [row[0] for row in result.read_clock]
+    assert len(sampled) >= 50
+    arrival = (14 + 3) * 10 / 57600
+    for t in sampled:
+        sent = max(r for r in requests if r <= t)
+        assert t - sent == pytest.approx(arrival, abs=1e-9)
+
+
+def test_a_pause_lifts_the_pen_alone_holds_and_puts_it_back(record):
+    """Paused before tick 20 with the pen down: the pen alone goes up in pen.move_time (one
+    goal a tick), the arm holds its last goals while the pause lasts, the pen comes back down
+    the same way, and the stream goes on from tick 20: nothing of it skipped or repeated."""
+    sim, driver, goals = _streaming(record)
+    p = driver.profile
+    up, down, pen = p["pen.up"], p["pen.down"], p["pen.id"]
+    goals[:, 2] = down
+    before = len(sim.values(pen, GOAL_POSITION))
+    with driver:
+        result = driver.stream(goals, control=_PauseAtTick(20, 5))
+    assert result.ticks_sent == 60 and result.pauses == 1 and result.paused > 0.04
+    steps = max(1, -(-round(1e3 * p["pen.move_time"]) // round(1e3 * p.period)))
+    lift = [round(down + (up - down) * i / steps) for i in range(1, steps + 1)]
+    lower = [round(up + (down - up) * i / steps) for i in range(1, steps + 1)]
+    assert sim.values(pen, GOAL_POSITION)[before:] == [down] * 20 + lift + lower + [down] * 40
+    for column, id in enumerate((1, 2)):
+        assert sim.values(id, GOAL_POSITION)[-60:] == goals[:, column].tolist()

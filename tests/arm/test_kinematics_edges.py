@@ -178,3 +178,14 @@ def test_arm_refuses_bad_geometry_and_takes_the_profile() -> None:
         profile.elbow_sign,
     )
     assert (l1, l2, bx, by, arm.branch) == (160.0, 110.0, 12.5, -7.0, -1)
+
+
+def test_a_straight_elbow_has_no_finite_joint_rates_and_says_nothing():
+    """At the singular pose (elbow straight, the Jacobian's determinant 0) a tip velocity has
+    no finite joint rates: infinities, quietly (callers test for them), not a numpy warning."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        w = ARM.joint_velocity([[0.3, 0.0]], [[10.0, 5.0]])
+    assert np.isinf(w).all()

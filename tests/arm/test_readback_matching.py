@@ -72,6 +72,9 @@ def test_replies_held_back_are_kept_with_their_own_requests(record, tmp_path, ho
     # No reply is taken sooner than the adapter's 50 ms after the request it answers.
     assert d["reply_delay_p50_ms"] >= 50
     assert 1e3 * hold < d["reply_delay_max_ms"] < 1e3 * hold + 5
+    # The held reply is one of more than a hundred: above the 99th percentile, not below it.
+    assert d["readback_replies"] > 100
+    assert 50 <= d["reply_delay_p99_ms"] < d["reply_delay_max_ms"]
 
 
 def test_a_hold_past_the_silence_timeout_is_a_fault_not_a_shifted_trace(record, tmp_path):

@@ -460,3 +460,24 @@ def test_joints_csv_holds_every_ticks_goals_under_its_header(tmp_path) -> None:
     for row, (t, shoulder, elbow, pen) in zip(rows, joints, strict=True):
         assert abs(float(row[0]) - t) <= 5e-7 and len(row[0].split(".")[1]) == 6
         assert [int(v) for v in row[1:]] == [shoulder, elbow, pen]
+
+
+def test_a_horn_below_tick_0_starts_at_its_negative_angle(tmp_path, record) -> None:
+    """A servo whose Present Position reads below 0 (a Homing Offset, a horn turned by hand
+    past its zero) is read as the signed number the servo holds, as the read-back reads it:
+    the warning names the angle where the elbow is, not one four billion ticks away."""
+    from tagbot.arm.run import simulated_chain
+
+    profile = load_profile()
+    chain = simulated_chain(profile)
+    chain.set_position(profile.joints[1].id, -3.0)
+    sim = record(chain)
+    job = prepare(small_tag(), port=sim.url)
+
+    def progress(done: int, total: int) -> None:  # the warning comes before the first tick
+        raise ConnectionLost("enough")
+
+    warnings = job.run(tmp_path, progress=progress).warnings
+    assert "elbow starts at -180.3° outside elbow.min_deg..max_deg (10..160°): moving it back" in (
+        warnings
+    )

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 from collections import Counter
 from dataclasses import replace
 from itertools import count
@@ -13,7 +14,7 @@ import pytest
 
 from sim.ebb.device import SimulatedEBB
 from sim.ebb.transport import attach_device
-from tagbot.axidraw.machine import AxiDrawJob, prepare
+from tagbot.axidraw.machine import AxiDrawJob, _finite, prepare
 from tagbot.axidraw.profile import load_profile
 from tagbot.axidraw.stream import entry_end_ticks, locate
 from tagbot.control import RunControl
@@ -27,6 +28,7 @@ from tagbot.errors import (
     ProfileError,
 )
 from tagbot.io.planfile import load_plan
+from tagbot.signals import SignalInterrupt
 
 from .conftest import LETTER_B
 
@@ -134,6 +136,26 @@ def test_old_firmware_is_refused_at_connect(job, tag, tmp_path, version):
     report = json.loads((tmp_path / "old" / "report.json").read_text())
     assert not report["completed"] and report["executed"] == 0
     assert not device.recorder.moves()
+
+
+@pytest.mark.parametrize(
+    ("stop", "named"),
+    [
+        (KeyboardInterrupt, "Ctrl-C"),
+        (lambda: SignalInterrupt(signal.SIGTERM, "SIGTERM"), "SIGTERM"),
+    ],
+)
+def test_a_stop_signal_is_named_in_the_error(job, tag, tmp_path, stop, named):
+    """Ctrl-C and SIGTERM (raised in the loop as the command's signal handler does) each end
+    the run as an interruption naming the signal the user sent."""
+
+    def progress(done: int, total: int) -> None:
+        if done >= total // 4:
+            raise stop()
+
+    with pytest.raises(Interrupted) as caught:
+        draw(tag, tmp_path / "stop", prepared=job, pictures=False, progress=progress)
+    assert str(caught.value).endswith(f": interrupted ({named})")
 
 
 def test_ctrl_c_stops_safely_naming_the_last_move(job, tag, tmp_path):
@@ -268,6 +290,20 @@ def test_the_stopped_position_names_the_moves_executed(job):
     assert locate(job.job, entries[inside].steps, 0, 0) == 0
 
 
+def test_a_stop_on_a_travels_last_step_has_not_lowered_the_pen(job):
+    """The travel to the first run takes its last step on its last tick; motors stopped there
+    (first reached then) have executed the travel, not the pen lowering queued after it."""
+    entries, ticks = job.job.entries, job.job.ticks
+    ends = entry_end_ticks(job.job)
+    travel = next(
+        i for i, e in enumerate(entries[:-1]) if e.kind == "travel" and entries[i + 1].kind == "pen"
+    )
+    end = int(ends[travel])
+    there = tuple(ticks[end - 1])
+    assert there != tuple(ticks[end - 2])  # that last tick steps: the place is its own
+    assert locate(job.job, there, travel, travel + 3) == travel + 1
+
+
 @pytest.mark.parametrize("end", [0.397, 0.3960000000000001, 0.396 + 4e-7, 15.16, 0.0005, 0.001001])
 def test_the_plans_samples_never_repeat_an_instant(end):
     """A run's plan every 1 ms and at its end, on the job's clock: never two samples at one
@@ -280,3 +316,53 @@ def test_the_plans_samples_never_repeat_an_instant(end):
     t = 28.2844 + _grid(end, PLAN_STEP)
     assert np.all(np.diff(t) > 0) and t[-1] == 28.2844 + end and t[0] == 28.2844
     assert np.diff(t).max() <= PLAN_STEP + 1e-6
+
+
+def test_two_host_stalls_in_a_run_are_named_in_the_plural_with_their_summed_time(cae_job):
+    """A run slower than its budget with two host stalls in it: the warning counts them, in the
+    plural, and sums their time."""
+    from tagbot.axidraw.machine import Budget
+
+    run = {"plan": 0, "executed_start": 1.0, "executed_duration": 2.0}
+    slow = {**run, "path_deviation_max_mm": 0.0, "speed_snr_db": 20.0}
+    (warning,) = Budget(cae_job[3], [(1.5, 0.1), (2.5, 0.05)])({"runs": [slow]})
+    assert warning.endswith("2 host stalls (150 ms) with the pen down: the board ran dry")
+
+
+def test_a_resume_at_the_last_run_compares_it_with_its_own_plan(tmp_path):
+    """The three-run example resumed at its third run's first drawing move: the report's one
+    run is that run, named by its own plan (2), not renumbered from 0."""
+    from .conftest import CAE
+
+    tag = load_plan(CAE)
+    base = prepare(tag)
+    plans = [run.plan for run in base.setpoints.runs]
+    entries = base.job.entries
+    first = next(i for i, e in enumerate(entries) if e.kind == "draw" and e.run == 2)
+    job = replace(base, resume_from=first + 1)
+    report = draw(tag, tmp_path / "b", prepared=job, pictures=False).report
+    assert [run["plan"] for run in report["runs"]] == plans[2:] == [2]
+
+
+def test_a_run_ctrl_c_stops_halfway_is_reported_cut_short(tmp_path):
+    """Ctrl-C halfway through the letter's one run: that run is reported ``cut_short`` (its
+    figures cover what was drawn), the stop named after the last move executed."""
+    tag = load_plan(LETTER_B)
+    job = prepare(tag)
+
+    def progress(done: int, total: int) -> None:
+        if done >= total // 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(Interrupted, match=r"^after move \d+ of \d+ \(moves.txt\): interrupted"):
+        draw(tag, tmp_path / "a", prepared=job, progress=progress, pictures=False)
+    report = json.loads((tmp_path / "a" / "report.json").read_text())
+    (run,) = report["runs"]
+    assert run["cut_short"] is True and not report["completed"]
+
+
+def test_a_figure_json_cannot_hold_is_reported_as_none():
+    """report.json is strict JSON: a run's speed figure that is infinite or NaN (a run too short
+    for it) is written as null, a finite one as the number."""
+    assert _finite(float("inf")) is None and _finite(float("nan")) is None
+    assert _finite(np.float64(31.25)) == 31.25 and type(_finite(np.float64(31.25))) is float

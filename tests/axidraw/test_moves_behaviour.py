@@ -27,6 +27,7 @@ from tagbot.axidraw.moves import (
     _axis,
     _check_rates,
     _db,
+    _lm_rate,
     _travel_moves,
     build_job,
     fifo_depth,
@@ -326,6 +327,24 @@ def test_each_runs_stated_speed_snrs_are_its_plans_speed_over_their_noise(small)
         assert job.run_speed_snr[index] >= job.run_step_snr[index] + SPEED_MARGIN_DB
 
 
+def test_an_lm_axis_with_steps_to_take_always_has_a_rate():
+    """An ``LM`` axis whose share of a long travel phase is a step or two gets the least rate
+    that moves (1), not 0 (the board would never finish the move), and not more than it asks;
+    an axis with no steps gets 0."""
+    assert _lm_rate(0.23, 1) == 1
+    assert _lm_rate(1.2, -1) == 1
+    assert _lm_rate(1.6, 2) == 2
+    assert _lm_rate(5000.4, 0) == 0
+
+
+def test_a_fifo_one_deep_is_enough_when_two_moves_hold_the_time_ahead():
+    """The least depth asked for may be 1 (or 0: the FIFO is at least one deep): two moves of
+    0.5 s on the board hold the 0.9 s ahead, so 1 it is."""
+    assert fifo_depth([0.5] * 10, 1, 0.9) == 1
+    assert fifo_depth([0.5] * 10, 0, 0.9) == 1
+    assert fifo_depth([0.5] * 10, 0, 1.2) == 2
+
+
 def test_fifo_depth_is_the_least_that_holds_the_time_ahead():
     assert fifo_depth([0.025] * 40, 8, 0.2) == 8  # 9 moves of 25 ms: 0.225 s
     assert fifo_depth([0.0125] * 40, 8, 0.2) == 15  # 16 moves of 12.5 ms: 0.2 s
@@ -334,6 +353,14 @@ def test_fifo_depth_is_the_least_that_holds_the_time_ahead():
     # A short stretch among long moves sets the depth: 9 held, 4 x 12.5 + 5 x 25 ms = 0.175 s;
     # 10 held, 0.2 s.
     assert fifo_depth([0.025] * 20 + [0.0125] * 4 + [0.025] * 20, 8, 0.2) == 9
+
+
+def test_a_job_shorter_than_the_time_ahead_needs_no_deeper_fifo_than_it_has_moves():
+    """Three moves of 0.1 s, 10 s ahead asked: the whole job is on the board at once with a
+    FIFO two deep (two queued, one executing), so the least depth asked for it is."""
+    assert fifo_depth([0.1] * 3, 2, 10.0) == 2
+    assert fifo_depth([0.1] * 3, 1, 10.0) == 2
+    assert fifo_depth([0.1] * 4, 1, 10.0) == 3
 
 
 def test_no_runs_and_no_travel_is_an_empty_job():
@@ -367,6 +394,11 @@ def test_pen_lines_carry_the_servo_time_and_pin():
     job = build_job(tag, place(tag, slow.placement()), slow)
     down = [e for e in job.entries if e.kind == "pen" and e.pen]
     assert down[0].line == b"SP,0,396,1\r" and down[0].duration == 0.396
+    # A pen that waits over half a second: still whole milliseconds of its time (SP,0,746).
+    slower = load_profile(overrides=["pen.delay_down=0.6"])
+    job = build_job(tag, place(tag, slower.placement()), slower)
+    down = [e for e in job.entries if e.kind == "pen" and e.pen]
+    assert down[0].line == b"SP,0,746,1\r" and down[0].duration == 0.746
 
 
 def test_the_jobs_ticks_are_the_boards_from_the_accumulators_em_clears():

@@ -483,3 +483,17 @@ def test_a_stop_waits_out_the_pens_rise_before_asking_the_board_again():
         assert after == [b"QM\r", b"QU,6\r"]  # one look at the board's state: idle
     finally:
         link.close()
+
+
+def test_a_polled_job_without_park_ends_with_the_pen_reported_up(tmp_path):
+    """Without a park travel the job's last move lifts the pen: a report polled once every move
+    has run is read against that move, pen up (not against the draw before it)."""
+    tag = load_plan(LETTER_B)
+    job = replace(prepare(tag, overrides=("motion.park=false",)), port=_url(SimulatedEBB()))
+    last = job.job.entries[-1]
+    assert last.kind == "pen" and not last.pen and job.job.entries[-2].pen
+    (tmp_path / "out").mkdir()
+    run = job.run(tmp_path / "out")
+    assert run.error is None and run.sparse
+    assert run.executed[-1, 3] == 0.0 and run.executed_runs[-1] == -1
+    assert run.executed[:, 3].max() == 1.0

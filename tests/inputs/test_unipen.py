@@ -284,6 +284,15 @@ def test_errors_name_the_line(text: str, message: str) -> None:
     assert error(unp(text)).startswith(message)
 
 
+def test_times_up_to_the_largest_magnitude_are_read_beyond_it_refused() -> None:
+    """At 3e-15 samples/s the fourth sample is 1e15 s in: the largest time read (exactly);
+    a fifth is beyond it."""
+    text = ".POINTS_PER_SECOND 3e-15\n.PEN_DOWN\n" + "0 0\n" * 4
+    traces = read_unipen(unp(text), "w.dat")
+    assert traces[0].t[-1] == 1e15
+    assert error(unp(text + "0 0\n")) == "times beyond 1e+15 s"
+
+
 def test_bytes_without_a_name_are_named_as_unipen_in_errors() -> None:
     for read in (parse_unipen, read_unipen):
         with pytest.raises(InputError) as e:
@@ -296,6 +305,7 @@ def test_text_whose_first_64_lines_are_blank_is_not_taken_for_unipen(text: str) 
     """Only the first 64 lines are looked at (a bounded peek): blank ones say nothing."""
     assert not unipen.looks_like_unipen(text)
     assert unipen.looks_like_unipen("\n" * 63 + ".PEN_DOWN\n")
+    assert not unipen.looks_like_unipen("\n" * 64 + ".PEN_DOWN\n")  # the 65th line
 
 
 def test_only_a_byte_order_mark_is_skipped_before_the_first_keyword() -> None:

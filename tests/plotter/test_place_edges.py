@@ -10,7 +10,14 @@ import pytest
 from tagbot.model import Plan, Tag
 from tagbot.model.motion import evaluate_plan
 from tagbot.plotter import load_profile, place
-from tagbot.plotter.place import PlacementError, motor_steps, step_box
+from tagbot.plotter.place import (
+    PlacementError,
+    interpolation_error,
+    junction_speed,
+    motor_steps,
+    segment_excess,
+    step_box,
+)
 
 from .conftest import straight_tag, two_plan_tag
 
@@ -61,3 +68,53 @@ def test_trimmed_runs_start_and_end_a_step_away_from_the_plans_ends(tiny_file) -
             assert np.any(np.abs(run.xy[0] - p0) >= box)
             assert np.any(np.abs(run.xy[-1] - p1) >= box)
             assert np.all(np.abs(run.xy[-1] - p1) < 2 * box)  # but only just
+
+
+def test_a_line_between_consecutive_samples_has_no_interpolation_error() -> None:
+    """interpolation_error: a line from one sample to the next (or to itself) passes through
+    every sample it spans, so its error is 0; over three samples it is the middle one's distance
+    from the line between the outer two."""
+    xy = np.array([[0.0, 0.0], [1.0, 0.5], [2.0, 0.0]])
+    assert interpolation_error(xy, 0, 1) == 0.0
+    assert interpolation_error(xy, 1, 2) == 0.0
+    assert interpolation_error(xy, 1, 1) == 0.0
+    assert interpolation_error(xy, 0, 2) == pytest.approx(0.5, abs=1e-12)
+
+
+def test_a_repeated_last_setpoint_does_not_hide_the_look_ahead_excess(tiny) -> None:
+    """segment_excess: 0.01 mm along x in 10 µs (1000 mm/s, the tiny machine's x speed) must
+    stop within itself: Grbl's look-ahead cap is √(2·a·L) = √(2·1e5·0.01) mm/s, so the time
+    scale must grow by (v / cap)² = 1000² / 2000 = 500. A last setpoint repeating the one before
+    (a line that moves nothing, nothing ahead of it) changes nothing."""
+    xy = np.array([[0.0, 0.0], [0.01, 0.0]])
+    t = np.array([0.0, 1e-5])
+    assert segment_excess(xy, t, tiny) == pytest.approx(500.0, rel=1e-9)
+    repeated = np.array([[0.0, 0.0], [0.01, 0.0], [0.01, 0.0]])
+    assert segment_excess(repeated, np.array([0.0, 1e-5, 2e-5]), tiny) == pytest.approx(
+        500.0, rel=1e-9
+    )
+
+
+def test_adaptive_lines_shorten_at_corners_so_the_junction_limit_needs_no_slowing() -> None:
+    """With a loose tolerance (0.2 mm) the adaptive lines could be long enough on a curve that
+    Grbl's junction speed ($11 = 0.01 mm) would bind at each corner between them; the lines are
+    shortened there instead, so every gentle corner is entered at about CORNER_MARGIN (0.9) of
+    Grbl's limit at most and the junction limit sets no time scale: the run keeps the scale its
+    axis speeds ask for."""
+    curve = Plan(
+        [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]],
+        [0.0, 0.15],
+        [math.log(0.2)] * 2,
+        [0.3] * 2,
+        [0.6, 0.5],
+        [-0.6, -0.5],
+    )
+    profile = load_profile(None, ["motion.min_buffer=0", "motion.tolerance=0.2"])
+    placed = place(Tag((curve,)), profile)
+    assert placed.limits["junction"] == 1.0
+    assert placed.scale == pytest.approx(placed.limits["speed"], rel=1e-9)
+    run = placed.runs[0]
+    entry, limit, deflection = junction_speed(run.xy, profile, run.t)
+    gentle = deflection < math.pi / 4
+    assert gentle.sum() > 10
+    assert np.all(entry[gentle] <= 0.92 * limit[gentle])

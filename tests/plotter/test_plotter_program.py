@@ -476,3 +476,50 @@ def test_host_pauses_of_half_a_second_do_not_starve_the_planner():
     old = load_profile(None, ["motion.setpoints=fixed", "motion.min_buffer=0"])
     starved, _ = _stream_with_host_stalls(build_program(place(tag, old), old), old, "stall_old")
     assert starved > 0
+
+
+def test_a_buffer_goal_the_lines_cannot_hold_is_warned_with_the_figure(
+    monkeypatch, capsys, tmp_path
+):
+    """motion.min_buffer = 2 s on letter-b: slowing the tag shortens its least window (more
+    lines clamped to Grbl's slowest step), so the placement keeps the natural timing. The
+    command says so, with the figure the program holds; at the default 0.6 s, no warning."""
+    from tagbot.cli import cli, main
+    from tagbot.plotter.program import host_pause_warnings
+
+    monkeypatch.setitem(cli.commands, "gcode", gcode_command)
+    tag = tagbot.load_plan(EXAMPLES / "letter-b.json")
+    profile = load_profile(None, ["motion.min_buffer=2"])
+    program = build_program(place(tag, profile), profile)
+    held = program.min_buffered_rx
+    assert 0.5 < held < 2.0
+    expected = (
+        f"host pauses: the lines hold {held:.3f} s of motion mid-run at least, less than "
+        "motion.min_buffer = 2 s (slowing the tag did not lengthen them: motion.max_dt or Grbl's "
+        f"slowest step bounds them); a host pause longer than {held:.3f} s there starves the "
+        "planner"
+    )
+    assert host_pause_warnings(program, profile) == [expected]
+    out = tmp_path / "b.gcode"
+    args = ["gcode", str(EXAMPLES / "letter-b.json"), "-o", str(out)]
+    assert main([*args, "--set", "motion.min_buffer=2"]) == 0
+    assert capsys.readouterr().err.splitlines()[1:] == [f"tagbot: warning: {expected}"]
+    assert main(args) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
+def test_a_buffer_goal_met_exactly_or_with_fixed_lines_is_no_warning():
+    """The warning compares the program's own figure with the goal: met at equality, and
+    fixed setpoints (no buffer rule) are never warned about."""
+    from tagbot.plotter.program import host_pause_warnings
+
+    tag = tagbot.load_plan(EXAMPLES / "letter-b.json")
+    free = load_profile(None, ["motion.min_buffer=0"])
+    program = build_program(place(tag, free), free)
+    held = program.min_buffered_rx
+    at = load_profile(None, [f"motion.min_buffer={held!r}"])
+    assert host_pause_warnings(program, at) == []
+    above = load_profile(None, [f"motion.min_buffer={held * 1.0001!r}"])
+    assert len(host_pause_warnings(program, above)) == 1
+    fixed = load_profile(None, [f"motion.min_buffer={held * 2!r}", "motion.setpoints=fixed"])
+    assert host_pause_warnings(program, fixed) == []

@@ -371,3 +371,61 @@ def test_a_dot_has_no_resting_share(tiny_file):
     program = build_program(place(straight_tag(), profile), profile)
     assert program.drawing_time == 0.0
     assert resting_share(program, profile) == 0.0
+
+
+def test_a_run_flowing_on_from_the_previous_runs_dwell_has_no_start_reserve(tiny_file):
+    """slow_lines = dwell with a Z pen and no pen dwell: the last stop before run 1 is a G4 inside
+    run 0, so run 1 starts with motion already queued behind it (no stop of its own): nothing is
+    exposed at its start, even though the lines after that G4 overflow the receive buffer."""
+    profile = load_profile(
+        tiny_file,
+        [
+            "place.scale=0.2",
+            "motion.dt=0.2",
+            "motion.setpoints=fixed",
+            "motion.trim=false",
+            "motion.slow_lines=dwell",
+            "pen.type=z",
+            "pen.up=5",
+            "pen.down=0",
+            "pen.dwell=0",
+        ],
+    )
+    first = straight_tag().plans[0]
+    second = Plan(
+        targets=[[10.0, 0.0], [10.0, 40.0]],
+        dt=[0.0],
+        mu=[math.log(0.4)],
+        sigma=[0.3],
+        phi1=[0.0],
+        phi2=[0.0],
+        start=first.end(10.0) + 0.5,
+    )
+    program = build_program(place(Tag(plans=(first, second)), profile), profile)
+    lines = program.lines
+    g93 = [k for k, line in enumerate(lines) if line.startswith("G93")]
+    assert len(g93) == 2
+    stop = max(k for k in range(g93[1]) if lines[k].startswith(("G4P", "M3")))
+    assert g93[0] < stop < g93[1]  # a G4 inside run 0, none between the runs
+    assert any(lines[k].startswith("G1X") for k in range(stop + 1, g93[1]))  # run 0 goes on
+    # The lines after that G4 up to run 1's end would overflow the 127-byte ring.
+    run1_end = next(k for k in range(g93[1], len(lines)) if lines[k].startswith("G94"))
+    assert sum(map(len, lines[stop : run1_end + 1])) > 127
+    assert program.run_start_reserve == (math.inf, math.inf)
+    assert program.min_buffered_start == math.inf
+
+
+def test_a_run_starting_two_motor_steps_from_the_park_position_is_travelled_to(tiny_file):
+    """Travel is left out only when it moves no motor step: a run starting 0.02 mm (2 steps at
+    100 steps/mm) from the park corner in x and y still gets its travel line, so the pen comes down
+    at the run's start, not at the park position."""
+    profile = load_profile(
+        tiny_file, ["bed.margin=0.02", "place.align=bottom-left", "motion.trim=false"]
+    )
+    setpoints = place(straight_tag(), profile)
+    assert setpoints.runs[0].xy[0].tolist() == pytest.approx([0.02, 0.02])
+    program = build_program(setpoints, profile)
+    pen_down = program.lines.index("M3S30\n")
+    assert program.lines[pen_down - 1] == "G1X0.02Y0.02F1200\n"
+    assert program.line_xy[pen_down].tolist() == pytest.approx([0.02, 0.02])
+    assert program.notes["travel_time"] > 0.0

@@ -209,3 +209,19 @@ def test_a_starved_planner_is_a_named_stall():
         report.warnings[0],
     )
     assert device.starvation  # the machine did starve
+
+
+def test_a_buffer_goal_the_program_cannot_hold_is_in_the_report_and_logged_before_the_run(
+    monkeypatch, tmp_path, caplog
+):
+    """motion.min_buffer = 2 s, more than letter-b's lines can hold: the warning is logged when
+    the job is checked (before anything is sent) and is the report's first warning."""
+    from tagbot.plotter.program import host_pause_warnings
+
+    with caplog.at_level("WARNING", logger="tagbot.plotter.machine"):
+        _, report, _, job = run_job(monkeypatch, tmp_path, overrides=("motion.min_buffer=2",))
+    expected = host_pause_warnings(job.program, job.profile)
+    assert len(expected) == 1 and f"{job.program.min_buffered_rx:.3f} s" in expected[0]
+    assert report["warnings"] == expected
+    logged = [r.getMessage() for r in caplog.records if r.name == "tagbot.plotter.machine"]
+    assert logged == expected

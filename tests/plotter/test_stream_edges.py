@@ -7,7 +7,7 @@ import pytest
 
 from firmware_protocols.grbl import State, parse_message
 from sim.grbl import SimulatedGrbl
-from tagbot.errors import DeviceTimeout
+from tagbot.errors import DeviceFault, DeviceTimeout
 from tagbot.plotter.stream import (
     GrblStreamer,
     StreamOptions,
@@ -16,6 +16,7 @@ from tagbot.plotter.stream import (
     executed_where,
     line_effects,
     resume_lines,
+    resume_point,
 )
 
 from .test_stream import PEN_UP, SETTINGS, Wire, connected, open_device, square_program
@@ -379,3 +380,67 @@ def test_a_streamer_that_saw_no_status_starts_the_job_from_the_origin():
     turn = xs.index(max(xs))  # the report nearest the far end of line 1
     assert xs[turn] > 19.5 and turn >= 5
     assert report.executing[: turn + 1] == [0] * (turn + 1)
+
+
+def test_an_alarm_during_a_command_names_the_command():
+    """``ALARM:N`` before a command's ``ok`` (here during a one-second dwell) is a fault named
+    after that command, as ``error:N`` is: the operator sees which line the machine refused."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, _ = connected(device)
+    try:
+        device.schedule_alarm(device.now + 0.2, 3)
+        with pytest.raises(DeviceFault) as caught:
+            streamer.command("G4P1")
+    finally:
+        port.close()
+    assert caught.value.where == "'G4P1'"
+    assert str(caught.value).startswith("'G4P1': ALARM:3 (")
+
+
+def test_a_build_naming_no_planner_blocks_keeps_the_stock_planner():
+    """``[OPT:V,0,128]`` (a build that reports no planner) is not believed: the streamer keeps
+    Grbl's stock 15 blocks rather than plan for none."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    device.executor.planner.capacity = 0
+    port, streamer, wire = connected(device)
+    port.close()
+    assert b"[OPT:V,0,128]\r\n" in b"".join(wire.rx)
+    assert streamer.blocks == 15
+
+
+def test_resuming_after_a_line_grbl_cannot_parse_names_it():
+    """A line before the resume point that Grbl's parser rejects outright (a letter it has no
+    word for) is named with Grbl's own error code, as a refused move is."""
+    lines = ["G21\n", "G1X1Q2F100\n", "G1X2Y2F100\n", "G1X3Y3\n"]
+    with pytest.raises(ValueError, match=r"^line 2: Grbl would refuse it \(error:20\)$"):
+        resume_lines(lines, 3, PEN_UP, [])
+
+
+def test_the_report_counts_every_byte_the_job_wrote():
+    """``bytes_sent``: the job's lines and its real-time bytes (status polls), all of them, as
+    they went out on the wire."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, wire = connected(device)
+    before = len(wire.tx)
+    try:
+        report = streamer.stream(square_program(200))
+    finally:
+        port.close()
+    written = wire.tx[before:]
+    assert b"?" in written and report.bytes_sent == sum(len(d) for d in written) > 200 * 20
+
+
+def test_resuming_a_feed_per_minute_program_adds_no_feed_mode_line():
+    """A program in G94 throughout: the preamble sets G94 once, up front, and ends with the
+    travel to the resume point (no second feed mode line after it)."""
+    lines = ["G21\n", "G90\n", "G94\n", "G1X1Y1F100\n", "G1X2Y2F100\n"]
+    assert resume_lines(lines, 4, PEN_UP, []) == [
+        "G21\n", "G90\n", "G94\n", *PEN_UP, "G0X1Y1\n"
+    ]  # fmt: skip
+
+
+def test_a_stop_inside_a_line_one_mm_long_resumes_inside_it():
+    """A 1 mm inverse-time line stopped at its middle resumes there, at the same speed (the
+    remaining half in half the time: F doubles)."""
+    lines = ["G21\n", "G90\n", "G93\n", "G1X10Y0F60\n", "G1X11Y0F60\n", "G1X20Y0F60\n"]
+    assert resume_point(lines, 4, (10.5, 0.0)) == ("G1X11Y0F120\n", (10.5, 0.0))

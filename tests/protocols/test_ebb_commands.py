@@ -157,6 +157,16 @@ def test_malformed_lines_give_the_firmware_error(line: bytes, reply: bytes) -> N
     assert caught.value.reply == reply
 
 
+def test_a_refused_parameter_says_why_beside_the_firmware_error() -> None:
+    """The error a host sees names the firmware's reply, then what in the line was wrong."""
+    with pytest.raises(EBBCommandError) as caught:
+        parse_command(b"SR,-5\r")
+    assert str(caught.value) == "!6 Err: Invalid parameter value (a negative unsigned parameter)"
+    with pytest.raises(EBBCommandError) as caught:
+        parse_command(b"EM,256\r")
+    assert str(caught.value) == "!6 Err: Invalid parameter value (256 out of 0..255)"
+
+
 def test_boundaries_accepted() -> None:
     assert parse_command(b"LM,-2147483648,1,0,0,0,0").params[0] == -(2**31)
     assert parse_command(b"LM,2147483647,1,0,0,0,0").params[0] == 2**31 - 1
@@ -323,6 +333,7 @@ def test_error_replies(name: bytes, error: bytes, reply: bytes) -> None:
         (Command("CS"), b"KO\r\n"),
         (Command("QM"), b"QM,1,1,1\n\r"),
         (Command("V"), b"!8 Err: Unknown\n"),
+        (Command("QU", (2,)), b"QU,\n"),  # a stray line feed right after the echo: at once
     ],
 )
 def test_replies_that_are_not_documented_are_refused(cmd: Command, data: bytes) -> None:

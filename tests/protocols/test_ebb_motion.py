@@ -427,3 +427,36 @@ def test_an_lm_longer_than_the_per_tick_model_is_refused_by_name():
     # Rate 1: one step takes 2**31 ticks.
     with pytest.raises(MoveTooLong, match=r"^LM axis with 1 steps: longer than 16777216 ticks$"):
         lm_axis(1, 1, 0)
+
+
+@pytest.mark.parametrize(
+    ("rate", "accel", "jerk", "ticks"),
+    [
+        # The rate peaks at tick 9 (a + 10·j < 0: tick 10 is already lower), one above int32.
+        (2**31 - 1 - 125, 29, -3, 20),
+        (-(2**31) + 125, -29, 3, 20),  # the mirror: a trough one below int32 at tick 9
+        (2**31 - 1 - 126, 29, -3, 20),  # one less: the peak is int32's largest, no wrap
+    ],
+)
+def test_a_rate_leaving_int32_only_at_its_extreme_tick_is_caught(rate, accel, jerk, ticks):
+    """Whether the rate wraps, against every tick's exact rate: the extreme of the rate's
+    parabola may fall on the tick before the rounded vertex."""
+    start = AxisStart(rate, accel, jerk)
+    exact = [rate + t * accel + jerk * t * (t + 1) // 2 for t in range(1, ticks + 1)]
+    assert start.stays_in_int32(ticks) == all(-(2**31) <= r <= 2**31 - 1 for r in exact)
+
+
+@pytest.mark.parametrize("clear", [0, 3])
+def test_a_t3_move_executes_its_jerk_on_both_axes(clear):
+    """execute() of a T3 move: each axis, tick by tick, as the ISR runs it with that axis's jerk
+    (a jerk of 6000 or -1200 a tick changes the path within 400 ticks)."""
+    move = Move("T3", (2**28, -(2**27)), (-5000, 3000), (6000, -1200), ticks=400, clear=clear)
+    positions, accumulators = execute(move, (123, 456))
+    for axis, acc in enumerate((123, 456)):
+        expected, expected_acc = isr(
+            move.rate[axis], move.accel[axis], move.jerk[axis], acc, ticks=400, clear=bool(clear)
+        )
+        assert positions[:, axis].tolist() == expected
+        assert accumulators[axis] == expected_acc
+    flat, _ = execute(Move("LT", move.rate, move.accel, ticks=400, clear=clear), (123, 456))
+    assert flat[-1].tolist() != positions[-1].tolist()

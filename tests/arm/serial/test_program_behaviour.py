@@ -451,3 +451,21 @@ def test_a_refusal_in_a_pen_move_names_the_move_and_the_time_into_it(monkeypatch
         assert seconds == pytest.approx(into * profile.period)
     else:  # the retreat's last point: its length, under the 5 s cap of any pen move
         assert 0.0 < seconds < 5.0
+
+
+def test_each_run_is_the_tag_sampled_on_its_run_clock_at_the_tags_size():
+    """cae (three plans of different extents) on the OpenManipulator-X: every pen-down sample
+    of plan k is the tag's motion at tag time ``run_clocks[k].tag_time(τ / s_k)``, τ the machine
+    time since the run's first sample, evaluated with the tag's size (which sets where each
+    stroke's window ends), placed on the paper."""
+    tag = load_plan(EXAMPLES / "cae.json")
+    program = build_serial_program(tag, load_serial_profile("openmanipulator-x"))
+    sp = program.setpoints
+    placement = sp.placement
+    for k, plan in enumerate(tag.plans):
+        rows = _run_rows(program, k)
+        tau = sp.t[rows] - sp.t[rows[0]]
+        u = np.minimum(tau / sp.run_scales[k], sp.run_clocks[k].duration)
+        xy, _ = evaluate_plan(plan, sp.run_clocks[k].tag_time(u), tag.size)
+        expected = xy @ placement.matrix.T + placement.offset
+        np.testing.assert_allclose(sp.xy[rows], expected, rtol=0, atol=1e-9)

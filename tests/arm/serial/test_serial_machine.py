@@ -87,6 +87,11 @@ def test_a_bad_profile_value_is_one_line_naming_the_source_and_field() -> None:
         load_serial_profile("openmanipulator-x", ["joint3.id=11"])
     with pytest.raises(ProfileError, match=r"^--set: robot\.description: .*no-such-arm\.xml"):
         load_serial_profile("openmanipulator-x", ["robot.description=no-such-arm.xml"])
+    with pytest.raises(
+        ProfileError,
+        match=r"^--set: robot\.max_tilt_deg: must be < 90 \(the pen must point into the paper\)$",
+    ):
+        load_serial_profile("openmanipulator-x", ["robot.max_tilt_deg=90"])
 
 
 # -- program ---------------------------------------------------------------------------------

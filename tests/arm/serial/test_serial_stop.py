@@ -177,3 +177,21 @@ def test_a_resumed_job_found_on_the_paper_lifts_off_it_before_moving_across_it(
     assert on[1]
     first = trace[1 : int(np.argmax(~on[1:])) + 1]  # the contact it was found in
     assert np.hypot(*(first[:, 1:3] - first[0, 1:3]).T).max() < 2.5
+
+
+def test_an_arm_whose_port_does_not_open_is_said_not_lifted_for_want_of_a_connection(
+    letter_b, tmp_path
+) -> None:
+    """The port refuses to open (nothing listens there): the run stops before any servo was
+    reached, and the report says the pen was not lifted by the arm, having no connection."""
+    job = prepare(letter_b, profile="openmanipulator-x", port="socket://127.0.0.1:9")
+    with pytest.raises(Exception) as caught:
+        draw(letter_b, tmp_path / "run", prepared=job, pictures=False)
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    assert report["details"]["lifted_by_arm_at_stop"] is False and report["executed"] == 0
+    expected = (
+        "the arm stopped, but the pen was not lifted by the arm (no connection to the arm): it"
+        " may still be on the paper"
+    )
+    assert expected in report["warnings"]
+    assert "socket://127.0.0.1:9" in str(caught.value)
