@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import tagbot
+from sim.dynamixel import SimulatedChain
 from tagbot.arm import load_profile, prepare
 from tagbot.arm.driver import ArmDriver, UrlPortHandler
 from tagbot.arm.run import simulated_chain
@@ -27,6 +28,7 @@ from tagbot.io.planfile import load_plan
 
 from .conftest import GOAL_POSITION, two_plan_tag
 from .serial.test_serial_machine import _faulted, _interrupt
+from .serial.test_serial_stop import _stopped
 
 LETTER_B = Path(tagbot.__file__).parent / "examples" / "letter-b.json"
 
@@ -579,3 +581,52 @@ def test_a_pause_lifts_the_pen_alone_holds_and_puts_it_back(record):
     assert sim.values(pen, GOAL_POSITION)[before:] == [down] * 20 + lift + lower + [down] * 40
     for column, id in enumerate((1, 2)):
         assert sim.values(id, GOAL_POSITION)[-60:] == goals[:, column].tolist()
+
+
+def test_every_missing_servo_is_named_once_in_a_list(record, profile):
+    """Two servos of the profile silent at connect: both are named, in ID order, separated by
+    a comma, before what the broadcast ping found."""
+    sim = record(SimulatedChain({1: "XM430-W350"}))
+    with ArmDriver(sim.url, profile) as driver, pytest.raises(DeviceError) as caught:
+        driver.connect()
+    assert str(caught.value) == (
+        f"connect: servo 2 (elbow), servo 3 (pen) did not answer a ping at 1000000 bps on"
+        f" {sim.url}; IDs found on the bus: 1 (XM430-W350)"
+    )
+
+
+def test_a_resumes_pen_goals_leave_at_once_and_a_tick_apart(record):
+    """Lowering the pen for a resume: the first goal leaves at once, each next one a period
+    later (it reaches the pen after its packet's time on the wire, well under a period), and
+    the call returns ``lead`` after the last goal."""
+    profile = load_profile(overrides=("pen.move_time=0.035",))
+    sim = record(simulated_chain(profile))
+    pen, period, lead = profile["pen.id"], profile.period, profile.lead
+    with ArmDriver(sim.url, profile) as driver:
+        driver.connect()
+        before = len(sim.writes)
+        t0 = driver.clock.now()
+        driver.lower_pen(profile["pen.down"])
+        end = driver.clock.now()
+    sent = [
+        t for t, id, address, _ in sim.writes[before:] if id == pen and address == GOAL_POSITION
+    ]
+    assert len(sent) == 4
+    for k, t in enumerate(sent):
+        assert 0.0 < t - (t0 + k * period) < 0.1 * period
+    assert end - t0 == pytest.approx(3 * period + lead, abs=0.1 * period)
+
+
+def test_a_stop_before_torque_with_the_pen_down_logs_why_it_was_not_lifted(tmp_path, caplog):
+    """Ctrl-C while a serial arm is connecting, its pen on the paper: the log says why the stop
+    did not lift the pen, in the words of the error."""
+    with caplog.at_level(logging.ERROR, logger="tagbot.arm.driver"):
+        _stopped(
+            load_plan(LETTER_B),
+            tmp_path,
+            pen_on_paper=True,
+            due=lambda chain, profile: True,
+            after=0.001,
+        )
+    why = "stopped before the arm was under torque, with the pen on the paper"
+    assert f"safe stop: {why}" in [r.getMessage() for r in caplog.records]

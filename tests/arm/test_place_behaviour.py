@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from tagbot.arm import build_program, check_program, load_profile, place
+from tagbot.arm.kinematics import Arm
 from tagbot.arm.place import safe
 from tagbot.errors import PlacementError
 from tagbot.model import Plan, Tag
@@ -215,3 +216,17 @@ def test_the_pen_lifts_after_a_run_from_down_to_up_in_equal_steps() -> None:
         expected = np.rint(down + (up - down) * np.arange(1, n + 1) / n)
         assert pen.tolist() == expected.tolist()
         assert np.all(program.joints[first:stop, 1:3] == program.joints[first - 1, 1:3])
+
+
+def test_a_box_of_a_millionth_of_a_millionth_of_the_room_has_no_extent() -> None:
+    """A tag whose box is 1e-12 of the room (the area less its margins) on both axes is a dot:
+    refused as having no extent, at exactly that fraction; at twice it, a scale is found."""
+    from tagbot.arm.place import _largest
+
+    profile = load_profile()  # area x -148.5..148.5, y 40..250, margin 10: room 277 x 190 mm
+    arm = Arm.from_profile(profile)
+    room = np.array([277.0, 190.0])
+    with pytest.raises(PlacementError) as refused:
+        _largest(1e-12 * room, profile, arm)
+    assert str(refused.value) == "place.scale: the tag has no extent to place"
+    assert _largest(2e-12 * room, profile, arm) > 0.0

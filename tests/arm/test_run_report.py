@@ -281,6 +281,22 @@ def test_a_device_error_from_the_callers_progress_names_the_resume(
     assert run_report(run)["error"] == str(run.error)
 
 
+def test_a_device_error_after_the_last_tick_names_no_resume(tmp_path) -> None:
+    """A DeviceError from the caller's progress once every tick was sent: the run is not
+    completed, but nothing is left to resume; the message is kept whole, with no resume."""
+    job = prepare(small_tag())
+
+    def progress(done: int, total: int) -> None:
+        if done == total:
+            raise ConnectionLost("the studio's link dropped")
+
+    run = job.run(tmp_path, progress=progress)
+    assert run.sent == run.total == len(job.program)
+    assert run.resume_from is None and str(run.error) == "the studio's link dropped"
+    report = run_report(run)
+    assert report["resume_from"] is None and not report["completed"]
+
+
 def test_outside_its_limits_at_start_is_a_warning_and_the_arm_goes_back(tmp_path, record) -> None:
     from tagbot.arm.run import simulated_chain
 
@@ -393,6 +409,9 @@ def test_a_host_stall_leaves_late_goals_on_the_executed_clock(record, tmp_path) 
     assert 0.1 <= float(late[:, 1].max()) <= 0.12 + 1e-9
     (stall_at, _), *_ = run.stalls
     assert np.all(np.abs(late[:, 0] - stall_at) < 0.2)
+    # the first goal due meanwhile, the tick after the last one sent, is on the executed clock
+    # at its own program time
+    assert late[0, 0] == pytest.approx(float(job.program.joints[frozen[0], 0]), abs=1e-9)
     budget = Budget(job.program, profile, [], late)
     at = float(late[0, 0])
     cause = budget.cause(

@@ -122,6 +122,24 @@ def test_a_stop_on_a_silent_board_gives_up_after_the_resync_timeout():
     assert RESYNC_TIMEOUT <= link.clock.t - 100.0 <= RESYNC_TIMEOUT + 0.05
 
 
+class _SlowSilentLink(_SilentLink):
+    """A silent board behind a port whose reads each wait 0.5 s (exact on the clock)."""
+
+    def read(self, n: int = 1) -> bytes:
+        self.clock.t += 0.5
+        return b""
+
+
+def test_a_silent_board_is_given_up_on_by_the_first_read_at_the_reply_timeout():
+    """A read that starts when the reply timeout (2 s) has run out and brings nothing is the
+    last: the host waited 2 s and that read's own 0.5 s, and did not read once more."""
+    link = _SlowSilentLink()
+    streamer = EBBStreamer(link, load_profile(), {})
+    with pytest.raises(DeviceTimeout, match=r"^QM: no reply from the EBB in 2 s$"):
+        streamer.ask("QM", data=True)
+    assert link.clock.t - 100.0 == 2.5
+
+
 def test_a_board_lost_at_connect_says_nothing_of_the_job_was_executed(tmp_path):
     tag = load_plan(LETTER_B)
     device = SimulatedEBB()

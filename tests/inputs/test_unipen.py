@@ -225,6 +225,16 @@ def test_selection_is_refused_when_sets_restart_the_numbering() -> None:
     assert "ambiguous: the file has 2 sets" in error(data, components="0")
 
 
+def test_a_set_started_at_the_files_start_is_one_numbering_a_selection_can_use() -> None:
+    """WORD opens with ``.START_SET`` before any pen data: its three components are one set,
+    numbered 0-2, so component 2 (the second pen-down) is selected; a file with no pen data
+    holds no set."""
+    assert parse_unipen(unp(WORD)).sets == 1
+    (trace,) = read_unipen(unp(WORD), components="2")
+    assert trace.xy.tolist() == [[6, -4], [7, -5]]
+    assert parse_unipen(unp(HEADER + ".START_SET\n")).sets == 0
+
+
 def test_include_is_never_followed(tmp_path) -> None:
     (tmp_path / "data.dat").write_bytes(unp(WORD))
     index = tmp_path / "index.dat"
@@ -272,6 +282,9 @@ def test_include_is_never_followed(tmp_path) -> None:
         (".DT -5\n", "line 1: .DT is negative ('-5')"),
         (".X_POINTS_PER_MM 1e-15\n.PEN_DOWN\n1e15 0\n",
          "line 2: a sample is beyond ±1e+15 mm once converted"),
+        # the component holding the far sample is named, not the one ending just before it
+        (".X_POINTS_PER_MM 1e-15\n.PEN_DOWN\n0 0\n.PEN_UP\n1e15 0\n",
+         "line 4: a sample is beyond ±1e+15 mm once converted"),
         (".POINTS_PER_SECOND 1e-15\n.PEN_DOWN\n0 0\n0 0\n0 0\n", "times beyond 1e+15 s"),
         (".PEN_DOWN\n1 1\n.X_POINTS_PER_MM 5\n.X_POINTS_PER_MM 6\n",
          "line 4: .X_POINTS_PER_MM changes after pen data (was 5 on line 3)"),

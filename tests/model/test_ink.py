@@ -179,3 +179,28 @@ def test_a_run_trimmed_at_one_end_eases_there_and_keeps_the_plans_speed_at_the_o
     ramped = rate[0] if trimmed == "start" else rate[-1]
     assert (plain, ramped) == (1.0, 0.0)
     assert clock.tag_time(u)[[0, -1]] == pytest.approx([on, off])
+
+
+def test_a_run_clock_never_steps_back_where_its_ease_in_joins_the_plans_speed() -> None:
+    """Sampled at the very instant the ramp ends (u = R₁) and the floats either side of it, the
+    tag clock does not run backwards (evaluate_plan takes sorted times): it is already on the
+    plan's own line ``tag_start + u`` there."""
+    plan = lifted()
+    size = Tag((plan,)).size
+    clock = run_clock(plan, 0.65, 0.95, size)
+    r1 = clock.ease_in
+    assert r1 == EASE
+    u = np.array([np.nextafter(r1, 0.0), r1, np.nextafter(r1, 1.0)])
+    tau = clock.tag_time(u)
+    assert np.all(np.diff(tau) >= 0)
+    assert tau[1] == clock.tag_start + r1
+
+
+def test_a_run_clock_at_rest_keeps_the_ramp_kind_it_was_asked_for() -> None:
+    """A run with no easing (a plan at rest, or an empty run) still records that its machine is
+    not jerk-limited, as every other run clock of that machine does."""
+    size = Tag((lifted(None),)).size
+    rest = run_clock(lifted(None), 0.6, 1.2, size, jerk_limited=False)
+    assert rest == RunClock(0.6, 1.2, jerk_limited=False)
+    empty = run_clock(lifted(), 0.8, 0.8, size, jerk_limited=False)
+    assert empty == RunClock(0.8, 0.8, jerk_limited=False) and empty.duration == 0.0

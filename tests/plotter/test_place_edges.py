@@ -100,7 +100,8 @@ def test_adaptive_lines_shorten_at_corners_so_the_junction_limit_needs_no_slowin
     Grbl's junction speed ($11 = 0.01 mm) would bind at each corner between them; the lines are
     shortened there instead, so every gentle corner is entered at about CORNER_MARGIN (0.9) of
     Grbl's limit at most and the junction limit sets no time scale: the run keeps the scale its
-    axis speeds ask for."""
+    axis speeds ask for. They are shortened no more than that: the tightest corner is entered
+    close to the margin (above 0.875 of the limit), not with room to spare."""
     curve = Plan(
         [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]],
         [0.0, 0.15],
@@ -118,3 +119,16 @@ def test_adaptive_lines_shorten_at_corners_so_the_junction_limit_needs_no_slowin
     gentle = deflection < math.pi / 4
     assert gentle.sum() > 10
     assert np.all(entry[gentle] <= 0.92 * limit[gentle])
+    assert np.max(entry[gentle] / limit[gentle]) > 0.875
+
+
+def test_a_bed_not_starting_at_y_0_is_filled_between_its_own_edges(tiny_file) -> None:
+    """place.scale=fit on a bed from y = 10 to 50 mm (no margin): a vertical line is scaled to
+    the bed's height, 40 mm, and drawn from y_min to y_max exactly."""
+    bed = load_profile(
+        tiny_file, ["bed.margin=0", "bed.y_min=10", "motion.park_y=10", "motion.trim=false"]
+    )
+    placed = place(_vertical_tag(), bed)
+    ys = np.concatenate([r.xy[:, 1] for r in placed.runs])
+    assert ys.min() == pytest.approx(10.0, abs=0.01) and ys.max() == pytest.approx(50.0, abs=0.01)
+    assert placed.size == pytest.approx(4.0, rel=1e-3)

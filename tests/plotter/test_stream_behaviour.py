@@ -18,7 +18,7 @@ from tagbot.plotter.stream import (
     resume_point,
 )
 
-from .test_stream import PEN_UP, SETTINGS, Wire, open_device, square_program
+from .test_stream import PEN_UP, SETTINGS, Wire, connected, open_device, square_program
 
 
 def test_a_fault_says_when_the_safe_stop_began_and_its_own_hold_is_no_outside_hold():
@@ -182,3 +182,138 @@ def test_a_run_control_pause_holds_and_its_resume_starts_the_cycle_again():
     assert [d for d in wire.tx if d in (b"!", b"~")] == [b"!", b"~"]
     assert report.pauses == 1 and 1.5 < report.paused_s < 2.5
     assert report.outside_holds == 0 and report.lines_executed == len(lines)
+
+
+@pytest.mark.parametrize(("option", "firmware_numbers"), [("on", False), ("off", True)])
+def test_line_numbers_on_or_off_overrule_what_the_firmware_says(option, firmware_numbers):
+    """``line_numbers="on"`` sends N words to a firmware whose ``$I`` does not list them;
+    ``"off"`` sends none to one that does (the job runs either way)."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50), line_numbers=firmware_numbers)
+    port, streamer, wire = connected(device, line_numbers=option)
+    lines = ["G21\n", "G90\n", "G1X10Y0F600\n", "G1X10Y10F600\n", "M2\n"]
+    try:
+        report = streamer.stream(lines)
+    finally:
+        port.close()
+    sent = [line.decode() for line in wire.lines_sent()[-len(lines) :]]
+    if option == "on":
+        assert sent == [f"N{k + 1}{line}" for k, line in enumerate(lines)]
+    else:
+        assert sent == lines
+    assert report.lines_executed == len(lines) and report.errors == []
+
+
+def test_a_message_after_the_banner_that_is_no_lock_does_not_stop_the_connect():
+    """A push message after the banner that does not ask to unlock (``[MSG:Check Door]``):
+    the machine is not locked, so the default policy (refuse a locked machine) connects and
+    sends neither ``$X`` nor ``$H``."""
+    device = SimulatedGrbl(SETTINGS)  # its boot banner is waiting to be read
+    device.emit_garbage(b"[MSG:Check Door]\r\n")
+    port = open_device(device)
+    wire = Wire()
+    try:
+        settings = GrblStreamer(port, StreamOptions(reset=False), trace=wire).connect()
+    finally:
+        port.close()
+    assert settings[110] == 6000
+    assert wire.lines_sent() == [b"$$\n", b"$I\n"]
+
+
+def test_the_watchdog_waits_out_the_longest_dwell_and_no_longer():
+    """A program with a 1 s dwell and a stall timeout of 0.3 s: the machine standing still for
+    the dwell is no stall (the watchdog allows 1.5 x 1 s + 1 s = 2.5 s); frozen mid-job, the
+    same program times out 2.5 s after the machine last changed (to within the acks still
+    coming and one status period), not sooner."""
+    lines = ["G21\n", "G90\n", "G94\n", "G1X10Y0F600\n", "G4P1\n", "G1X20Y0F600\n", "M2\n"]
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, _ = connected(device, stall_timeout=0.3)
+    try:
+        report = streamer.stream(lines)
+    finally:
+        port.close()
+    assert report.errors == [] and report.lines_executed == len(lines)
+    assert report.duration > 1.0 + 20 / 10  # the dwell, and 20 mm at 10 mm/s
+
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, _ = connected(device, stall_timeout=0.3)
+    program = [line.replace("G4P0.1", "G4P1") for line in square_program(400)]
+    frozen_at: list[float] = []
+
+    def freeze(done: int, total: int) -> None:
+        if done >= 100 and not frozen_at:
+            frozen_at.append(device.now)
+            device.freeze_motion()
+
+    try:
+        with pytest.raises(DeviceTimeout, match="the machine stopped executing"):
+            streamer.stream(program, pen_up=PEN_UP, progress=freeze)
+    finally:
+        device.freeze_motion(False)
+        port.close()
+    assert 2.5 < streamer.last_report.stop_requested - frozen_at[0] < 2.5 + 1.0
+
+
+def test_a_host_stall_after_the_lines_drawing_covers_is_no_warning():
+    """``drawing`` covering only lines 1 and 2: the host standing still 0.5 s before line 3
+    (one line at a time) is outside every run it names, so no warning; with line 3 a drawing
+    line too, the same stall is a named host stall."""
+    lines = ["G1X10Y0F600\n", "G1X20Y0F600\n", "G1X30Y0F600\n"]
+    warnings = {}
+    for drawing in ([True, True], [True, True, True]):
+        device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+        port, streamer, wire = connected(device, mode="wait")
+        wire.at[len(wire.lines_sent()) + 2] = lambda device=device: device.advance(0.5)
+        try:
+            report = streamer.stream(lines, drawing=drawing)
+        finally:
+            port.close()
+        assert report.errors == [] and report.lines_executed == 3
+        warnings[len(drawing)] = report.warnings
+    assert warnings[2] == []
+    assert [w.split(",")[0] for w in warnings[3]] == [
+        "host stall: nothing was sent for 0.50 s before line 3"
+    ]
+
+
+@pytest.mark.parametrize("answers", [2, None])
+def test_a_reset_the_controller_misses_in_a_safe_stop_is_sent_again(answers):
+    """A fault mid-job; the controller, stopped by the feed hold, misses the safe stop's first
+    reset (no banner within 1.5 s): the reset is sent again, and once a banner comes the pen is
+    lifted. A controller that answers none of three resets: the safe stop is incomplete, said
+    in the report, and the pen lines are not sent."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port = open_device(device)
+    wire = Wire()
+    seen = {"hold": False, "resets": 0}
+
+    def trace(direction: str, data: bytes) -> None:
+        wire(direction, data)
+        if direction == "tx" and data == b"!":
+            seen["hold"] = True
+        elif direction == "rx" and seen["hold"] and b"Hold:0" in data and not seen["resets"]:
+            device.go_silent()  # stopped, then deaf to the reset
+        elif direction == "tx" and data == b"\x18" and seen["hold"]:
+            seen["resets"] += 1
+            if seen["resets"] == answers:
+                device.go_silent(False)  # hears this one (it is still on the wire)
+
+    streamer = GrblStreamer(port, StreamOptions(), trace=trace)
+    streamer.connect()
+    device.inject_error(device.lines_received + 100, 22)
+    try:
+        with pytest.raises(DeviceFault, match="error:22"):
+            streamer.stream(square_program(300), pen_up=PEN_UP)
+    finally:
+        port.close()
+    errors = streamer.last_report.errors
+    after_hold = wire.tx[wire.tx.index(b"!") :]
+    pen_lines = [d for d in after_hold if d.endswith(b"\n")]
+    if answers is None:
+        assert seen["resets"] == 3 and pen_lines == []
+        assert errors[1:] == [
+            "safe stop incomplete: no welcome after 3 resets: the machine may still hold lines;"
+            " switch it off"
+        ]
+    else:
+        assert seen["resets"] == 2 and len(errors) == 1
+        assert pen_lines == [line.encode() for line in PEN_UP]
