@@ -294,3 +294,18 @@ def test_an_executed_run_too_short_for_a_speed_has_no_snr_and_is_placed_by_its_o
     assert short.snr_db is None and np.isfinite(whole.snr_db)
     assert comparison.speed_snr_db == pytest.approx(alone.speed_snr_db)
     assert short.executed_start == pytest.approx(3.0, abs=0.05)  # not a second away
+
+
+@pytest.mark.parametrize("crowded_first", [True, False])
+def test_a_crowded_scribble_far_inside_a_plain_circle_is_measured_exactly(crowded_first) -> None:
+    """A hundred circles of radius 10 over one another (crowded) at the centre of a circle of
+    radius 200 (plain: measured through its grids, points this far from it through the coarse
+    one): every point of either drawing is 190 mm from the other (less the big circle's
+    sagitta, 200·(1 − cos(π/2000)) = 0.00025 mm, between its 2000 chords)."""
+    crowded = [_circle(10.0)] * 100
+    plain = [_circle(200.0)]
+    reference, candidate = (crowded, plain) if crowded_first else (plain, crowded)
+    error = shape_error(reference, candidate)
+    assert error.size == pytest.approx((20.0 if crowded_first else 400.0) * np.sqrt(2.0))
+    assert error.mean * error.size == pytest.approx(190.0, abs=0.0003)
+    assert error.max * error.size == pytest.approx(190.0, abs=0.0003)

@@ -630,3 +630,18 @@ def test_a_stop_before_torque_with_the_pen_down_logs_why_it_was_not_lifted(tmp_p
         )
     why = "stopped before the arm was under torque, with the pen on the paper"
     assert f"safe stop: {why}" in [r.getMessage() for r in caplog.records]
+
+
+def test_a_stop_with_the_pen_up_logs_that_the_arm_stopped_safely(tmp_path, caplog):
+    """Ctrl-C while a serial arm is connecting, its pen off the paper: the log says the arm
+    stopped safely with its pen lifted, in those words."""
+    with caplog.at_level(logging.INFO, logger="tagbot.arm.driver"):
+        _stopped(
+            load_plan(LETTER_B),
+            tmp_path,
+            pen_on_paper=False,
+            due=lambda chain, profile: True,
+            after=0.001,
+        )
+    stopped = [m for m in (r.getMessage() for r in caplog.records) if m.startswith("stopped ")]
+    assert stopped == ["stopped safely: pen lifted by the arm"]

@@ -95,6 +95,9 @@ def test_a_whole_tag_follows_the_plan(drawn, job):
     assert report["stalls"] == 0  # the board never ran dry
     # The moves' own stated error against the plan, per run (letter-b has one), in mm.
     assert report["details"]["run_error_mm"] == job.job.run_error
+    # The job's size: every command sent (travel, pen, draw) a move, the draw moves among them.
+    assert report["details"]["moves"] == len(job.job.entries)
+    assert report["details"]["draw_moves"] == sum(e.kind == "draw" for e in job.job.entries)
     assert len(job.job.run_error) == 1 and 0.0 < job.job.run_error[0] <= 0.02
     # What was sent, one command a line, the job's own.
     sent = (out / "moves.txt").read_text().splitlines()

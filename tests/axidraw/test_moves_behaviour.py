@@ -456,3 +456,20 @@ def test_the_jobs_reference_passes_through_every_setpoint_of_its_run(cae_job):
     for run in setpoints.runs:
         at = run_reference(tag, run, setpoints.matrix, setpoints.offset)
         np.testing.assert_allclose(at(run.t), run.xy, rtol=0.0, atol=1e-9)
+
+
+def test_a_run_shorter_than_the_speed_window_is_drawn_with_no_speed_figure():
+    """A 12 ms run (shorter than the ±10 ms speed window) still becomes its draw moves, each
+    with its own error, and states no speed SNR (inf: nothing to measure it over)."""
+    tag = load_plan(CAE)
+    profile = load_profile(overrides=["place.scale=0.3", "motion.park=false"])
+    setpoints = place(tag, profile.placement())
+    run = setpoints.runs[0]
+    at = run_reference(tag, run, setpoints.matrix, setpoints.offset)
+    t, h = np.array([0.0, 0.012]), 1e-6
+    short = replace(run, t=t, xy=at(t), v=(at(t + h) - at(t - h)) / (2 * h))
+    job = build_job(tag, replace(setpoints, runs=(short,)), profile)
+    draws = [i for i, e in enumerate(job.entries) if e.kind == "draw"]
+    assert sum(job.entries[i].duration for i in draws) == pytest.approx(0.012)
+    assert all(0.0 < job.move_error[i] < 0.012 for i in draws)
+    assert job.run_speed_snr == [math.inf] and job.run_step_snr == [math.inf]

@@ -140,6 +140,32 @@ def test_a_silent_board_is_given_up_on_by_the_first_read_at_the_reply_timeout():
     assert link.clock.t - 100.0 == 2.5
 
 
+class _BlockingLink(_SilentLink):
+    """A pyserial port that cannot tell what is waiting (no ``in_waiting``) and whose read of
+    ``n`` bytes waits out its 0.5 s timeout when fewer have arrived; ``replies`` have."""
+
+    def __init__(self, replies: bytes) -> None:
+        super().__init__()
+        self.replies = replies
+
+    def read(self, n: int = 1) -> bytes:
+        if len(self.replies) < n:
+            self.clock.t += 0.5
+        got, self.replies = self.replies[:n], self.replies[n:]
+        return got
+
+
+def test_a_line_ended_by_its_first_end_byte_is_taken_without_waiting_for_more():
+    """Legacy lines may end with CR or LF alone: a reply whose last byte so far ends its line
+    is taken at once, not after the port's timeout waiting for a byte the board never sends."""
+    link = _BlockingLink(b"QM,0,1,0,0\n")
+    streamer = EBBStreamer(link, load_profile(), {})
+    assert streamer.ask("QM", data=True, ok=False) == b"QM,0,1,0,0"
+    link.replies = b"OK\r"
+    assert streamer.ask("SC,8,8") == b""
+    assert link.clock.t == 100.0 and link.replies == b""
+
+
 def test_a_board_lost_at_connect_says_nothing_of_the_job_was_executed(tmp_path):
     tag = load_plan(LETTER_B)
     device = SimulatedEBB()

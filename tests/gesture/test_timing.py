@@ -416,6 +416,17 @@ def test_fit_cost_is_least_for_the_plan_a_recording_was_made_from() -> None:
         fit_cost(plan, few, 100.0)
 
 
+def test_fit_cost_times_a_trace_of_exactly_min_samples_stamps() -> None:
+    """A trace of exactly MIN_SAMPLES distinct stamps is one the fit times: it has a cost."""
+    rng = np.random.default_rng(21)
+    plan = random_timed_plan(rng)
+    trace = simulated_capture(plan, rng, rate=60.0, noise=0.0)
+    just = Trace(trace.xy[:MIN_SAMPLES], trace.t[:MIN_SAMPLES])
+    assert len(np.unique(just.t)) == MIN_SAMPLES
+    cost = fit_cost(plan, just, 100.0)
+    assert np.isfinite(cost) and cost >= 0.0
+
+
 def _missed_bump_at(at: float) -> tuple[object, object]:
     """One straight stroke, and a recording of it plus a sideways velocity bump centred at
     ``at`` seconds that the stroke misses (so the only candidate cut is there)."""

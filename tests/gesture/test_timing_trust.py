@@ -18,6 +18,7 @@ from tagbot.gesture.timing import (
     SHAPE_MARGIN_MAX,
     SHAPE_MARGIN_MEAN,
     TimingOptions,
+    TraceTiming,
     Turn,
     fastest_turn,
     fit_cost,
@@ -172,6 +173,14 @@ def test_one_implausible_trace_falls_back_alone() -> None:
     assert "timing: 1 matched, 1 geometric" in report.summary()
     # The geometric plan touches down where its trace was recorded.
     assert fitted.tag.plans[1].ink_window(fitted.tag.size)[0] >= start - 1e-9
+
+
+def test_a_timing_without_a_reason_is_described_by_its_kind_alone() -> None:
+    """describe names the trace and its kind, and adds the reason in brackets only if there is
+    one."""
+    assert TraceTiming("matched").describe(0) == "trace 0: matched"
+    assert TraceTiming("scaled", "").describe(3) == "trace 3: scaled"
+    assert TraceTiming("mapped", "why").describe(2) == "trace 2: mapped (why)"
 
 
 def test_implausible_clock_bounds() -> None:

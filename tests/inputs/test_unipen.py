@@ -219,6 +219,15 @@ def test_load_unipen_reads_the_selected_components(tmp_path) -> None:
     assert len(load_unipen(path)) == 3  # every pen-down component
 
 
+def test_load_unipen_names_the_file_in_its_errors(tmp_path) -> None:
+    """An error in a UNIPEN file read from disk starts with that file's path and the line."""
+    path = tmp_path / "bad.dat"
+    path.write_bytes(unp(".COORD X Y X\n"))
+    with pytest.raises(InputError) as e:
+        load_unipen(path)
+    assert str(e.value) == f"{path}: line 1: .COORD names X twice"
+
+
 def test_selection_is_refused_when_sets_restart_the_numbering() -> None:
     data = unp(".START_SET a\n.PEN_DOWN\n0 0\n.START_SET b\n.PEN_DOWN\n1 1\n")
     assert len(read_unipen(data)) == 2

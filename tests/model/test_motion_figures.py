@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from tagbot.model.motion import (
+    Motion,
     evaluate_plan,
     evaluate_plans,
     owned_spans,
@@ -106,3 +107,40 @@ def test_overlapping_plans_hand_over_halfway_between_lift_off_and_touch_down() -
     motion = sample(tag, 0.01)
     assert len(motion) == len(motion.t) and motion.duration == motion.t[-1] - motion.t[0]
     assert [k for k, _ in motion.runs()] == [0, 1]
+
+
+def test_a_run_on_the_first_sample_is_found_whatever_its_plan() -> None:
+    """runs() yields a pen-down run that starts on the motion's first sample, even one of
+    plans[1] (a motion cut from the middle of a tag)."""
+    two = _two_plans()
+    a, b = two.plans
+    whole = sample(Tag((a, b, b.at(b.end(two.size) + 0.4))), 0.01)
+    _, (_, second), (_, third) = whole.runs()
+    cut = slice(second.start, None)
+    tail = Motion(
+        t=whole.t[cut],
+        xy=whole.xy[cut],
+        v=whole.v[cut],
+        speed=whole.speed[cut],
+        pen=whole.pen[cut],
+        plan=whole.plan[cut],
+        dt=whole.dt,
+    )
+    assert tail.plan[0] == 1
+    assert list(tail.runs()) == [
+        (1, slice(0, second.stop - second.start)),
+        (2, slice(third.start - second.start, third.stop - second.start)),
+    ]
+
+
+def test_a_lift_of_a_single_pen_up_sample_is_sampled() -> None:
+    """A pen lift that leaves exactly one pen-up sample between two runs is not too coarse for
+    ``dt``: the runs end and start either side of that one sample."""
+    a, b = _two_plans().plans
+    a = Plan(a.targets, a.dt, a.mu, a.sigma, a.phi1, a.phi2, 0.0, (0.0, 0.5))
+    b = Plan(b.targets, b.dt, b.mu, b.sigma, b.phi1, b.phi2, 0.3, (0.22, 0.6))  # down at 0.52
+    motion = sample(Tag((a, b)), 0.01)
+    (_, first), (_, second) = motion.runs()
+    assert (first.stop, second.start) == (51, 52)
+    assert motion.t[51] == pytest.approx(0.51) and motion.pen[50:53].tolist() == [1, 0, 1]
+    assert motion.plan[51] == -1

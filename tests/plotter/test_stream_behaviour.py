@@ -4,12 +4,14 @@ resumed line's feed."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from firmware_protocols.grbl import parse_message
 from sim.grbl import SimulatedGrbl
 from tagbot.control import RunControl
-from tagbot.errors import DeviceFault, DeviceTimeout
+from tagbot.errors import DeviceError, DeviceFault, DeviceTimeout
 from tagbot.plotter.stream import (
     ExecutionTracker,
     GrblStreamer,
@@ -317,3 +319,78 @@ def test_a_reset_the_controller_misses_in_a_safe_stop_is_sent_again(answers):
     else:
         assert seen["resets"] == 2 and len(errors) == 1
         assert pen_lines == [line.encode() for line in PEN_UP]
+
+
+def test_an_ok_for_no_line_after_the_last_one_is_a_named_device_error():
+    """Every line acknowledged, the machine still moving: an ``ok`` nobody asked for then means
+    host and controller disagree on what was sent; the stream stops with an error that says
+    so."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    lines = ["G21\n", "G90\n", "G1X40Y0F3000\n"]
+    port = open_device(device)
+    wire = Wire()
+    stray = []
+
+    def trace(direction: str, data: bytes) -> None:
+        wire(direction, data)
+        acked = sum(d.count(b"ok\r\n") for d in wire.rx) - before
+        if direction == "tx" and data == b"?" and acked == len(lines) and not stray:
+            stray.append(device.now)  # the first status request after the last ok
+            device.emit_garbage(b"ok\r\n")
+
+    streamer = GrblStreamer(port, StreamOptions(), trace=trace)
+    before = 10**9
+    streamer.connect()
+    before = sum(d.count(b"ok\r\n") for d in wire.rx)
+    try:
+        with pytest.raises(DeviceError) as caught:
+            streamer.stream(lines)
+    finally:
+        port.close()
+    assert stray
+    assert re.fullmatch(
+        r"after line [23] \(the last line the machine executed; .*\): unexpected Ok\(\) after"
+        r" the last line",
+        str(caught.value),
+    )
+
+
+@pytest.mark.parametrize("short", ["moves", "targets"])
+def test_moves_or_targets_not_one_per_line_are_refused_before_anything_is_sent(short):
+    """A caller's ``moves`` or ``targets`` one short of the lines: refused with a message that
+    names both, and not one line goes out."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, wire = connected(device)
+    lines = ["G21\n", "G90\n", "G1X10Y0F600\n"]
+    given = {"moves": [False, False, True], "targets": [(0.0, 0.0), (0.0, 0.0), (10.0, 0.0)]}
+    given[short] = given[short][:-1]
+    sent = len(wire.lines_sent())
+    try:
+        with pytest.raises(ValueError) as caught:
+            streamer.stream(lines, **given)
+    finally:
+        port.close()
+    assert str(caught.value) == "moves, targets: one per line"
+    assert len(wire.lines_sent()) == sent
+
+
+def test_with_no_dwell_the_watchdog_allows_a_second_beyond_a_shorter_stall_timeout():
+    """A program with no dwell and a stall timeout of 0.3 s: the watchdog still allows the
+    machine 1 s of standing still (1.5 x 0 s + 1 s) before calling it stalled, and no more."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, _ = connected(device, stall_timeout=0.3)
+    program = [line for line in square_program(400) if not line.startswith("G4P")]
+    frozen_at: list[float] = []
+
+    def freeze(done: int, total: int) -> None:
+        if done >= 100 and not frozen_at:
+            frozen_at.append(device.now)
+            device.freeze_motion()
+
+    try:
+        with pytest.raises(DeviceTimeout, match="the machine stopped executing"):
+            streamer.stream(program, progress=freeze)
+    finally:
+        device.freeze_motion(False)
+        port.close()
+    assert 1.0 < streamer.last_report.stop_requested - frozen_at[0] < 1.0 + 1.0

@@ -562,3 +562,11 @@ def test_a_line_starting_with_an_error_mark_that_is_no_error_is_named() -> None:
 def test_qt_answers_a_nickname_given_as_text_or_bytes_alike() -> None:
     qt = parse_command(b"QT")
     assert format_reply(qt, "abc") == format_reply(qt, b"abc") == b"abc\r\nOK\r\n"
+
+
+def test_qt_with_no_nickname_given_answers_an_empty_line():
+    """``QT`` on a board with no stored nickname prints an empty line, then ``OK``."""
+    qt = parse_command(b"QT")
+    assert format_reply(qt) == b"\r\nOK\r\n"
+    assert format_reply(qt, ack=False) == b"\r\n\r\n"
+    assert read_reply(qt, format_reply(qt)).values == (b"",)

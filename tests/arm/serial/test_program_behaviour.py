@@ -351,6 +351,24 @@ def test_the_papers_push_is_fed_forward_where_the_point_is_below_the_paper_where
     assert np.abs(pushed[0, 1:]).min() > 1e-3  # rad: the shoulder, elbow and wrist take it
 
 
+def test_a_point_exactly_on_the_paper_is_not_pushed_a_hair_into_it_is() -> None:
+    """The paper raised exactly to the pen's point at park: the point touches it without being
+    aimed in, so no push is fed forward; a micrometre higher, the preload's push is."""
+    profile = load_serial_profile("openmanipulator-x")
+    pose = profile.park[None, :]
+    tip, _ = profile.arm.fk(pose)
+    z = 1000.0 * float(np.asarray(tip).reshape(-1, 3)[0, 2])  # mm above the base plate
+    alone = feedforward(pose, np.ones(1, dtype=bool), profile)
+
+    def on_paper_at(height: float) -> np.ndarray:
+        raised = load_serial_profile("openmanipulator-x", [f"paper.z={height!r}"])
+        return feedforward(pose, np.ones(1, dtype=bool), raised) - alone
+
+    assert z / 1000.0 == float(np.asarray(tip).reshape(-1, 3)[0, 2])  # the paper at the point
+    np.testing.assert_array_equal(on_paper_at(z), 0.0)
+    assert np.abs(on_paper_at(z + 1e-3)[0, 1:]).min() > 5e-4  # rad: the preload's push
+
+
 def test_a_point_at_a_strokes_onset_is_named_for_that_stroke() -> None:
     """A refusal names the stroke under way (the last one begun): at its onset exactly, the
     stroke that begins there; just before, the one before it."""

@@ -521,6 +521,20 @@ def test_the_pen_is_up_from_half_the_pen_up_height(factor, up) -> None:
     assert ArmLift(profile).is_up(row) is up
 
 
+@pytest.mark.parametrize(("limit", "beyond"), [("lower", -5), ("upper", 5)])
+def test_a_pose_found_beyond_a_joints_limit_is_held_at_that_limit(limit, beyond) -> None:
+    """An arm found (torque off) with its wrist 5 ticks beyond a limit of its range: the goal
+    that holds it there is the limit itself, never a goal beyond it."""
+    profile = load_serial_profile("openmanipulator-x", ["servo.feedforward=false"])
+    pairs = list(zip(profile.park, profile.joints, strict=True))
+    row = np.array([int(angles_to_ticks(a, j)) for a, j in pairs])
+    wrist = profile.joints[3]
+    at = int(angles_to_ticks(getattr(wrist, limit), wrist))
+    row[3] = at + beyond
+    (held,) = ArmLift(profile).stand(row)
+    assert held.tolist() == [*row[:3].tolist(), at]
+
+
 def test_a_hop_is_measured_from_the_last_sample_on_the_paper() -> None:
     t = np.arange(5) * 0.001
     x = np.array([-5.0, 0.0, 0.3, 0.6, 0.9])  # far before the last sample on the paper
@@ -763,3 +777,24 @@ def test_a_planned_instant_at_a_pauses_start_is_drawn_after_the_pause() -> None:
     assert paused["contact_kept_pct"] == 100.0  # steps around 0.625 s and 1.75 s
     (late,) = contact_figures([run], executed, np.zeros((0, 2)), [(1.0 + 1e-6, 0.25)])
     assert late["contact_kept_pct"] == 50.0  # the instant before the pause: a step around 0.5 s
+
+
+@pytest.mark.parametrize(("before", "kept"), [(1e-9, 100.0), (1e-8, 50.0)])
+def test_a_planned_instant_a_nanosecond_before_a_pause_counts_as_at_it(before, kept) -> None:
+    """A planned instant up to 1 ns before a pause's start (the clocks' rounding) is drawn after
+    the pause, with everything after it; 10 ns before, it is drawn before the pause."""
+    executed = np.column_stack([np.linspace(0, 3, 31), np.zeros(31), np.zeros(31), np.ones(31)])
+    executed[5, 3] = 0.0  # off the paper at 0.5 s only, before the pause
+    run = (np.array([0.0, 1.0 - before, 2.0]), np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]))
+    (paused,) = contact_figures([run], executed, np.zeros((0, 2)), [(1.0, 0.25)])
+    assert paused["contact_kept_pct"] == kept  # steps around 0.625 s and 1.75 s, or 0.5 s
+
+
+def test_a_step_at_the_first_executed_sample_is_judged_by_that_sample() -> None:
+    """The record starts at 0.5 s with the nib off the paper there only: the planned step whose
+    middle is that instant counts as not drawn (the first sample's), the next one as drawn."""
+    executed = np.column_stack([np.linspace(0.5, 3, 26), np.zeros(26), np.zeros(26), np.ones(26)])
+    executed[0, 3] = 0.0
+    run = (np.array([0.0, 1.0, 2.0]), np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]))
+    (figures,) = contact_figures([run], executed, np.zeros((0, 2)))
+    assert figures["contact_kept_pct"] == 50.0  # steps around 0.5 s (off) and 1.5 s (on)

@@ -10,6 +10,7 @@ import pytest
 
 from tagbot.arm.serial import OPEN_MANIPULATOR_X
 from tagbot.arm.serial.kinematics import SerialArm
+from tagbot.arm.serial.profile import load_serial_profile
 from tagbot.errors import ProfileError
 
 # open_manipulator_x.urdf (ROBOTIS, Apache-2.0): joint origins in the parent frame, axes, limits
@@ -150,3 +151,22 @@ def test_the_model_ships_with_the_package() -> None:
     assert OPEN_MANIPULATOR_X.is_file()
     text = OPEN_MANIPULATOR_X.read_text()
     assert "Apache-2.0" in text and "open_manipulator_x.urdf" in text
+
+
+def test_a_servo_id_of_252_is_taken_and_253_refused() -> None:
+    """The highest DYNAMIXEL ID, 252, is a joint's servo; 253 is refused naming the joint."""
+    assert load_serial_profile(None, ["joint4.id=252"]).bus_ids == [11, 12, 13, 252]
+    with pytest.raises(ProfileError) as err:
+        load_serial_profile(None, ["joint4.id=253"])
+    assert str(err.value) == "--set: joint4.id: must be a DYNAMIXEL ID 0..252, got 253"
+
+
+def test_an_area_off_the_paper_names_the_file_that_widened_it(tmp_path) -> None:
+    """An area.x_max beyond the sheet, set by the user's file alone, names that file."""
+    path = tmp_path / "wide.toml"
+    path.write_text("[area]\nx_max = 200.0\n")
+    with pytest.raises(ProfileError) as err:
+        load_serial_profile(path)
+    assert str(err.value) == (
+        f"{path}: area.y_max: the area must lie on the paper (0..148 by 0..210 mm)"
+    )
