@@ -355,6 +355,7 @@ class GrblStreamer:
         self._read_build_options()
         if alarmed or self.query_state().state == State.ALARM:
             self._unlock()
+            self.query_state()  # where $X or $H left the machine
         return dict(self.settings)
 
     def _after_reset(self) -> bool:
@@ -577,8 +578,14 @@ class GrblStreamer:
         return out
 
     def _machine_xy(self) -> tuple[float, float]:
-        position = _xy_of(self.state) if self.state is not None else None
-        return position or (0.0, 0.0)
+        """Where the machine is: the last status report's position, asked for if none came."""
+        position = _xy_of(self.state if self.state is not None else self.query_state())
+        if position is None:
+            raise DeviceFault(
+                f"the status report {self.state} gives no machine position (MPos or WPos):"
+                " is this a Grbl 1.1 controller?"
+            )
+        return position
 
     def _on_status(self, status: Status) -> None:
         """Track the executing line; progress; the watchdog's evidence."""

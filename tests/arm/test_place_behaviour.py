@@ -10,7 +10,7 @@ import pytest
 
 from tagbot.arm import build_program, check_program, load_profile, place
 from tagbot.arm.kinematics import Arm
-from tagbot.arm.place import safe
+from tagbot.arm.place import approach, safe
 from tagbot.errors import PlacementError
 from tagbot.model import Plan, Tag
 
@@ -230,3 +230,12 @@ def test_a_box_of_a_millionth_of_a_millionth_of_the_room_has_no_extent() -> None
         _largest(1e-12 * room, profile, arm)
     assert str(refused.value) == "place.scale: the tag has no extent to place"
     assert _largest(2e-12 * room, profile, arm) > 0.0
+
+
+def test_an_approach_to_a_goal_of_the_program_lifts_its_pen(profile) -> None:
+    """Approaching one of the program's goals (shoulder, elbow, pen down) gives three goals: that
+    goal's shoulder and elbow ticks with the pen up, never its pen-down ticks as a fourth."""
+    program = build_program(small_tag(), profile)
+    row = program.goals[len(program) // 2]
+    goals, _ = approach(np.array([2048, 2048, 2048]), profile, row)
+    assert goals.tolist() == [int(row[0]), int(row[1]), profile["pen.up"]]

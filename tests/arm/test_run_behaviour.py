@@ -16,6 +16,7 @@ from tagbot.arm import load_profile, prepare
 from tagbot.arm.kinematics import Arm
 from tagbot.arm.run import (
     Budget,
+    _outside_limits,
     _stall_warnings,
     draw_arm,
     simulated_chain,
@@ -125,3 +126,14 @@ def test_a_clean_runs_details_name_its_resyncs_and_their_delay(tmp_path) -> None
     run = prepare(small_tag()).run(tmp_path)
     details = run_report(run)["details"]
     assert details["resyncs"] == 0 and details["resync_delay_s"] == 0.0
+
+
+def test_a_joint_starting_exactly_at_its_lower_limit_is_not_warned() -> None:
+    """Limits on whole ticks (shoulder.min_deg -90° = tick 0, elbow.min_deg 0° = tick 2048): joints
+    read back exactly there start inside them, no warning; the elbow one tick lower is warned."""
+    profile = load_profile(None, ["shoulder.min_deg=-90", "elbow.min_deg=0"])
+    pen = profile["pen.up"]
+    assert _outside_limits(np.array([0, 2048, pen]), profile) == []
+    assert _outside_limits(np.array([0, 2047, pen]), profile) == [
+        "elbow starts at -0.1° outside elbow.min_deg..max_deg (0..160°): moving it back"
+    ]

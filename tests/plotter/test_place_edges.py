@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import math
 
 import numpy as np
@@ -20,6 +21,8 @@ from tagbot.plotter.place import (
 )
 
 from .conftest import straight_tag, two_plan_tag
+
+place_module = importlib.import_module("tagbot.plotter.place")
 
 
 def _vertical_tag() -> Tag:
@@ -132,3 +135,26 @@ def test_a_bed_not_starting_at_y_0_is_filled_between_its_own_edges(tiny_file) ->
     ys = np.concatenate([r.xy[:, 1] for r in placed.runs])
     assert ys.min() == pytest.approx(10.0, abs=0.01) and ys.max() == pytest.approx(50.0, abs=0.01)
     assert placed.size == pytest.approx(4.0, rel=1e-3)
+
+
+@pytest.mark.parametrize(("too_fast", "converges"), [(99, True), (100, False)])
+def test_retiming_gives_up_after_100_rounds_of_slowing(monkeypatch, too_fast, converges) -> None:
+    """Retiming slows a run down for at most 100 rounds: a run still too fast after its 99th
+    slowing is drawn (the 100th round finds it within the limits), one still too fast after its
+    100th is refused with "retiming: did not converge"."""
+    real = place_module.segment_excess
+    rounds = []
+
+    def excess(xy, t, profile):
+        rounds.append(len(rounds))
+        return 1.00001 if len(rounds) <= too_fast else real(xy, t, profile)
+
+    monkeypatch.setattr(place_module, "segment_excess", excess)
+    profile = load_profile(None, ["motion.min_buffer=0", "place.scale=0.2"])
+    if converges:
+        assert len(place(straight_tag(), profile).runs) == 1
+        assert len(rounds) == 100
+    else:
+        with pytest.raises(PlacementError, match=r"^retiming: did not converge$"):
+            place(straight_tag(), profile)
+        assert len(rounds) == 100

@@ -461,3 +461,13 @@ def test_the_bed_check_allows_a_micrometre_on_every_edge_and_not_more() -> None:
         point[0, axis] = edge + out * 2e-6
         with pytest.raises(PlacementError, match=rf"beyond {re.escape(key)} = "):
             _check_bed(profile, [inside, point])
+
+
+def test_the_look_ahead_cap_counts_only_the_segment_and_the_ones_after_it() -> None:
+    """With two look-ahead blocks, a segment's cap √(2·a·ΣL) sums its own length and the next
+    one's (just its own at the end), never the path already drawn before it."""
+    profile = load_profile(None, ["limits.planner_blocks=2"])
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0], [4.0, 0.0]])
+    _, cap = segment_speed_cap(xy, 0.1, profile)
+    # One direction, one acceleration: cap² is proportional to ΣL = 2, 2, 2 and 1 mm.
+    assert (cap**2 / cap[-1] ** 2).tolist() == pytest.approx([2.0, 2.0, 2.0, 1.0])

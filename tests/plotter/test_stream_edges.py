@@ -361,25 +361,42 @@ def test_a_safe_stop_without_an_alarm_holds_resets_and_lifts_the_pen():
     assert [d for d in tx[reset:] if d.endswith(b"\n")] == [b"M3S50\n", b"G4P0.1\n"]
 
 
-def test_a_streamer_that_saw_no_status_starts_the_job_from_the_origin():
+def test_a_streamer_that_saw_no_status_asks_where_the_machine_is_before_the_job():
     """A streamer used without :meth:`connect` (its banner already read by the caller) has no
-    status yet: the job starts from the origin, so while the machine still runs out along its
-    first line (0,0)->(20,0), no report says that line is done, though the second line comes
-    back over the same path."""
-    device = SimulatedGrbl(SETTINGS)
+    status yet: it asks for one before the first line, so the job starts where the machine is
+    (here 0,20), not at an assumed origin, and runs to its end."""
+    device = SimulatedGrbl(SETTINGS, position_mm=(0.0, 20.0, 0.0))
     device.read()  # the boot banner, taken by whoever opened the port
     port = open_device(device)
-    streamer = GrblStreamer(port, StreamOptions())
-    lines = ["G1X20Y0F600\n", "G1X10Y0F600\n", "G1X10Y20F600\n"]
+    wire = Wire()
+    streamer = GrblStreamer(port, StreamOptions(), trace=wire)
+    lines = ["G1X20Y20F600\n", "G1X20Y0F600\n"]
     try:
         assert streamer.state is None
         report = streamer.stream(lines)
     finally:
         port.close()
-    xs = [status.mpos[0] for _, status in report.statuses]
-    turn = xs.index(max(xs))  # the report nearest the far end of line 1
-    assert xs[turn] > 19.5 and turn >= 5
-    assert report.executing[: turn + 1] == [0] * (turn + 1)
+    assert wire.tx[0] == b"?" and wire.tx.index(lines[0].encode()) > 0
+    (_, first), *_ = report.statuses
+    assert first.mpos[1] == 20.0 and 0.0 <= first.mpos[0] < 1.0  # setting out from (0, 20)
+    assert report.lines_executed == 2 and report.errors == []
+
+
+def test_a_status_with_no_position_is_refused_before_the_job():
+    """A controller whose status report carries neither MPos nor WPos (not Grbl 1.1): the job
+    is refused before its first line, since no line could be traced to where it ran."""
+    device = SimulatedGrbl(SETTINGS)
+    device.read()
+    port = open_device(device)
+    wire = Wire()
+    streamer = GrblStreamer(port, StreamOptions(), trace=wire)
+    streamer.state = parse_message("<Idle|FS:0,0>")
+    try:
+        with pytest.raises(DeviceFault, match=r"gives no machine position \(MPos or WPos\)"):
+            streamer.stream(["G1X20Y20F600\n"])
+    finally:
+        port.close()
+    assert wire.tx == []
 
 
 def test_an_alarm_during_a_command_names_the_command():
@@ -444,3 +461,19 @@ def test_a_stop_inside_a_line_one_mm_long_resumes_inside_it():
     remaining half in half the time: F doubles)."""
     lines = ["G21\n", "G90\n", "G93\n", "G1X10Y0F60\n", "G1X11Y0F60\n", "G1X20Y0F60\n"]
     assert resume_point(lines, 4, (10.5, 0.0)) == ("G1X11Y0F120\n", (10.5, 0.0))
+
+
+@pytest.mark.parametrize(("policy", "where"), [("unlock", (30.0, 40.0)), ("home", (0.0, 0.0))])
+def test_after_an_unlock_or_homing_at_connect_the_streamer_knows_the_new_state(policy, where):
+    """A machine locked at power-up at (30, 40): once ``$X`` or ``$H`` is done, the streamer's
+    last status is asked afresh, Idle and where that left the machine (homing moves it to the
+    origin), not the Alarm seen before it."""
+    device = SimulatedGrbl({**SETTINGS, 22: 1}, start_in_alarm=True, position_mm=(30.0, 40.0, 0.0))
+    port = open_device(device)
+    streamer = GrblStreamer(port, StreamOptions(unlock=policy))
+    try:
+        streamer.connect()
+    finally:
+        port.close()
+    assert streamer.state.state == State.IDLE
+    assert streamer.state.mpos[:2] == where
