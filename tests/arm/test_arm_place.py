@@ -98,8 +98,12 @@ def test_too_large_a_scale_is_refused_naming_the_largest() -> None:
 
 def test_unreachable_area_is_refused() -> None:
     profile = load_profile(None, ["area.x_min=400", "area.x_max=600"])
-    with pytest.raises(PlacementError, match="no part of the area"):
+    with pytest.raises(PlacementError) as refused:
         place(small_tag(), profile)
+    assert str(refused.value) == (
+        "placement: no part of the area (area.*) is in the arm's safe reach"
+        " (check arm.base_x/base_y, the link lengths and the joint limits)"
+    )
 
 
 def test_joint_limits_shrink_the_workspace() -> None:

@@ -645,3 +645,99 @@ def test_a_stop_with_the_pen_up_logs_that_the_arm_stopped_safely(tmp_path, caplo
         )
     stopped = [m for m in (r.getMessage() for r in caplog.records) if m.startswith("stopped ")]
     assert stopped == ["stopped safely: pen lifted by the arm"]
+
+
+def test_a_port_that_fails_to_say_what_is_waiting_names_the_drain(record, profile):
+    """The adapter fails when asked how many bytes are waiting: the error names the drain, the
+    port and the adapter's words."""
+    sim = record(simulated_chain(profile))
+    with ArmDriver(sim.url, profile) as driver:
+        driver.connect()
+
+        class Broken:
+            @property
+            def in_waiting(self) -> int:
+                raise OSError("the adapter went away")
+
+        real, driver.port.ser = driver.port.ser, Broken()
+        try:
+            with pytest.raises(ConnectionLost) as caught:
+                driver.drain()
+        finally:
+            driver.port.ser = real
+    assert caught.value.where == "drain"
+    assert str(caught.value) == f"drain: {sim.url}: drain: the adapter went away"
+
+
+def test_a_failed_stream_logs_its_last_bus_operations_with_their_results(
+    record, monkeypatch, caplog
+):
+    """The read-back request refused at tick 1: the debug log lists the bus operations before
+    the stop, the goals written with result 0 and the refused SYNC_READ with the SDK's code."""
+    _, driver, goals = _streaming(record)
+    monkeypatch.setattr(sdk.GroupSyncRead, "txPacket", lambda self: sdk.COMM_TX_FAIL)
+    with (
+        driver,
+        caplog.at_level(logging.DEBUG, logger="tagbot.arm.driver"),
+        pytest.raises(ConnectionLost),
+    ):
+        driver.stream(goals)
+    logged = [r.getMessage() for r in caplog.records]
+    stop = next(i for i, m in enumerate(logged) if m.startswith("stopping: "))
+    listed = [m for m in logged[stop + 1 :] if m.startswith("  ")]
+    assert listed[-2:] == [
+        "  tick 1: SYNC_WRITE of goal positions -> result 0, error 0",
+        f"  tick 1: SYNC_READ of present positions -> result {sdk.COMM_TX_FAIL}, error 0",
+    ]
+
+
+@pytest.mark.parametrize("off", [20, 21])
+def test_a_servo_stopping_up_to_20_ticks_from_its_goal_has_arrived(record, profile, off):
+    """After the move to the start a servo 20 ticks (1.8°) from its goal has arrived; 21 ticks
+    away it is named as stopped short, with where it stands."""
+    sim = record(simulated_chain(profile))
+    with ArmDriver(sim.url, profile) as driver:
+        driver.connect()
+        goals = driver.read_present()
+        stands = goals + np.array([0, off, 0])
+        driver.read_present = lambda where="connect": stands.copy()
+        if off == 20:
+            driver.move_to(goals, 0.5)
+            assert driver.last_row == goals.tolist()
+        else:
+            with pytest.raises(DeviceError) as caught:
+                driver.move_to(goals, 0.5)
+            assert str(caught.value) == (
+                f"approach: servo 2 (elbow) stopped at {stands[1]} ticks, 21 from its goal"
+                f" {goals[1]} (blocked, or torque off?)"
+            )
+
+
+@pytest.mark.parametrize(("rate", "fits"), [(42.0, True), (43.0, False)])
+def test_the_bus_check_adds_each_servos_return_delay_to_the_read_back(rate, fits):
+    """With bus.return_delay_us = 500 each of the three servos waits 0.5 ms before its reply:
+    at 57600 bps a tick then takes 22.05 + 1.5 = 23.55 ms on the bus, within 42 Hz's period,
+    over 43 Hz's."""
+    from tagbot.arm.run import check_bus
+    from tagbot.errors import ProfileError
+
+    profile = load_profile(
+        None,
+        [
+            "bus.baud=57600",
+            f"motion.rate={rate:g}",
+            "bus.readback_rate=40",
+            "servo.profile_ms=80",
+            "bus.return_delay_us=500",
+        ],
+    )
+    busy = ((14 + 5 * 3) + (14 + 3) + 3 * 27) * 10 / 57600 + 3 * 500e-6
+    assert (busy <= 1 / rate) == fits
+    if fits:
+        check_bus(profile)
+    else:
+        with pytest.raises(ProfileError) as raised:
+            check_bus(profile)
+        assert f"take {1e3 * busy:.1f} ms on the bus, more than the {1e3 / rate:g} ms" in str(
+            raised.value
+        )

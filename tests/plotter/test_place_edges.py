@@ -158,3 +158,11 @@ def test_retiming_gives_up_after_100_rounds_of_slowing(monkeypatch, too_fast, co
         with pytest.raises(PlacementError, match=r"^retiming: did not converge$"):
             place(straight_tag(), profile)
         assert len(rounds) == 100
+
+
+def test_a_plotters_runs_say_they_ease_at_constant_acceleration(tiny_file) -> None:
+    """Steppers take a constant acceleration, not a jerk limit: every placed run's clock says
+    it is not jerk-limited (the run clock a report or a resume reads back)."""
+    placed = place(two_plan_tag(), load_profile(tiny_file))
+    assert len(placed.runs) == 2
+    assert [run.clock.jerk_limited for run in placed.runs] == [False, False]
