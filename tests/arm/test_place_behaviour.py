@@ -239,3 +239,60 @@ def test_an_approach_to_a_goal_of_the_program_lifts_its_pen(profile) -> None:
     row = program.goals[len(program) // 2]
     goals, _ = approach(np.array([2048, 2048, 2048]), profile, row)
     assert goals.tolist() == [int(row[0]), int(row[1]), profile["pen.up"]]
+
+
+def test_a_boundary_in_a_long_span_is_found_in_as_few_halvings_as_its_tolerance_needs() -> None:
+    """Finding a trim instant in a 40 s span stops once the bracket is within 1e-9 of the
+    instant's size: about log2(40 / (1e-9·13.3)) = 32 evaluations of the predicate, not more."""
+    from tagbot.arm.place import _bisect
+
+    calls = []
+    boundary = 40.0 / 3.0
+
+    def below(t: float) -> bool:
+        calls.append(t)
+        return t < boundary
+
+    found = _bisect(below, 0.0, 40.0)
+    assert found < boundary and boundary - found <= 1e-9 * boundary
+    assert len(calls) <= math.ceil(math.log2(40.0 / (1e-9 * boundary))) + 1
+
+
+def test_a_run_starting_right_of_the_shoulder_keeps_the_shoulders_turn() -> None:
+    """With the shoulder's range widened to -30..265° and the elbow's raised to 120..160°, a run
+    that starts at a shoulder angle of a few degrees is drawn there (within the shoulder's own
+    range, as the inverse kinematics gives it), not a turn round at 366°."""
+    plan = Plan(
+        targets=[[10.0, 0.0], [0.0, 0.0], [0.0, 6.0]],
+        dt=[0.0, 0.15],
+        mu=[math.log(0.2)] * 2,
+        sigma=[0.3, 0.3],
+        phi1=[0.3, 0.0],
+        phi2=[0.0, -0.3],
+    )
+    profile = load_profile(None, ["elbow.min_deg=120", "shoulder.max_deg=265", "place.scale=5"])
+    program = build_program(Tag(plans=(plan,)), profile)
+    (first,) = [s[2] for s in program.segments if s[0] == "draw"]
+    shoulder = program.angles[first, 0]
+    expected = Arm.from_profile(profile).ik(program.setpoints.xy[first : first + 1])[0, 0]
+    assert 0.0 < math.degrees(shoulder) < 14.0
+    assert shoulder == pytest.approx(expected, abs=1e-9)
+
+
+def test_a_run_the_sampled_limits_slow_beyond_the_cap_is_refused_naming_it() -> None:
+    """A run whose 1 ms estimate is exactly motion.max_time_scale but whose samples at the loop
+    period need a little more is refused, naming that plan and the slow-down it needs."""
+    tag = two_plan_tag()
+    slow = ["shoulder.max_speed=60", "elbow.max_speed=60", "motion.max_deviation=0"]
+    uncapped = load_profile(None, [*slow, "motion.max_time_scale=100"])
+    placement = place(tag, uncapped)
+    free = build_program(tag, uncapped, placement)
+    estimate, needed = free.setpoints.limits["speed"], free.setpoints.run_scales[0]
+    assert free.setpoints.limits["sampled"] == needed > estimate
+    capped = load_profile(None, [*slow, f"motion.max_time_scale={estimate!r}"])
+    with pytest.raises(PlacementError) as refused:
+        build_program(tag, capped, placement)
+    assert str(refused.value) == (
+        f"joint limits: plan 0 must be slowed down {needed:.3g} times, more than"
+        f" motion.max_time_scale = {estimate:g}"
+    )
