@@ -279,9 +279,10 @@ def _best_centre(
     return feasible[np.argmin(np.hypot(*(feasible - mean).T))]
 
 
-def _largest(extent: Array, profile: ArmProfile, arm: Arm) -> float:
-    """The largest mm per tag unit at which the box fits somewhere (0 if none): bisection with
-    centres on a 25 × 25 grid over the area, then refined on a finer grid around the best."""
+def _largest(extent: Array, profile: ArmProfile, arm: Arm) -> tuple[float, Array | None]:
+    """The largest mm per tag unit at which the box fits somewhere, and a centre where it fits
+    there (0 and None if none fits): bisection with centres on a 25 × 25 grid over the area,
+    then refined on a finer grid around the best."""
     x_min, x_max, y_min, y_max = profile.area
     m = profile["area.margin"]
     room = np.array([x_max - x_min - 2 * m, y_max - y_min - 2 * m])
@@ -291,8 +292,9 @@ def _largest(extent: Array, profile: ArmProfile, arm: Arm) -> float:
     if not ratios:
         raise PlacementError("place.scale: the tag has no extent to place")
     low, high = 0.0, min(ratios)
-    if _best_centre(extent * high, profile, arm, 25) is not None:
-        return high
+    best = _best_centre(extent * high, profile, arm, 25)
+    if best is not None:
+        return high, best
     floor = 1e-4 * high  # below this, nothing usable fits
     while high - low > 1e-3 * high and high > floor:
         mid = 0.5 * (low + high)
@@ -302,7 +304,7 @@ def _largest(extent: Array, profile: ArmProfile, arm: Arm) -> float:
             high = mid
     best = _best_centre(extent * low, profile, arm, 25) if low > 0 else None
     if best is None:
-        return 0.0
+        return 0.0, None
     # Near the best coarse centre, a finer grid may hold a slightly larger box.
     high = min(min(ratios), low * 1.1)
     while high - low > 1e-4 * high:
@@ -312,7 +314,7 @@ def _largest(extent: Array, profile: ArmProfile, arm: Arm) -> float:
             low, best = mid, found
         else:
             high = mid
-    return low
+    return low, best
 
 
 def place(tag: Tag, profile: ArmProfile) -> Placement:
@@ -334,7 +336,7 @@ def place(tag: Tag, profile: ArmProfile) -> Placement:
     pad *= FINE_STEP / 4.0
     low, high = turned.min(axis=0) - pad, turned.max(axis=0) + pad
     extent = high - low
-    largest = _largest(extent, profile, arm)
+    largest, near = _largest(extent, profile, arm)
     if largest <= 0.0:
         raise PlacementError(
             "placement: no part of the area (area.*) is in the arm's safe reach"
@@ -344,6 +346,10 @@ def place(tag: Tag, profile: ArmProfile) -> Placement:
     # "fit" keeps 0.1 % clear of the limits the box touches: the extent is sampled every 1 ms.
     size = largest * (1.0 - 1e-3) if scale == "fit" else float(scale)
     centre = _best_centre(extent * size, profile, arm, 61)
+    if centre is None and near is not None and size <= largest:
+        # The area's grid can miss the small region the largest sizes fit in: look around the
+        # centre the refinement found (where a box of ``largest`` fits).
+        centre = _best_centre(extent * size, profile, arm, 21, near=near)
     if centre is None:
         raise PlacementError(
             f"place.scale: {size:g} mm per unit makes the tag {(extent[0] - 2 * pad) * size:.1f}"

@@ -229,7 +229,8 @@ def test_a_box_of_a_millionth_of_a_millionth_of_the_room_has_no_extent() -> None
     with pytest.raises(PlacementError) as refused:
         _largest(1e-12 * room, profile, arm)
     assert str(refused.value) == "place.scale: the tag has no extent to place"
-    assert _largest(2e-12 * room, profile, arm) > 0.0
+    largest, centre = _largest(2e-12 * room, profile, arm)
+    assert largest > 0.0 and centre is not None
 
 
 def test_an_approach_to_a_goal_of_the_program_lifts_its_pen(profile) -> None:
