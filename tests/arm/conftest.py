@@ -43,6 +43,19 @@ def small_tag(length: float = 10.0) -> Tag:
     return Tag(plans=(plan,))
 
 
+def hook_from_its_end() -> Tag:
+    """The hook drawn from its bottom-right end: 10 units left, then 6 up."""
+    plan = Plan(
+        targets=[[10.0, 0.0], [0.0, 0.0], [0.0, 6.0]],
+        dt=[0.0, 0.15],
+        mu=[math.log(0.2)] * 2,
+        sigma=[0.3, 0.3],
+        phi1=[0.3, 0.0],
+        phi2=[0.0, -0.3],
+    )
+    return Tag(plans=(plan,))
+
+
 def two_plan_tag() -> Tag:
     """Two plans with a pen lift between them."""
     first = small_tag().plans[0]

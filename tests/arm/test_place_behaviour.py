@@ -14,7 +14,7 @@ from tagbot.arm.place import approach, safe
 from tagbot.errors import PlacementError
 from tagbot.model import Plan, Tag
 
-from .conftest import small_tag, two_plan_tag
+from .conftest import hook_from_its_end, small_tag, two_plan_tag
 
 # The default arm: links of 150 mm from (0, 0), reach margin 5 mm, so the safe reach ends at
 # 295 mm; a tall area lets the reach (not the paper) be the limit straight up the y axis.
@@ -263,16 +263,8 @@ def test_a_run_starting_right_of_the_shoulder_keeps_the_shoulders_turn() -> None
     """With the shoulder's range widened to -30..265° and the elbow's raised to 120..160°, a run
     that starts at a shoulder angle of a few degrees is drawn there (within the shoulder's own
     range, as the inverse kinematics gives it), not a turn round at 366°."""
-    plan = Plan(
-        targets=[[10.0, 0.0], [0.0, 0.0], [0.0, 6.0]],
-        dt=[0.0, 0.15],
-        mu=[math.log(0.2)] * 2,
-        sigma=[0.3, 0.3],
-        phi1=[0.3, 0.0],
-        phi2=[0.0, -0.3],
-    )
     profile = load_profile(None, ["elbow.min_deg=120", "shoulder.max_deg=265", "place.scale=5"])
-    program = build_program(Tag(plans=(plan,)), profile)
+    program = build_program(hook_from_its_end(), profile)
     (first,) = [s[2] for s in program.segments if s[0] == "draw"]
     shoulder = program.angles[first, 0]
     expected = Arm.from_profile(profile).ik(program.setpoints.xy[first : first + 1])[0, 0]

@@ -12,10 +12,9 @@ import pytest
 from tagbot.arm import build_program, load_profile
 from tagbot.arm.place import Placement, place, safe
 from tagbot.errors import PlacementError
-from tagbot.model import Plan, Tag
 from tagbot.model.motion import evaluate_plan
 
-from .conftest import small_tag
+from .conftest import hook_from_its_end, small_tag
 
 AREA = ["area.x_min=-20", "area.x_max=20", "area.y_min=150", "area.y_max=190"]
 """A 40 by 40 mm sheet (20 by 20 inside its 10 mm margin) well inside the arm's reach and joint
@@ -115,32 +114,22 @@ def test_the_inner_reach_circle_keeps_its_margin_and_not_a_hair_less() -> None:
     assert not bool(safe(np.nextafter(inner, np.inf), folded))
 
 
-def _hook() -> Tag:
-    """A hook drawn from its bottom-right end: 10 units left, then 6 up."""
-    plan = Plan(
-        targets=[[10.0, 0.0], [0.0, 0.0], [0.0, 6.0]],
-        dt=[0.0, 0.15],
-        mu=[math.log(0.2)] * 2,
-        sigma=[0.3, 0.3],
-        phi1=[0.3, 0.0],
-        phi2=[0.0, -0.3],
-    )
-    return Tag(plans=(plan,))
-
-
 @pytest.mark.parametrize("elbow_min", [100, 120])
 def test_fit_and_the_largest_scale_are_placed_where_the_area_grid_finds_no_room(elbow_min) -> None:
     """An elbow that cannot fold past 100 or 120° leaves a small region where the largest boxes
     fit, between the points of the area's grid: "fit" and the largest scale itself are still
     placed (inside the arm's safe reach), not refused as fitting nowhere; beyond it, refused."""
     limits = [f"elbow.min_deg={elbow_min}"]
-    fit = place(_hook(), load_profile(None, limits))
+    fit = place(hook_from_its_end(), load_profile(None, limits))
     assert fit.mm_per_unit == pytest.approx(fit.largest * (1 - 1e-3), rel=1e-12)
     largest = float(fit.largest)
-    at = place(_hook(), load_profile(None, [*limits, f"place.scale={largest!r}"]))
+    at = place(hook_from_its_end(), load_profile(None, [*limits, f"place.scale={largest!r}"]))
     assert at.mm_per_unit == largest
     x0, x1, y0, y1 = at.box
     corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])
     assert safe(corners, load_profile(None, limits)).all()
     with pytest.raises(PlacementError, match="fits nowhere"):
-        place(_hook(), load_profile(None, [*limits, f"place.scale={largest * (1 + 1e-6)!r}"]))
+        place(
+            hook_from_its_end(),
+            load_profile(None, [*limits, f"place.scale={largest * (1 + 1e-6)!r}"]),
+        )

@@ -333,40 +333,27 @@ def test_goals_stepping_to_a_range_end_stay_within_the_servos_limits(end) -> Non
     assert ticks[-1] == limit
 
 
-def test_the_papers_push_is_fed_forward_where_the_point_is_below_the_paper_wherever_it_is():
-    """A pose standing with the pen's point 1 mm above a raised paper: no push; the paper 1 mm
-    above the point (the point aimed 1 mm in): the joints' feedforward takes the paper's push."""
+@pytest.mark.parametrize(
+    ("above", "pushed"),
+    [(-1.0, False), (0.0, False), (1e-3, True), (1.0, True)],
+)
+def test_the_papers_push_is_fed_forward_only_where_the_point_is_aimed_into_it(above, pushed):
+    """A pose at park with the paper raised to the pen's point, ``above`` mm over it: 1 mm
+    under the point, or exactly at it (touching, not aimed in), no push is fed forward; a
+    micrometre or 1 mm over it (the point aimed in), the shoulder, elbow and wrist take the
+    paper's push (the preload's at least)."""
     profile = load_serial_profile("openmanipulator-x")
     pose = profile.park[None, :]
     tip, _ = profile.arm.fk(pose)
     z = 1000.0 * float(np.asarray(tip).reshape(-1, 3)[0, 2])  # mm above the base plate
+    assert z / 1000.0 == float(np.asarray(tip).reshape(-1, 3)[0, 2])  # exactly at the point
     alone = feedforward(pose, np.ones(1, dtype=bool), profile)
-
-    def on_paper_at(height: float) -> np.ndarray:
-        raised = load_serial_profile("openmanipulator-x", [f"paper.z={height!r}"])
-        return feedforward(pose, np.ones(1, dtype=bool), raised) - alone
-
-    np.testing.assert_array_equal(on_paper_at(z - 1.0), 0.0)
-    pushed = on_paper_at(z + 1.0)
-    assert np.abs(pushed[0, 1:]).min() > 1e-3  # rad: the shoulder, elbow and wrist take it
-
-
-def test_a_point_exactly_on_the_paper_is_not_pushed_a_hair_into_it_is() -> None:
-    """The paper raised exactly to the pen's point at park: the point touches it without being
-    aimed in, so no push is fed forward; a micrometre higher, the preload's push is."""
-    profile = load_serial_profile("openmanipulator-x")
-    pose = profile.park[None, :]
-    tip, _ = profile.arm.fk(pose)
-    z = 1000.0 * float(np.asarray(tip).reshape(-1, 3)[0, 2])  # mm above the base plate
-    alone = feedforward(pose, np.ones(1, dtype=bool), profile)
-
-    def on_paper_at(height: float) -> np.ndarray:
-        raised = load_serial_profile("openmanipulator-x", [f"paper.z={height!r}"])
-        return feedforward(pose, np.ones(1, dtype=bool), raised) - alone
-
-    assert z / 1000.0 == float(np.asarray(tip).reshape(-1, 3)[0, 2])  # the paper at the point
-    np.testing.assert_array_equal(on_paper_at(z), 0.0)
-    assert np.abs(on_paper_at(z + 1e-3)[0, 1:]).min() > 5e-4  # rad: the preload's push
+    raised = load_serial_profile("openmanipulator-x", [f"paper.z={z + above!r}"])
+    push = feedforward(pose, np.ones(1, dtype=bool), raised) - alone
+    if pushed:
+        assert np.abs(push[0, 1:]).min() > 5e-4  # rad
+    else:
+        np.testing.assert_array_equal(push, 0.0)
 
 
 def test_a_point_at_a_strokes_onset_is_named_for_that_stroke() -> None:
