@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tagbot.metrics import FitReport, ShapeError, compare_execution, shape_error
+from tagbot.metrics import FitReport, ShapeError, compare_execution, low_pass, shape_error
 
 
 def _circle(radius: float) -> np.ndarray:
@@ -309,3 +309,14 @@ def test_a_crowded_scribble_far_inside_a_plain_circle_is_measured_exactly(crowde
     assert error.size == pytest.approx((20.0 if crowded_first else 400.0) * np.sqrt(2.0))
     assert error.mean * error.size == pytest.approx(190.0, abs=0.0003)
     assert error.max * error.size == pytest.approx(190.0, abs=0.0003)
+
+
+def test_low_pass_smooths_four_rows_and_leaves_three() -> None:
+    """Four rows are enough to filter (a zig-zag at the Nyquist frequency, far above the 5 Hz
+    cut-off, straightens out); three rows come back unchanged."""
+    zigzag = np.array([0.0, 1.0, 0.0, 1.0])
+    smooth = low_pass(zigzag, 0.01, 5.0)
+    assert np.abs(np.diff(zigzag, 2)).max() == 2.0
+    assert np.abs(np.diff(smooth, 2)).max() < 0.05
+    assert smooth.mean() == pytest.approx(0.5, abs=0.05)
+    np.testing.assert_array_equal(low_pass(zigzag[:3], 0.01, 5.0), zigzag[:3])

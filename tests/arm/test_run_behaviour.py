@@ -24,7 +24,7 @@ from tagbot.arm.run import (
 from tagbot.draw import run_report
 from tagbot.errors import ConnectionLost, DeviceError
 
-from .conftest import small_tag
+from .conftest import hook_from_its_end, small_tag
 
 
 def test_draw_arm_reads_the_latency_timer_under_sys(tmp_path, monkeypatch, caplog) -> None:
@@ -136,4 +136,25 @@ def test_a_joint_starting_exactly_at_its_lower_limit_is_not_warned() -> None:
     assert _outside_limits(np.array([0, 2048, pen]), profile) == []
     assert _outside_limits(np.array([0, 2047, pen]), profile) == [
         "elbow starts at -0.1° outside elbow.min_deg..max_deg (0..160°): moving it back"
+    ]
+
+
+def test_a_slow_runs_cause_is_the_follow_where_its_rounded_plan_keeps_3_db_over_budget() -> None:
+    """A run below the speed SNR whose plan, its goals rounded to whole ticks, still has 28.2 dB
+    (3 dB or more over the 25 dB budget): the rounding does not explain it, the servos' follow
+    does."""
+    job = prepare(hook_from_its_end(), overrides=("place.scale=12",))
+    budget = Budget(job.program, job.profile, [], np.zeros((0, 2)))
+    snr = budget.rounded(0)[1]
+    assert 28.0 <= snr < 29.0
+    run = {
+        "plan": 0,
+        "executed_start": 1.0,
+        "planned_duration": 2.0,
+        "path_deviation_max_mm": 0.0,
+        "speed_snr_db": 20.0,
+    }
+    assert budget({"runs": [run]}) == [
+        "run 1 (plan 0): speed SNR 20.0 dB below 25 dB: the servos' follow beyond the retiming's"
+        " model (motion.max_deviation)"
     ]

@@ -10,8 +10,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from firmware_protocols.ebb.motion import ACCUMULATOR_STEP, TICK_HZ, Move, axis_final, execute
-from tagbot.axidraw.moves import SETTLE, _axis, build_job, run_reference, steps_to_xy
+from firmware_protocols.ebb.motion import (
+    ACCUMULATOR_STEP,
+    TICK_HZ,
+    AxisStart,
+    Move,
+    axis_final,
+    execute,
+)
+from tagbot.axidraw.moves import SETTLE, _axis, _check_rates, build_job, run_reference, steps_to_xy
 from tagbot.axidraw.profile import MOTOR_AXES, load_profile
 from tagbot.errors import PlacementError
 from tagbot.model import Plan, Tag
@@ -138,6 +145,29 @@ def test_a_move_faster_than_a_step_per_tick_is_refused(cae_job):
     slow = ["motors.steps_per_mm_16x=400", "limits.draw_speed=62", "limits.travel_speed=62"]
     with pytest.raises(PlacementError, match=r"^motion: a drawing move needs \d+ steps/s on a"):
         build_job(tag, setpoints, load_profile(overrides=slow))
+
+
+def test_a_t3_move_too_fast_only_at_its_second_tick_is_refused():
+    """A T3 move past one step per tick only at tick 2 (its rate's peak) is refused."""
+    # Loaded rate, accel and jerk per tick: the rate turns at tick -accel/jerk - 1/2 = 1.75.
+    jerk = -(2**24)
+    accel = -jerk * 9 // 4
+    rate = ACCUMULATOR_STEP - 1 - (accel + jerk)  # tick 1 at exactly one step per tick
+    rates = [rate + accel * k + jerk * k * (k + 1) // 2 for k in (1, 2, 3)]
+    assert rates[0] == ACCUMULATOR_STEP - 1 and rates[2] < rates[0] < rates[1]
+    # The command's parameters (rate + accel/2 - jerk/6, accel + jerk), each within int32.
+    sent = (rate + (accel + jerk) // 2 - int(jerk / 6), accel + jerk, jerk)
+    assert AxisStart.load(*sent) == AxisStart(rate, accel, jerk)
+    assert not AxisStart.load(*sent).stays_in_int32(3)  # the firmware's tick 2 would wrap
+    move = Move("T3", (sent[0], 0), (sent[1], 0), (sent[2], 0), ticks=3)
+    needs = round(rates[1] / ACCUMULATOR_STEP * TICK_HZ)
+    assert needs == 25049
+    with pytest.raises(PlacementError) as info:
+        _check_rates(move)
+    assert str(info.value) == (
+        f"motion: a drawing move needs {needs} steps/s on a motor, beyond the EBB's {TICK_HZ}"
+        " (lower limits.draw_speed)"
+    )
 
 
 def test_a_dot_is_drawn_as_pen_down_and_up_where_it_is():

@@ -32,6 +32,7 @@ from tagbot.axidraw.stream import (
     entry_end_ticks,
     parse_version,
 )
+from tagbot.control import RunControl
 from tagbot.draw import draw
 from tagbot.errors import (
     ConnectionLost,
@@ -541,3 +542,41 @@ def test_a_polled_job_without_park_ends_with_the_pen_reported_up(tmp_path):
     assert run.error is None and run.sparse
     assert run.executed[-1, 3] == 0.0 and run.executed_runs[-1] == -1
     assert run.executed[:, 3].max() == 1.0
+
+
+class _PauseOnce(RunControl):
+    """Paused at the stream's first look, resumed ``reads`` looks later."""
+
+    def __init__(self, reads: int) -> None:
+        super().__init__()
+        self.reads = reads
+
+    @property
+    def paused(self) -> bool:
+        self.reads -= 1
+        return self.reads >= 0
+
+
+def test_a_pause_with_the_pen_down_after_the_last_line_lifts_and_lowers_it():
+    """Paused once every line is on the board, the last of them leaving the pen down: the pause
+    lifts the pen (the job's own SP line) when the motors stop and lowers it before going on."""
+    link = serial.serial_for_url(_url(SimulatedEBB()), timeout=0.01)
+    try:
+        wire = _Recording(link)
+        up, down = b"SP,1,200,1\r", b"SP,0,200,1\r"
+        streamer = EBBStreamer(wire, load_profile(), {False: (up, 0.2), True: (down, 0.2)})
+        streamer.connect()
+        moves = [m.line() for m in _travel_moves((2000, 1000), streamer.profile)]
+        lines = [down, *moves]
+        report = streamer.stream(
+            lines,
+            durations=[0.2] + [0.5] * len(moves),
+            pen_down=[True] * len(lines),
+            control=_PauseOnce(reads=3),
+        )
+        assert report.sent == len(lines) and len(report.pauses) == 1
+        pens = [w for w in wire.written if w.startswith(b"SP")]
+        assert pens == [down, up, down]
+        assert wire.written.index(up) > wire.written.index(moves[-1])
+    finally:
+        link.close()

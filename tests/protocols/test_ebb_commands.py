@@ -222,6 +222,14 @@ def test_not_modelled_and_not_lines() -> None:
         parse_command(b"V\rV\r")
 
 
+def test_empty_line_is_refused_with_its_message() -> None:
+    """A bare terminator is refused with the exact message ``an empty line``."""
+    for line in (b"\r\n", b"\r", b"\n", b""):
+        with pytest.raises(ValueError) as info:
+            parse_command(line)
+        assert str(info.value) == "an empty line"
+
+
 def test_extra_characters_run_then_report() -> None:
     assert parse_command(b"SM,1,1,1,0,0\r") == Command("SM", (1, 1, 1, 0), extra=True)
     assert parse_command(b"QS,1\r") == Command("QS", (), extra=True)
