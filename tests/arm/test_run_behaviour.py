@@ -63,19 +63,23 @@ def test_a_start_outside_the_limits_is_logged_as_reported(tmp_path, record, capl
     assert message in warnings and message in caplog.messages
 
 
-def test_the_budgets_warning_is_logged_as_returned(caplog) -> None:
-    """A run below the speed SNR: the budget's warning is logged, word for word as returned."""
-    job = prepare(small_tag())
-    budget = Budget(job.program, job.profile, [(1.5, 0.2)], np.zeros((0, 2)))
-    run = {
+def _slow_run() -> dict:
+    """A report's run of plan 0 drawn on its path but 5 dB below the 25 dB speed SNR budget."""
+    return {
         "plan": 0,
         "executed_start": 1.0,
         "planned_duration": 2.0,
         "path_deviation_max_mm": 0.0,
         "speed_snr_db": 20.0,
     }
+
+
+def test_the_budgets_warning_is_logged_as_returned(caplog) -> None:
+    """A run below the speed SNR: the budget's warning is logged, word for word as returned."""
+    job = prepare(small_tag())
+    budget = Budget(job.program, job.profile, [(1.5, 0.2)], np.zeros((0, 2)))
     with caplog.at_level(logging.WARNING, logger="tagbot.arm.run"):
-        out = budget({"runs": [run]})
+        out = budget({"runs": [_slow_run()]})
     assert out == [
         "run 1 (plan 0): speed SNR 20.0 dB below 25 dB: 1 host stall (200 ms) with the pen down"
     ]
@@ -147,14 +151,7 @@ def test_a_slow_runs_cause_is_the_follow_where_its_rounded_plan_keeps_3_db_over_
     budget = Budget(job.program, job.profile, [], np.zeros((0, 2)))
     snr = budget.rounded(0)[1]
     assert 28.0 <= snr < 29.0
-    run = {
-        "plan": 0,
-        "executed_start": 1.0,
-        "planned_duration": 2.0,
-        "path_deviation_max_mm": 0.0,
-        "speed_snr_db": 20.0,
-    }
-    assert budget({"runs": [run]}) == [
+    assert budget({"runs": [_slow_run()]}) == [
         "run 1 (plan 0): speed SNR 20.0 dB below 25 dB: the servos' follow beyond the retiming's"
         " model (motion.max_deviation)"
     ]
