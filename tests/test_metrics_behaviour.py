@@ -320,3 +320,16 @@ def test_low_pass_smooths_four_rows_and_leaves_three() -> None:
     assert np.abs(np.diff(smooth, 2)).max() < 0.05
     assert smooth.mean() == pytest.approx(0.5, abs=0.05)
     np.testing.assert_array_equal(low_pass(zigzag[:3], 0.01, 5.0), zigzag[:3])
+
+
+def test_the_shared_clock_speed_snr_counts_the_recording_past_the_model_end_as_noise() -> None:
+    """A pen moving at 3 mm/s for 2 s against a model that moves so for only its first second:
+    after the model's end it is at rest, so the second half is all noise (201 / 100 in energy)."""
+    from tagbot.metrics import clock_velocity_snr
+
+    t = np.linspace(0.0, 2.0, 201)
+    xy = np.column_stack([3.0 * t, np.zeros_like(t)])
+    model_t = np.linspace(0.0, 1.0, 11)
+    model_v = np.column_stack([np.full(11, 3.0), np.zeros(11)])
+    snr = clock_velocity_snr(t, xy, model_t, model_v, None)
+    assert snr == pytest.approx(10.0 * np.log10(201.0 / 100.0), rel=1e-9)

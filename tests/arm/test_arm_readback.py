@@ -298,8 +298,10 @@ def test_prepare_refuses_before_anything_is_sent(sim_default, tmp_path) -> None:
         prepare(small_tag(), port="/dev/null")
     with pytest.raises(ProfileError, match=r"bus.baud: at 57600 bps a tick's goals and read"):
         prepare(small_tag(), overrides=("bus.baud=57600",), port=sim.url)
-    with pytest.raises(InputError, match="mode: not an option of the arm"):
+    with pytest.raises(InputError, match=r"^mode: not an option of the arm$"):
         prepare(small_tag(), mode="wait")
+    with pytest.raises(InputError, match=r"^mode, speed: not an option of the arm$"):
+        prepare(small_tag(), mode="wait", speed=2)
     assert sim.chain.packets_received == 0
     folder = tmp_path / "never"
     with pytest.raises(PortError):

@@ -179,6 +179,10 @@ def test_zpen_lines_and_dwells(tiny_file):
     assert program.lines.count("G1Z0F600\n") == 1
     assert not any(line.startswith("M3") for line in program.lines)
     assert _spans(program, "G4P") == pytest.approx([0.3, 0.3, 0.3])
+    # the pen's time is its Z moves' and its dwells' (0.3 s each, with the stop)
+    z_moves = _spans(program, "G1Z")
+    assert len(z_moves) == 3 and sum(z_moves) > 0.0
+    assert program.notes["pen_time"] == pytest.approx(sum(z_moves) + 0.9, rel=1e-12)
 
 
 def test_buffered_motion_windows(tiny_file):
@@ -429,3 +433,19 @@ def test_a_run_starting_two_motor_steps_from_the_park_position_is_travelled_to(t
     assert program.lines[pen_down - 1] == "G1X0.02Y0.02F1200\n"
     assert program.line_xy[pen_down].tolist() == pytest.approx([0.02, 0.02])
     assert program.notes["travel_time"] > 0.0
+
+
+def test_a_travel_that_cruises_is_halfway_along_at_half_its_time(slow):
+    """Grbl's trapezoid is symmetric: halfway through the long hop home (slow axes, so it
+    cruises), the planned pen is at the hop's midpoint, moving at the cruise speed toward park."""
+    program = build_program(place(_gap_tag(), slow), slow)
+    k = max(i for i, line in enumerate(program.lines) if line.startswith("G1X0Y0"))
+    here = program.line_xy[k - 1]
+    start, stop = program.line_start[k], program.line_end[k]
+    d = -here
+    length = float(np.hypot(*d))
+    assert stop - start == pytest.approx(_rest_to_rest(length, d / length, 1200.0, slow))
+    xy, v, _ = program.at(np.array([0.5 * (start + stop)]))
+    assert xy[0] == pytest.approx(0.5 * here, abs=1e-9)
+    speed = min(20.0, slow["limits.x_max_feed"] / 60.0 / abs(d[0] / length))
+    assert v[0] == pytest.approx(speed * d / length, rel=1e-9)

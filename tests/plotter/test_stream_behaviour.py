@@ -385,3 +385,17 @@ def test_with_no_dwell_the_watchdog_allows_a_second_beyond_a_shorter_stall_timeo
     machine 1 s of standing still (1.5 x 0 s + 1 s) before calling it stalled, and no more."""
     program = [line for line in square_program(400) if not line.startswith("G4P")]
     assert 1.0 < _stall_detected_after(program) < 1.0 + 1.0
+
+
+def test_a_command_waited_on_polls_the_status_at_the_poll_rate():
+    """``G4P1`` sent as a command, with a poll rate of 5 Hz: while waiting for its ``ok`` the
+    host asks for a status every 0.2 s, so 5 or 6 times over the second's dwell (4 allows a
+    late poll on a busy host; every 0.4 s would be 3)."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port, streamer, wire = connected(device, poll_rate=5.0)
+    before = len(wire.tx)
+    try:
+        streamer.command("G4P1")
+    finally:
+        port.close()
+    assert 4 <= wire.tx[before:].count(b"?") <= 6

@@ -4,6 +4,7 @@ joint moves at their floor, and the program check's refusals at and just beyond 
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from tagbot.arm.run import placement_of
 from tagbot.arm.serial.profile import load_serial_profile
 from tagbot.arm.serial.program import (
     MIN_JERK_PEAK_RATE,
+    _check_clearance,
     _excess,
     _joint_move,
     _owned,
@@ -84,6 +86,24 @@ def test_travel_between_runs_is_no_faster_than_the_profiles_travel_speed():
         assert took >= MIN_JERK_PEAK_RATE * distance / 40.0 - profile.period
 
 
+def test_a_travel_takes_the_ticks_its_straight_line_needs_at_the_travel_speed_and_no_more():
+    """Two strokes 142 mm apart at 30 mm/s (the joints' limits far off): the travel between
+    them lasts the whole ticks the straight line between the runs' ends takes at
+    ``motion.travel_speed`` with the minimum-jerk peak at 1.875x its mean, both ends outside
+    it."""
+    first = _stroke([0.0, 0.0], [10.0, 0.0])
+    last = _stroke([90.0, 90.0], [100.0, 90.0], start=first.end(15.0) + 0.3)
+    profile = load_serial_profile("openmanipulator-x", ["motion.travel_speed=30"])
+    program = build_serial_program(Tag(plans=(first, last)), profile)
+    draws = {k: (start, stop) for kind, k, start, stop in program.segments if kind == "draw"}
+    ((_kind, _plan, start, stop),) = [s for s in program.segments if s[0] == "travel" and s[1]]
+    # where the first run's ink ends and the second one's starts, mm on the paper
+    a, b = program.setpoints.xy[draws[0][1] - 1], program.setpoints.xy[draws[1][0]]
+    ticks = 1.875 * float(np.hypot(*(b - a))) / 30.0 / profile.period
+    assert ticks == pytest.approx(888.47, abs=0.01)  # whole ticks 0.47 and 0.53 away
+    assert stop - start == math.ceil(ticks) - 1
+
+
 def test_a_short_joint_move_takes_its_fifth_of_a_second_and_no_tick_more():
     """0.2 s at 100 Hz is 20 ticks: 21 samples, both ends included."""
     a = np.zeros(4)
@@ -92,6 +112,15 @@ def test_a_short_joint_move_takes_its_fifth_of_a_second_and_no_tick_more():
     q = _joint_move(a, b, 0.01, limits, limits)
     assert len(q) == 21
     np.testing.assert_allclose(q[[0, -1]], [a, b])
+
+
+def test_a_short_joint_move_at_5_hz_is_one_tick_its_two_ends():
+    """At 5 Hz a fifth of a second is one tick: the move is its two ends, nothing between."""
+    a = np.zeros(4)
+    b = np.full(4, 1e-4)
+    limits = np.full(4, 10.0)
+    q = _joint_move(a, b, 0.2, limits, limits)
+    np.testing.assert_allclose(q, [a, b])
 
 
 def _standing(profile, ticks: int = 40):
@@ -220,6 +249,29 @@ def test_a_way_back_to_park_that_dips_to_the_paper_is_refused_naming_the_park():
     profile = load_serial_profile("openmanipulator-x", park)
     with pytest.raises(PlacementError, match=r"^tick \d+ \(park to park\): the pen's point would"):
         build_serial_program(Tag(plans=(first, last)), profile)
+
+
+@pytest.mark.parametrize(("factor", "refused"), [(1 - 1e-6, False), (1.0, False), (1 + 1e-6, True)])
+def test_a_pen_up_move_may_pass_at_half_the_pen_up_height_not_below(factor, refused):
+    """A travel whose pen passes exactly half ``robot.pen_up`` above the paper is accepted; a
+    pen-up height a hair higher refuses it, naming the tick, the move and the height."""
+    profile = load_serial_profile("openmanipulator-x")
+    q = profile.park[None, :]
+    tip, _ = profile.arm.fk(q)
+    paper = profile.paper
+    height = float(((tip.reshape(-1, 3) - np.asarray(paper.origin)) @ paper.normal)[0])
+    pen_up = 2000.0 * height * factor
+    raised = load_serial_profile("openmanipulator-x", [f"robot.pen_up={pen_up!r}"])
+    if refused:
+        message = (
+            f"tick 7 (travel before plan 2): the pen's point would pass {1000 * height:.1f} mm"
+            " above the paper, less than half robot.pen_up (raise it, or move the park pose)"
+        )
+        with pytest.raises(PlacementError) as caught:
+            _check_clearance(q, raised, 2, "travel", 7)
+        assert str(caught.value) == message
+    else:
+        _check_clearance(q, raised, 2, "travel", 7)
 
 
 def _run_rows(program, k: int) -> np.ndarray:

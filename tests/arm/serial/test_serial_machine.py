@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import tagbot
+from tagbot.arm.driver import ArmDriver
 from tagbot.arm.kinematics import angles_to_ticks
 from tagbot.arm.serial.machine import (
     FORCE_RANGE,
@@ -374,6 +375,32 @@ def test_a_lift_that_fails_is_said_so_in_the_message_and_the_report(
     assert any("not lifted" in w for w in report["warnings"])
 
 
+def test_a_second_ctrl_c_during_the_lift_is_still_an_interrupted_job(
+    letter_b, tmp_path, monkeypatch
+) -> None:
+    """A Ctrl-C as the approach ends, then another cutting the stop's lift short: the job ends
+    as interrupted, the pen said not to be lifted by the arm."""
+    approach = ArmDriver.move_to
+
+    def move_to(self, *args, **kwargs):
+        approach(self, *args, **kwargs)
+        raise KeyboardInterrupt
+
+    def lift_from(self, *args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ArmDriver, "move_to", move_to)
+    monkeypatch.setattr(ArmDriver, "lift_from", lift_from)
+    job = prepare(letter_b, profile="openmanipulator-x")
+    with pytest.raises(Interrupted) as caught:
+        draw(letter_b, tmp_path / "run", prepared=job, pictures=False)
+    assert "interrupted (Ctrl-C): the arm stopped, but the pen was not lifted by the arm" in str(
+        caught.value
+    )
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    assert not report["completed"] and report["details"]["lifted_by_arm_at_stop"] is False
+
+
 def test_a_resumed_job_lowers_the_pen_where_it_stopped_and_draws_the_rest(
     letter_b, tmp_path
 ) -> None:
@@ -521,6 +548,13 @@ def test_the_pen_is_up_from_half_the_pen_up_height(factor, up) -> None:
     assert ArmLift(profile).is_up(row) is up
 
 
+def test_the_pens_height_is_measured_from_the_paper_where_it_lies() -> None:
+    """A sheet raised 20 mm (on a board) holds the pen at the rest pose 20 mm lower over it."""
+    _, on_table = _park_row(load_serial_profile("openmanipulator-x"))
+    _, on_board = _park_row(load_serial_profile("openmanipulator-x", ["paper.z=20"]))
+    assert on_board == pytest.approx(on_table - 20.0, abs=1e-9)
+
+
 @pytest.mark.parametrize(("limit", "beyond"), [("lower", -5), ("upper", 5)])
 def test_a_pose_found_beyond_a_joints_limit_is_held_at_that_limit(limit, beyond) -> None:
     """An arm found (torque off) with its wrist 5 ticks beyond a limit of its range: the goal
@@ -555,6 +589,14 @@ def test_a_run_of_two_planned_instants_has_its_contact_figure() -> None:
     force = np.column_stack([[0.2, 0.5, 1.0, 1.5, 1.8], [9.0, 0.3, 0.4, 0.6, 9.0]])
     (figures,) = contact_figures([run], executed, force)  # the force while the run draws
     assert (figures["force_min_n"], figures["force_max_n"]) == (0.3, 0.6)
+
+
+def test_a_run_planned_as_a_dot_has_no_ink_to_lose() -> None:
+    """A run whose planned points all coincide (no ink length) keeps 100 % of its contact."""
+    executed = np.column_stack([np.linspace(0, 2, 21), np.zeros(21), np.zeros(21), np.ones(21)])
+    run = (np.array([0.5, 1.0, 1.5]), np.zeros((3, 2)))
+    (figures,) = contact_figures([run], executed, np.zeros((0, 2)))
+    assert figures["contact_kept_pct"] == 100.0
 
 
 def test_planned_instants_in_whole_seconds_move_on_by_a_pause() -> None:
