@@ -81,6 +81,7 @@ def test_completes_with_replies_50_ms_late_and_2_percent_lost(sim_default, recor
     assert d["readbacks"] >= 0.9 * len(program)
     assert d["late_ticks"] == 0 and d["resyncs"] == 0 and d["max_lateness_ms"] == 0.0
     assert d["loop_rate_hz"] == pytest.approx(100.0)
+    assert isinstance(d["realtime"], bool)  # whether the loop ran at a real-time priority
     # The read-backs are the positions of their own instants: tracking stays small.
     assert d["joint_tracking_error"]["max"] < 0.5
     assert run.executed_source == "simulator recorder, 1 ms" and not run.sparse
