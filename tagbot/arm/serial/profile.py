@@ -335,9 +335,19 @@ def _check(p: SerialProfile) -> None:
     )
     check_area(p)
     x_min, x_max, y_min, y_max = p.area
+    off = [  # the edges beyond the paper, named in the message
+        key
+        for key, on in (
+            ("area.x_min", x_min >= 0),
+            ("area.x_max", x_max <= p["paper.width"]),
+            ("area.y_min", y_min >= 0),
+            ("area.y_max", y_max <= p["paper.height"]),
+        )
+        if not on
+    ]
     need(
-        x_min >= 0 and y_min >= 0 and x_max <= p["paper.width"] and y_max <= p["paper.height"],
-        ("area.x_min", "area.x_max", "area.y_min", "area.y_max"),
+        not off,
+        tuple(off),
         f"the area must lie on the paper (0..{p['paper.width']:g} by 0..{p['paper.height']:g} mm)",
     )
     check_servo_loop(p)

@@ -162,11 +162,16 @@ def test_a_servo_id_of_252_is_taken_and_253_refused() -> None:
 
 
 def test_an_area_off_the_paper_names_the_file_that_widened_it(tmp_path) -> None:
-    """An area.x_max beyond the sheet, set by the user's file alone, names that file."""
+    """An area edge beyond the sheet is named, with the file (or --set) that put it there."""
     path = tmp_path / "wide.toml"
     path.write_text("[area]\nx_max = 200.0\n")
     with pytest.raises(ProfileError) as err:
         load_serial_profile(path)
     assert str(err.value) == (
-        f"{path}: area.y_max: the area must lie on the paper (0..148 by 0..210 mm)"
+        f"{path}: area.x_max: the area must lie on the paper (0..148 by 0..210 mm)"
+    )
+    with pytest.raises(ProfileError) as err:  # the edge that is off, whichever it is
+        load_serial_profile(None, ["area.y_min=-5"])
+    assert (
+        str(err.value) == "--set: area.y_min: the area must lie on the paper (0..148 by 0..210 mm)"
     )
