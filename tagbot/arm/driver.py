@@ -740,9 +740,10 @@ class ArmDriver:
         self.models: dict[int, int] = {}
         self.stopped = False
         self.lifted = False
-        """Whether a serial arm's safe stop lifted the pen by the arm (or found it up)."""
+        """Whether the safe stop got the pen up: the pen servo's pen-up goal sent and its
+        ``pen.move_time`` waited, or a serial arm's lift by the arm done (or the pen found up)."""
         self.lift_failure: str | None = None
-        """Why a serial arm's safe stop did not lift the pen, when it failed."""
+        """Why the safe stop did not get the pen up, when it failed."""
 
     # -- context -----------------------------------------------------------------------------
 
@@ -1317,7 +1318,9 @@ class ArmDriver:
         sent is drawn, so a resume from the next tick skips nothing), arm joints holding it;
         after an error, arm torque off (policy).
 
-        Best effort: failures are logged, never raised (the original error matters more).
+        Best effort: failures are logged, never raised (the original error matters more);
+        :attr:`lifted` says whether the pen is up, :attr:`lift_failure` why not (also when a
+        second interrupt cut the stop short, which is re-raised).
         """
         if self.port is None or self.stopped:
             return
@@ -1329,17 +1332,22 @@ class ArmDriver:
             self._lift_by_arm(error, result)
             return
         pen = p["pen.id"]
+        self.lift_failure = "interrupted before the pen was up"  # until the pen is up
         try:
             if result is not None and result.scheduler is not None and result.scheduler.sends:
                 self.clock.sleep_until(result.scheduler.sends[-1] + p.lead)
             group = sdk.GroupSyncWrite(self.port, self.ph, GOAL_POSITION, 4)
             group.addParam(pen, _u32(p["pen.up"]))
-            self._guard(group.txPacket, "pen up", "stop")
+            written = self._guard(group.txPacket, "pen up", "stop")
+            self._check(written, 0, None, "SYNC_WRITE of pen up", "stop")
             self.clock.sleep_until(self.clock.now() + p["pen.move_time"])
+            self.lifted, self.lift_failure = True, None
             if error and p["servo.torque_off_after_error"]:
                 self.set_torque([p["shoulder.id"], p["elbow.id"]], False, "stop")
             log.info("stopped safely: pen up%s", ", arm torque off" if error else "")
         except (DeviceError, OSError, serial.SerialException) as e:
+            if not self.lifted:
+                self.lift_failure = str(e) or type(e).__name__
             log.error("safe stop failed: %s", e)
 
     def _lift_by_arm(self, error: bool, result: StreamResult | None) -> None:

@@ -25,6 +25,7 @@ puts the pen as it was and sends the rest.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import logging
 import math
@@ -207,6 +208,18 @@ class _Outcome:
     where: str = "connect"
     until: float | None = None
     """After a stop: the program time the pen had drawn to (see :func:`_drawn_to`)."""
+    lifted: bool = False
+    """Whether the safe stop got the pen up (:attr:`ArmDriver.lifted`)."""
+    lift_failure: str | None = None
+    """Why the safe stop did not get the pen up, when it did not."""
+
+    def stop(self, driver: ArmDriver, error: BaseException) -> None:
+        """Stopped by ``error``: the driver's safe stop, and whether it got the pen up (a
+        second Ctrl-C cutting it short leaves the pen's state said, not the first error lost)."""
+        self.error = error
+        with contextlib.suppress(KeyboardInterrupt):  # driver.lift_failure then says so
+            driver.safe_stop(error=True)
+        self.lifted, self.lift_failure = driver.lifted, driver.lift_failure
 
 
 def check_resume(resume_from: int | None, program: Any) -> None:
@@ -226,19 +239,25 @@ def finish_run(
     device: str,
     planned: MotionTable,
     n_plans: int,
-    stopped: str,
+    stopped: tuple[str, str],
     recorder: str,
     judge: Callable[[dict[str, Any], list, list, list], Any],
 ) -> MachineRun:
     """What an arm's streaming ``outcome`` (from row ``first`` of ``program``) did, as every
-    machine reports it: Ctrl-C as :class:`Interrupted` (``stopped`` says what the arm did), the
-    tick a stopped job resumes from, pauses and stalls on the program's clock, what was left of
-    each plan to draw, the executed trace's source (``recorder`` when the simulator recorded
-    it). ``judge(figures, planned runs, pauses, stalls)`` may add figures and gives the report's
-    budget judge. Any other error is a bug and raised (:func:`tagbot.draw.draw` reports it)."""
+    machine reports it: Ctrl-C as :class:`Interrupted` saying what the arm did (``stopped``:
+    the words for a stop that got the pen up, and for one that did not, then said with why and
+    warned of), the tick a stopped job resumes from, pauses and stalls on the program's clock,
+    what was left of each plan to draw, the executed trace's source (``recorder`` when the
+    simulator recorded it). ``judge(figures, planned runs, pauses, stalls)`` may add figures and
+    gives the report's budget judge. Any other error is a bug and raised
+    (:func:`tagbot.draw.draw` reports it)."""
     error = outcome.error
+    said, not_up = stopped
+    if error is not None and not outcome.lifted:
+        said = f"{not_up} ({outcome.lift_failure or 'no connection to the arm'})"
+        outcome.warnings.append(f"{said}: it may still be on the paper")
     if isinstance(error, KeyboardInterrupt):
-        error = Interrupted(f"interrupted ({label(signal_of(error))}): {stopped}", outcome.where)
+        error = Interrupted(f"interrupted ({label(signal_of(error))}): {said}", outcome.where)
     elif error is not None and not isinstance(error, DeviceError):
         raise error
     sp, result = program.setpoints, outcome.result
@@ -336,8 +355,7 @@ def _stream(
                 outcome.where = f"tick {first}"
                 driver.stream(program.goals[first:], progress, control, first)
             except BaseException as e:
-                driver.safe_stop(error=True)
-                outcome.error = e
+                outcome.stop(driver, e)
             outcome.result = getattr(driver, "result", None)
             chain = _recorder(driver, profile)
             outcome.recorder = chain is not None
@@ -418,7 +436,8 @@ class ArmJob:
         outcome = _stream(program, profile, self.port, progress, control, self.sysfs, first)
         return finish_run(
             outcome, program, profile, self.port, first, self.device, self.planned,
-            len(self.tag.plans), "the arm stopped, pen up",
+            len(self.tag.plans),
+            ("the arm stopped, pen up", "the arm stopped, but the pen was not raised"),
             f"simulator recorder, {RECORDER_DT * 1e3:g} ms",
             lambda figures, runs, pauses, stalls: Budget(
                 program, profile, stalls, _late(outcome.result, program)

@@ -492,14 +492,25 @@ def test_the_end_of_a_stream_is_logged_with_what_it_counted(record, caplog):
     ]
 
 
-def test_a_servo_silent_mid_stream_is_named_with_nothing_more(record):
-    """A servo that falls silent (no stray replies, no host stall): the message names it, how
-    long and the timeout, and ends there."""
+@pytest.mark.parametrize("silent_from", [0, 11], ids=["before-any-read-back", "mid-stream"])
+def test_a_servo_that_falls_silent_is_named_with_nothing_more(record, monkeypatch, silent_from):
+    """A servo that falls silent (no stray replies, no host stall), whether it answered a
+    read-back before or never did: the message names it, how long and the timeout, and ends
+    there."""
     sim, driver, goals = _streaming(record, PATIENT)
+    offsets = driver._clock_offsets
+
+    def offsets_then_silent(where: str) -> dict[int, float]:
+        measured = offsets(where)  # the clocks are read: it falls silent as the stream starts
+        if silent_from == 0:
+            sim.chain.silence(2)
+        return measured
 
     def progress(done: int, total: int) -> None:
-        if done == 11:
+        if done == silent_from:
             sim.chain.silence(2)
+
+    monkeypatch.setattr(driver, "_clock_offsets", offsets_then_silent)
 
     with driver, pytest.raises(DeviceTimeout) as caught:
         driver.stream(goals, progress=progress)
@@ -701,3 +712,57 @@ def test_a_servo_stopping_up_to_20_ticks_from_its_goal_has_arrived(record, profi
                 f"approach: servo 2 (elbow) stopped at {stands[1]} ticks, 21 from its goal"
                 f" {goals[1]} (blocked, or torque off?)"
             )
+
+
+def _ctrl_c_with_a_stop_that(breaks: str, monkeypatch):
+    """Ctrl-C mid-run of the planar arm, its safe stop's pen-up goal then ``written``, not
+    written (the adapter takes no byte from then on), or ``interrupted`` by a second Ctrl-C."""
+    guard = ArmDriver._guard
+
+    def second_ctrl_c(self, action, what, where):
+        if what == "pen up":
+            raise KeyboardInterrupt
+        return guard(self, action, what, where)
+
+    def progress(done: int, total: int) -> None:
+        if done == 301:
+            if breaks == "not written":
+                monkeypatch.setattr(UrlPortHandler, "writePort", lambda self, packet: 0)
+            if breaks == "interrupted":
+                monkeypatch.setattr(ArmDriver, "_guard", second_ctrl_c)
+            raise KeyboardInterrupt
+
+    return progress
+
+
+@pytest.mark.parametrize(
+    ("breaks", "said"),
+    [
+        ("written", None),
+        ("not written", "stop: could not write SYNC_WRITE of pen up to dxlsim://"),
+        ("interrupted", "interrupted before the pen was up"),
+    ],
+)
+def test_a_planar_arm_stopped_says_whether_its_pen_went_up(
+    record, tmp_path, monkeypatch, breaks, said
+):
+    """The stop's pen-up goal is said done only when it was written: a failed write or a
+    second Ctrl-C is named, and warned of, with the pen perhaps still on the paper."""
+    profile = load_profile()
+    sim = record(simulated_chain(profile))
+    job = prepare(two_plan_tag(), port=sim.url)
+    run = job.run(tmp_path, progress=_ctrl_c_with_a_stop_that(breaks, monkeypatch))
+    assert isinstance(run.error, Interrupted)
+    message = str(run.error)
+    pen_goals = sim.values(profile["pen.id"], GOAL_POSITION)
+    if said is None:
+        assert "interrupted (Ctrl-C): the arm stopped, pen up" in message
+        assert not any("still be on the paper" in w for w in run.warnings)
+        assert pen_goals[-1] == profile["pen.up"]
+        return
+    assert pen_goals[-1] == profile["pen.down"]  # the stop's goal never reached the servo
+    not_raised = "the arm stopped, but the pen was not raised ("
+    assert f"interrupted (Ctrl-C): {not_raised}{said}" in message
+    warned = [w for w in run.warnings if w.startswith(not_raised)]
+    assert len(warned) == 1 and warned[0].endswith("): it may still be on the paper")
+    assert said in warned[0]

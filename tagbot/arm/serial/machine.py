@@ -256,9 +256,6 @@ def executed_from_reads(reads: Array, profile: SerialProfile) -> Array:
 class _SerialOutcome(_Outcome):
     force: Array = field(default_factory=lambda: np.zeros((0, 2)))
     """``t, N`` on the executed clock (the simulator's nib force), empty on a real arm."""
-    lifted: bool = False
-    lift_failure: str | None = None
-    """Why the safe stop did not lift the pen, when it did not."""
     contact_steps: float = math.nan
 
 
@@ -335,9 +332,7 @@ def _stream(
             try:
                 _connect_and_stream(driver, program, profile, outcome, progress, control, first)
             except BaseException as e:
-                driver.safe_stop(error=True)
-                outcome.error = e
-            outcome.lifted, outcome.lift_failure = driver.lifted, driver.lift_failure
+                outcome.stop(driver, e)
             outcome.result = result = getattr(driver, "result", None)
             if result is not None:
                 outcome.where = f"tick {result.first + result.ticks_sent}"
@@ -508,11 +503,10 @@ class SerialJob:
         first = 0 if self.resume_from is None else self.resume_from - 1
         outcome = _stream(program, profile, self.port, progress, control, first, self.fault)
 
-        stopped = "the arm stopped, pen lifted by the arm"
-        if outcome.error is not None and not outcome.lifted:
-            why = outcome.lift_failure or "no connection to the arm"
-            stopped = f"the arm stopped, but the pen was not lifted by the arm ({why})"
-            outcome.warnings.append(f"{stopped}: it may still be on the paper")
+        stopped = (
+            "the arm stopped, pen lifted by the arm",
+            "the arm stopped, but the pen was not lifted by the arm",
+        )
 
         def judge(figures: dict[str, Any], runs: list, pauses: list, stalls: list) -> SerialBudget:
             figures["lifted_by_arm_at_stop"] = outcome.lifted

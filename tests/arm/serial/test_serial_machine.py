@@ -379,7 +379,8 @@ def test_a_second_ctrl_c_during_the_lift_is_still_an_interrupted_job(
     letter_b, tmp_path, monkeypatch
 ) -> None:
     """A Ctrl-C as the approach ends, then another cutting the stop's lift short: the job ends
-    as interrupted, the pen said not to be lifted by the arm."""
+    as interrupted, the pen said not to be lifted by the arm because the lift was interrupted
+    (the arm was connected: not "no connection to the arm")."""
     approach = ArmDriver.move_to
 
     def move_to(self, *args, **kwargs):
@@ -394,11 +395,13 @@ def test_a_second_ctrl_c_during_the_lift_is_still_an_interrupted_job(
     job = prepare(letter_b, profile="openmanipulator-x")
     with pytest.raises(Interrupted) as caught:
         draw(letter_b, tmp_path / "run", prepared=job, pictures=False)
-    assert "interrupted (Ctrl-C): the arm stopped, but the pen was not lifted by the arm" in str(
-        caught.value
+    not_lifted = (
+        "the arm stopped, but the pen was not lifted by the arm (interrupted before the pen was up)"
     )
+    assert f"interrupted (Ctrl-C): {not_lifted}" in str(caught.value)
     report = json.loads((tmp_path / "run" / "report.json").read_text())
     assert not report["completed"] and report["details"]["lifted_by_arm_at_stop"] is False
+    assert report["warnings"] == [f"{not_lifted}: it may still be on the paper"]
 
 
 def test_a_resumed_job_lowers_the_pen_where_it_stopped_and_draws_the_rest(
