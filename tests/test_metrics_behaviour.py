@@ -92,6 +92,35 @@ def test_fit_summary_counts(traces: int, points: int, strokes: int, words: str) 
     )
 
 
+@pytest.mark.parametrize(
+    ("clock", "trace", "words"),
+    [
+        (20.04, 15.06, ", velocity SNR 20.0 dB on the tag's clock, 15.1 dB trace by trace"),
+        (20.04, None, ", velocity SNR 12.3 dB"),
+        (None, 15.06, ", velocity SNR 12.3 dB"),
+    ],
+)
+def test_fit_summary_quotes_the_clock_snrs_only_when_it_has_both(
+    clock: float | None, trace: float | None, words: str
+) -> None:
+    """The tag's-clock and trace-by-trace SNRs are quoted as a pair; with either missing the
+    line falls back to the scaled velocity SNR."""
+    report = FitReport(
+        1,
+        2,
+        1,
+        ShapeError(0.01, 0.02, 50.0),
+        1.0,
+        12.345,
+        velocity_snr_clock_db=clock,
+        velocity_snr_trace_db=trace,
+    )
+    assert (
+        report.summary()
+        == f"1 trace (2 points) -> 1 stroke; shape error mean 1.00% max 2.00% of 50{words}"
+    )
+
+
 def test_a_run_stopped_before_it_began_is_not_compared() -> None:
     """A stop 2 ms into the second run (a slow one: 0.0002 mm drawn, under the 0.02 mm a run
     needs to start) or on its second sample (0.01 mm): only the first run is compared, and its
@@ -186,6 +215,24 @@ def test_a_crowded_scribble_is_measured_exactly_against_a_plain_drawing_with_dot
     assert error.size == pytest.approx(98.0 * np.sqrt(2.0))
     assert error.max * error.size == pytest.approx(2.0, abs=0.5 / DENSITY * error.size)
     assert 1.0 <= error.mean * error.size < 1.01
+
+
+def test_a_crowded_scribble_is_measured_near_its_nearest_samples_only() -> None:
+    """A thousand squares over one another with corners every 5 mm and dots (four at each
+    place) 2 mm inside the bottom side (crowded: measured through a KD-tree of its samples)
+    against a square 1 mm outside them with the same dots and dots on the bottom side below
+    them, midway between two corners: those dots lie on the scribble but are measured to the
+    segments of its nearest samples, its dots 2 mm away, not the side under them (whose
+    corners are 2.5 mm away): the max is 2 mm, where all else is at most the corners' √2 mm."""
+    from tagbot.metrics import densify
+
+    xs = np.arange(-37.5, 40.0, 10.0)
+    inside = [np.array([[x, -48.0]]) for x in xs]
+    on_side = [np.array([[x, -50.0]]) for x in xs]
+    crowded = [densify(_square(50.0), 5.0)] * 1000 + [dot for dot in inside for _ in range(4)]
+    error = shape_error(crowded, [_square(51.0), *inside, *on_side])
+    assert error.size == pytest.approx(100.0 * np.sqrt(2.0))
+    assert error.max * error.size == pytest.approx(2.0, abs=1e-9)
 
 
 def test_the_executed_speed_against_the_recorded_one_per_run() -> None:

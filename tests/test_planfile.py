@@ -403,6 +403,16 @@ def test_an_integer_too_long_for_python_is_not_json(tmp_path: Path) -> None:
     assert "\n" not in str(e.value)
 
 
+def test_json_nested_too_deeply_is_not_json(tmp_path: Path) -> None:
+    """100 000 nested lists (beyond Python's recursion limit) are refused as a plan-file error
+    naming the file, not a crash."""
+    path = tmp_path / "deep.json"
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(PlanFileError) as e:
+        load_plan(path)
+    assert str(e.value) == f"{path}: not JSON (nested too deeply)"
+
+
 def test_top_level_must_be_an_object() -> None:
     with pytest.raises(
         PlanFileError, match=r"^expected a JSON object at the top level, got a list$"

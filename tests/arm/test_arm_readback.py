@@ -297,7 +297,12 @@ def test_prepare_refuses_before_anything_is_sent(sim_default, tmp_path) -> None:
         prepare(small_tag(), port=str(tmp_path))
     with pytest.raises(PortError, match="not a serial port"):
         prepare(small_tag(), port="/dev/null")
-    with pytest.raises(ProfileError, match=r"bus.baud: at 57600 bps a tick's goals and read"):
+    with pytest.raises(
+        ProfileError,
+        match=r"^bus\.baud: at 57600 bps a tick's goals and read-back take 22\.0 ms on the bus,"
+        r" more than the 10 ms period of motion\.rate: raise bus\.baud \(and the servos' Baud"
+        r" Rate\) or lower motion\.rate$",
+    ):
         prepare(small_tag(), overrides=("bus.baud=57600",), port=sim.url)
     with pytest.raises(InputError, match=r"^mode: not an option of the arm$"):
         prepare(small_tag(), mode="wait")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -250,6 +251,14 @@ def test_a_port_that_cannot_open_is_connection_lost(profile, tmp_path) -> None:
         draw_arm(small_tag(), profile, missing)
     assert str(raised.value).startswith(f"connect: cannot open {missing}: ")
     assert isinstance(raised.value, ConnectionError)
+    # A bit rate the SDK's port does not offer (a profile made by hand, past its checks): the
+    # port is not opened, and the message names the port and the rate.
+    odd = replace(
+        profile, values={**profile.values, "bus": {**profile.values["bus"], "baud": 250_000}}
+    )
+    with pytest.raises(ConnectionLost) as raised:
+        ArmDriver(missing, odd).open()
+    assert str(raised.value) == f"connect: cannot open {missing} at 250000 bps"
 
 
 def test_executed_from_read_backs_is_forward_kinematics(profile) -> None:

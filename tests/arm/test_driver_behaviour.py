@@ -121,6 +121,11 @@ def test_connecting_waits_for_a_reply_as_long_as_bus_silence_timeout(record):
     with ArmDriver(sim.url, profile) as driver:
         driver.open()
         assert driver.port.reply_allowance_ms == pytest.approx(400.0, abs=1e-9)
+        # A reply of 14 bytes is waited for as long as they take on the wire (10 bits a byte
+        # at bus.baud) and that allowance.
+        driver.port.setPacketTimeout(14)
+        wire_ms = 14 * 10 * 1000.0 / profile["bus.baud"]
+        assert driver.port.packet_timeout == pytest.approx(wire_ms + 400.0, abs=1e-9)
 
 
 def test_a_second_safe_stop_sends_nothing(record, profile):
@@ -551,21 +556,28 @@ def test_a_read_back_request_that_cannot_be_written_names_it(record, monkeypatch
 def test_a_host_stall_mid_stream_is_recorded_and_the_run_goes_on(record):
     """The host does not look at the bus for 0.3 s (more than bus.silence_timeout) while
     replies are on their way (50 ms late): the stall is the host's, recorded from the last look
-    to the next, and no servo is taken for silent."""
+    to the next, and no servo is taken for silent. Later holes between two looks: two periods
+    and 4 ms is no stall, two periods and 6 ms is one, from look to look."""
     sim, driver, goals = _streaming(record)
     sim.chain.set_reply_faults(latency=0.05)
     stalled = []
+    held = {41: 2 * driver.profile.period + 0.004, 51: 2 * driver.profile.period + 0.006}
+    looks = []
 
     def progress(done: int, total: int) -> None:
         if done == 21:
             stalled.append(driver.clock.now())
             driver.clock.sleep_until(stalled[0] + 0.3)
+        elif done in held:
+            looks.append(driver.clock.now())
+            driver.clock.sleep_until(looks[-1] + held[done])
 
     with driver:
         result = driver.stream(goals, progress=progress)
     assert result.ticks_sent == 60 and result.readback is not None
-    [(start, end)] = result.readback.host_stalls
+    [(start, end), short] = result.readback.host_stalls
     assert start <= stalled[0] and end - start >= 0.3
+    assert short == (looks[1], pytest.approx(looks[1] + held[51], abs=1e-9))
 
 
 def test_a_read_back_is_stamped_when_its_request_has_reached_the_servos(record, monkeypatch):
@@ -610,6 +622,12 @@ def test_a_pause_lifts_the_pen_alone_holds_and_puts_it_back(record):
     assert sim.values(pen, GOAL_POSITION)[before:] == [down] * 20 + lift + lower + [down] * 40
     for column, id in enumerate((1, 2)):
         assert sim.values(id, GOAL_POSITION)[-60:] == goals[:, column].tolist()
+    # The program's clock has no time for the pause: from the pen's first lift goal until the
+    # stream went on, every instant maps to NaN; tick 19's own send still has its time.
+    sent = [t for t, i, a, _ in sim.writes if i == pen and a == GOAL_POSITION][before:]
+    start, length = result.pause_spans[0]
+    assert np.isnan(result.program_time(np.linspace(sent[20], start + length, 50))).all()
+    assert np.isfinite(result.program_time(np.array([sent[19]]))).all()
 
 
 def test_every_missing_servo_is_named_once_in_a_list(record, profile):
@@ -622,6 +640,11 @@ def test_every_missing_servo_is_named_once_in_a_list(record, profile):
         f"connect: servo 2 (elbow), servo 3 (pen) did not answer a ping at 1000000 bps on"
         f" {sim.url}; IDs found on the bus: 1 (XM430-W350)"
     )
+    # A servo of a model the driver does not know is listed by its model number.
+    sim.chain.set_model_number(1, 9999)
+    with ArmDriver(sim.url, profile) as driver, pytest.raises(DeviceError) as caught:
+        driver.connect()
+    assert str(caught.value).endswith("; IDs found on the bus: 1 (model 9999)")
 
 
 def test_a_resumes_pen_goals_leave_at_once_and_a_tick_apart(record):

@@ -9,6 +9,8 @@ answered, is a fault; the servos' clocks drift, jump a little and wrap. Simulate
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from tagbot.arm import load_profile, prepare
@@ -237,3 +239,24 @@ def test_a_read_back_answered_with_an_error_and_no_data_is_a_fault_naming_it(rec
         ": servo 2 (elbow) answered SYNC_READ of present positions with access error (7)"
     )
     assert at + 5 <= int(error.where.split()[1]) <= at + 7  # delivered 50 ms late, as all
+
+
+def test_two_servos_whose_clocks_restart_are_each_named_with_their_unmatched_replies(
+    record, tmp_path
+):
+    """Two clocks restarted at once: each servo's stray replies are said in turn, one clause
+    each, nothing between them."""
+
+    def restart(chain) -> None:
+        for id in (1, 2):
+            chain.servo(id).booted_at = chain.now()
+
+    _, run, _ = _faulty_once(record, tmp_path, fault=restart)
+    message = str(run.error)
+    assert "servo 1 (shoulder) and servo 2 (elbow) did not answer SYNC_READ" in message
+    stray = (
+        r" replied \d+ times meanwhile, its Realtime Tick matching no request"
+        r" \(its clock restarted\?\)"
+    )
+    timeout = r"\(bus\.silence_timeout: 0\.25 s\)"
+    assert re.search(rf"{timeout}; servo 1 \(shoulder\){stray}; servo 2 \(elbow\){stray}$", message)

@@ -10,6 +10,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from itertools import count
 
 import numpy as np
@@ -338,6 +339,26 @@ def test_the_budget_warns_for_each_run_over_it_naming_its_figures_and_cause(cae_
         f" 25 dB: the executed motion beyond its moves' stated {stated:.3f} mm",
         "run 3 (plan 2): speed SNR 24.0 dB below 25 dB: 1 host stall (100 ms) with the pen"
         " down: the board ran dry",
+    ]
+
+
+def test_a_resumed_jobs_runs_are_judged_on_their_own_plans_stated_error(cae_job):
+    """A resumed job's report starts at a later run (here plan 1): each run's cause names its
+    own plan's stated error, not that of the run at its place in the report."""
+    job = replace(cae_job[3], run_error=[0.001, 0.030, 0.002])
+    run = {
+        "plan": 1,
+        "path_deviation_max_mm": 0.035,
+        "speed_snr_db": 30.0,
+        "executed_start": 0.0,
+        "executed_duration": 1.0,
+    }
+    report = {"runs": [run, {**run, "plan": 2, "executed_start": 2.0}]}
+    assert Budget(job, [])(report) == [
+        "run 1 (plan 1): path deviation 0.035 mm over 0.02 mm: its moves' own error against"
+        " the plan (0.030 mm, stated)",
+        "run 2 (plan 2): path deviation 0.035 mm over 0.02 mm: the executed motion beyond its"
+        " moves' stated 0.002 mm",
     ]
 
 

@@ -114,6 +114,26 @@ def test_the_stated_speed_figures_are_the_moves_exact_motions(plan, overrides):
         assert job.run_step_snr[run] == pytest.approx(steps_db, abs=0.01)
 
 
+def test_each_speed_error_counts_for_the_move_holding_its_instant():
+    """A run's speed error, taken over ±10 ms at each tick, counts for the move that tick is
+    in (the move split for it): two ticks in a row off the plan err in the speeds 10 ms either
+    side of them, at the first move's last tick, the second's first and two of the third's."""
+    half = round(moves.SPEED_WINDOW * TICK_HZ)  # 250 ticks
+    span = 2 * half / TICK_HZ
+    planned = np.column_stack([np.arange(6 * half + 1) * 0.01, np.zeros(6 * half + 1)])
+    motion = planned.copy()
+    motion[3 * half, 0] += 1.0  # tick 750: a step off on motor 1
+    motion[3 * half + 1, 1] += 2.0  # tick 751: two steps off on motor 2
+    # Moves of ticks 1-500, 501-850 and 851-1500; speeds at ticks 500 and 501 (the first
+    # move's last tick, the second's first), 1000 and 1001 (the third move's) take the errors.
+    bounds = np.array([0, 2 * half, 3 * half + 100])
+    per_move, signal, steps_noise = moves._speed_figures(motion, planned, bounds)
+    assert per_move.tolist() == pytest.approx([1 / span**2, 4 / span**2, 5 / span**2])
+    speeds = len(planned) - 2 * half  # ticks 250-1250
+    assert signal == pytest.approx(speeds * (0.01 * TICK_HZ) ** 2)
+    assert steps_noise == pytest.approx(speeds * 2 * (2 / 12) / span**2)
+
+
 def test_the_fifo_holds_the_promised_drawing_ahead_and_the_board_never_runs_dry(tmp_path):
     """100 ms setpoints promise serial.fifo x 0.1 s ahead; the split moves need a deeper FIFO
     for it. On the simulated board every move of a run starts on the tick the one before

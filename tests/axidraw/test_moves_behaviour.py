@@ -37,6 +37,7 @@ from tagbot.axidraw.moves import (
 from tagbot.axidraw.profile import MOTOR_AXES, load_profile
 from tagbot.errors import PlacementError
 from tagbot.io.planfile import load_plan
+from tagbot.model import Plan, Tag
 from tagbot.plotter.place import place
 
 MAX_RATE = 2**31 - 1  # one step per tick
@@ -281,7 +282,35 @@ def test_each_entry_has_its_run_its_pen_and_its_place_on_the_clock(small):
 
 
 def test_every_tick_is_on_the_jobs_clock_and_every_move_states_its_own_error(small):
-    tag, profile, setpoints, job = small
+    _each_tick_on_the_clock_and_each_move_states_its_own_error(*small)
+
+
+def test_after_a_run_built_again_every_move_still_states_its_own_error():
+    """Four fast 0.4 s hooks, 15 mm apart, on 50 ms setpoints: each run has its moves split
+    and is built again (the runs before it, and their pen and travel moves, left as they
+    were), and every move of every run states its own error."""
+    stroke = dict(
+        dt=[0.0, 0.08],
+        mu=[math.log(0.12), math.log(0.1)],
+        sigma=[0.3, 0.3],
+        phi1=[0.0, 0.0],
+        phi2=[1.0, -2.0],
+    )
+    hooks = [
+        Plan(targets=[[x, 0.0], [x + 8.0, 2.0], [x + 5.0, 6.0]], start=i * 1.0, **stroke)
+        for i, x in enumerate((0.0, 15.0, 30.0, 45.0))
+    ]
+    tag = Tag(plans=tuple(hooks))
+    profile = load_profile(overrides=["place.scale=1", "motion.dt=0.05"])
+    setpoints = place(tag, profile.placement())
+    job = build_job(tag, setpoints, profile)
+    assert len(job.runs) == 4
+    _each_tick_on_the_clock_and_each_move_states_its_own_error(tag, profile, setpoints, job)
+
+
+def _each_tick_on_the_clock_and_each_move_states_its_own_error(tag, profile, setpoints, job):
+    """Each entry's ticks on the job's clock, ending where it says; each draw move's stated
+    error its ticks' largest distance from the plan (0 for the other entries)."""
     k = profile.steps_per_mm
     i = 0
     for index, entry in enumerate(job.entries):

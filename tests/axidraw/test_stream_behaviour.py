@@ -156,6 +156,27 @@ class _BlockingLink(_SilentLink):
         return got
 
 
+def test_a_reply_not_ok_to_a_garbled_command_still_names_it():
+    """A byte that is not ASCII in a command's name (a corrupted line) answered by a line that
+    is not ``OK`` is shown replaced in the error, not a crash."""
+    streamer = EBBStreamer(_BlockingLink(b"QU,32\r"), load_profile(), {})
+    with pytest.raises(DeviceError, match=r"^\ufffdU: expected OK from the EBB, got b'QU,32'$"):
+        streamer.ask(b"\xe9U,2")
+
+
+def test_a_stop_reads_a_qm_reply_without_its_four_flags_as_nothing_executing():
+    """A ``QM`` reply that is not its four flags (a garbled line) counts no command executing:
+    the stop's wait for the pen lift ends when ``QU,6`` says nothing is waiting, and the stop
+    gives where the motors stopped."""
+    version = b"EBBv13_and_above EB Firmware Version 3.0.3\r"
+    link = _BlockingLink(b"0\rOK\r" + version + b"120,-40\rOK\rOK\rQM,0\rQU,0\rOK\r")
+    up = b"SP,1,200,1\r"
+    streamer = EBBStreamer(link, load_profile(), {False: (up, 0.2)})
+    assert streamer.stop() == (120, -40)
+    assert link.written == [b"ES\r", b"V\r", b"QS\r", up, b"QM\r", b"QU,6\r"]
+    assert link.replies == b""
+
+
 def test_a_line_ended_by_its_first_end_byte_is_taken_without_waiting_for_more():
     """Legacy lines may end with CR or LF alone: a reply whose last byte so far ends its line
     is taken at once, not after the port's timeout waiting for a byte the board never sends."""
@@ -524,8 +545,10 @@ def test_a_stop_waits_out_the_pens_rise_before_asking_the_board_again():
         before = streamer.clock.now()
         assert streamer.stop() == (0, 0)
         assert streamer.clock.now() - before >= 0.2
-        after = wire.written[wire.written.index(up) + 1 :]
-        assert after == [b"QM\r", b"QU,6\r"]  # one look at the board's state: idle
+        stop = wire.written[wire.written.index(b"ES\r") :]
+        # ES, then V past every reply in flight, QS where the motors stopped, the pen lifted
+        # and one look at the board's state (QM, QU): idle.
+        assert stop == [b"ES\r", b"V\r", b"QS\r", up, b"QM\r", b"QU,6\r"]
     finally:
         link.close()
 
@@ -534,7 +557,8 @@ def test_a_polled_job_without_park_ends_with_the_pen_reported_up(tmp_path):
     """Without a park travel the job's last move lifts the pen: a report polled once every move
     has run is read against that move, pen up (not against the draw before it)."""
     tag = load_plan(LETTER_B)
-    job = replace(prepare(tag, overrides=("motion.park=false",)), port=_url(SimulatedEBB()))
+    device = SimulatedEBB()
+    job = replace(prepare(tag, overrides=("motion.park=false",)), port=_url(device))
     last = job.job.entries[-1]
     assert last.kind == "pen" and not last.pen and job.job.entries[-2].pen
     (tmp_path / "out").mkdir()
@@ -542,6 +566,9 @@ def test_a_polled_job_without_park_ends_with_the_pen_reported_up(tmp_path):
     assert run.error is None and run.sparse
     assert run.executed[-1, 3] == 0.0 and run.executed_runs[-1] == -1
     assert run.executed[:, 3].max() == 1.0
+    # A new job starts from home without a travel: the motors end where its last move ends.
+    assert job.job.entries[-1].steps != (0, 0)
+    assert device.motor_position() == job.job.entries[-1].steps
 
 
 class _PauseOnce(RunControl):

@@ -13,6 +13,7 @@ from tagbot.gesture.timing import (
     MIN_SAMPLES,
     TimingOptions,
     fit_cost,
+    match_trace,
     resample,
     simulated_capture,
     usable,
@@ -21,6 +22,8 @@ from tagbot.inputs import Trace, load_traces, read_gml
 from tagbot.metrics import (
     clock_velocity_snr,
     fit_report,
+    ink_polyline,
+    shape_error,
     stroke_report,
     velocity_snr,
 )
@@ -68,6 +71,25 @@ def test_synthetic_timed_plans_are_matched() -> None:
     assert np.median(snr) >= 25.0, snr
     assert max(shape) <= 0.005, shape
     assert np.median(snr) >= np.median(snr_ignored) + 10.0
+
+
+def test_match_trace_puts_a_geometric_plan_on_the_traces_clock() -> None:
+    """One trace of a random timed plan stamped from 5 s: ``match_trace`` refits its geometric
+    plan (start 0) to the recorded speed, on the trace's clock counted from that first
+    timestamp, which it returns; the geometric plan misses the speed, the ink keeps the shape."""
+    rng = np.random.default_rng(2)
+    capture = simulated_capture(random_timed_plan(rng), rng)
+    trace = Trace(capture.xy, capture.t + 5.0)
+    geometric = fit([trace], timing="ignore")
+    plan = geometric.plans[0]
+    timed, t0 = match_trace(plan, trace, geometric.size, "sigma", TimingOptions())
+    assert t0 == pytest.approx(5.0, abs=1e-9)
+    db = []
+    for p in (plan, timed):
+        t, _, v = sample_plan(Tag((p,)), 0, 0.005)
+        db.append(clock_velocity_snr(trace.t - t0, trace.xy, t, v))
+    assert db[0] < 5.0 and db[1] >= 20.0, db
+    assert shape_error([trace.xy], [ink_polyline(timed, geometric.size)]).mean <= 0.005
 
 
 def test_ignore_is_the_geometric_fit_exactly() -> None:

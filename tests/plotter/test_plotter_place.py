@@ -376,6 +376,17 @@ def test_lines_never_slower_than_grbl_steps(tiny_file):
     assert np.all(d <= profile.dt * (1 + 1e-9))
 
 
+def test_the_slowest_a_move_can_take_is_its_slowest_steps_or_the_minimum_feed() -> None:
+    """At 100 steps/mm and 0.0327 s a step, 1 mm takes at most 3.27 s and a 3-4-5 move
+    (400 steps on y) 13.08 s; a minimum feed of 100 mm/min caps them at 0.6 s and 3 s."""
+    steps = ["limits.x_steps_per_mm=100", "limits.y_steps_per_mm=100", "limits.slowest_step=0.0327"]
+    xy = np.array([[0.0, 0.0], [1.0, 0.0], [4.0, 4.0]])
+    by_steps = slowest_durations(xy, load_profile(None, [*steps, "limits.min_feed=1"]))
+    assert by_steps == pytest.approx([3.27, 13.08])
+    by_feed = slowest_durations(xy, load_profile(None, [*steps, "limits.min_feed=100"]))
+    assert by_feed == pytest.approx([0.6, 3.0])
+
+
 def test_a_segment_of_no_duration_has_speed_zero_and_every_speed_is_a_number() -> None:
     """Speeds per segment in mm/s: 10 mm in 0.5 s is 20; a repeated instant (no time) has no
     speed, 0, rather than an infinity or a missing value."""

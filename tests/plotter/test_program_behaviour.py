@@ -18,7 +18,7 @@ import pytest
 
 from tagbot.model import Plan, Tag
 from tagbot.plotter import build_program, load_profile, place
-from tagbot.plotter.place import PlacementError
+from tagbot.plotter.place import PlacementError, Run, Setpoints
 from tagbot.plotter.program import resting_share
 
 from .conftest import straight_tag
@@ -375,6 +375,48 @@ def test_a_dot_has_no_resting_share(tiny_file):
     program = build_program(place(straight_tag(), profile), profile)
     assert program.drawing_time == 0.0
     assert resting_share(program, profile) == 0.0
+
+
+def test_dwell_mode_counts_each_surplus_too_short_for_a_dwell(tiny_file):
+    """slow_lines = dwell: four one-step runs (slowest 0.0327 s, $1 0.025 s) planned 0.02 s,
+    0.0004 s, 0.06 s and 0.0499 s slower than that; the 0.02 s and 0.0499 s surpluses are too
+    short for a 50 ms G4 and are counted (0.0004 s is below the 3-decimal resolution, 0.06 s
+    becomes one G4 P0.05)."""
+    profile = load_profile(
+        tiny_file,
+        [
+            "motion.slow_lines=dwell",
+            "limits.slowest_step=0.0327",
+            "limits.step_idle_delay=0.025",
+            "limits.min_feed=1",
+        ],
+    )
+    runs = tuple(
+        Run(
+            plan=k,
+            t=np.array([0.0, 0.0327 + 0.025 + surplus]),
+            xy=np.array([[10.0 + 10 * k, 10.0], [10.01 + 10 * k, 10.0]]),
+            v=np.zeros(2),
+        )
+        for k, surplus in enumerate((0.02, 0.0004, 0.06, 0.0499))
+    )
+    setpoints = Setpoints(
+        runs=runs,
+        dt=0.05,
+        scale=1.0,
+        size=1.0,
+        matrix=np.eye(2),
+        offset=np.zeros(2),
+        limits={},
+    )
+    program = build_program(setpoints, profile)
+    assert program.notes["short_surpluses"] == 2.0
+    inside = [
+        line
+        for k, line in enumerate(program.lines)
+        if line.startswith("G4P") and program.lines[k - 1] == "G93\n"
+    ]
+    assert inside == ["G4P0.05\n"]
 
 
 def test_a_run_flowing_on_from_the_previous_runs_dwell_has_no_start_reserve(tiny_file):

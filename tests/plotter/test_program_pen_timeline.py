@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tagbot.plotter import build_program, load_profile, place
-from tagbot.plotter.program import pen_down, pen_up
+from tagbot.plotter.program import Program, pen_down, pen_up
 
 from .conftest import straight_tag
 
@@ -63,3 +63,34 @@ def test_a_timeline_coarser_than_the_job_has_its_start_and_end(tiny_file):
     table = program.timeline(2 * program.duration)
     assert table.t.tolist() == [0.0, program.duration]
     assert table.xy[-1] == pytest.approx(program.line_xy[-1])
+
+
+@pytest.mark.parametrize("dt", [0.0, -0.01])
+def test_a_timeline_step_not_above_zero_is_refused(tiny_file, dt):
+    """A sampling step of 0 s or less is refused, naming ``dt``."""
+    profile = load_profile(tiny_file)
+    program = build_program(place(straight_tag(), profile), profile)
+    with pytest.raises(ValueError, match=r"^dt: must be > 0$"):
+        program.timeline(dt)
+
+
+def test_a_program_without_lines_has_no_motion_at_no_instants():
+    """A hand-built program of no lines, sampled at no instants, gives empty arrays of the
+    usual shapes: positions (0, 2), velocities (0, 2), pen (0,)."""
+    empty = Program(
+        lines=(),
+        line_start=np.zeros(0),
+        line_end=np.zeros(0),
+        line_xy=np.zeros((0, 2)),
+        line_pen=np.zeros(0, dtype=bool),
+        line_run=np.zeros(0, dtype=np.int64),
+        line_moves=np.zeros(0, dtype=bool),
+        run_plans=(),
+        run_scales=(),
+        scale=1.0,
+        drawing_time=0.0,
+        min_buffered=math.inf,
+    )
+    xy, v, pen = empty.at(np.zeros(0))
+    assert (xy.shape, v.shape, pen.shape) == ((0, 2), (0, 2), (0,))
+    assert empty.duration == 0.0

@@ -19,8 +19,9 @@ from tagbot.draw import run_report
 from tagbot.errors import ConnectionLost
 from tagbot.metrics import compare_execution
 from tagbot.plotter.machine import prepare
+from tagbot.plotter.stream import GrblStreamer, StreamOptions
 
-from .test_stream import PEN_UP, SETTINGS, connected, square_program
+from .test_stream import PEN_UP, SETTINGS, connected, open_device, square_program
 
 ROOT = Path(__file__).resolve().parents[2]
 LETTER_B = ROOT / "tagbot" / "examples" / "letter-b.json"
@@ -209,6 +210,33 @@ def test_a_starved_planner_is_a_named_stall():
         report.warnings[0],
     )
     assert device.starvation  # the machine did starve
+
+
+def test_a_link_too_slow_for_the_lines_is_a_named_starved_planner():
+    """10 ms lines over 2400 baud (about 90 ms a line on the wire): the machine stands idle
+    with the pen down between drawing lines while the host is still sending, and the report
+    names each such wait as a starved planner, one stall span per warning."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port = open_device(device, baud=2400)
+    streamer = GrblStreamer(port, StreamOptions())
+    streamer.connect()
+    lines = square_program(30)
+    drawing = _drawing(lines)
+    try:
+        report = streamer.stream(lines, drawing=drawing)
+    finally:
+        port.close()
+    assert report.errors == [] and report.lines_executed == len(lines)
+    assert report.warnings and len(report.stall_spans) == len(report.warnings)
+    for warning in report.warnings:
+        named = re.fullmatch(
+            r"starved planner: the machine stood with the pen down before line (\d+) for about"
+            r" \d+\.\d\d s, \d+\.\d\d s into the job \(the host did not send lines in time\)",
+            warning,
+        )
+        assert named, warning
+        line = int(named[1]) - 1  # inside a run: it and the line before it draw
+        assert drawing[line] and drawing[line - 1]
 
 
 def test_a_buffer_goal_the_program_cannot_hold_is_in_the_report_and_logged_before_the_run(

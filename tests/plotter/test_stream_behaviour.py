@@ -221,6 +221,31 @@ def test_a_message_after_the_banner_that_is_no_lock_does_not_stop_the_connect():
     assert wire.lines_sent() == [b"$$\n", b"$I\n"]
 
 
+@pytest.mark.parametrize("policy", ["never", "unlock"])
+def test_a_machine_announcing_after_the_banner_that_it_is_locked_is_taken_as_locked(policy):
+    """Grbl's ``[MSG:'$H'|'$X' to unlock]`` after the banner says the machine is locked, even
+    before a status report shows it: the default policy refuses it, naming what to do;
+    ``unlock`` sends ``$X``."""
+    device = SimulatedGrbl(SETTINGS)  # its boot banner is waiting to be read
+    device.emit_garbage(b"[MSG:'$H'|'$X' to unlock]\r\n")
+    port = open_device(device)
+    wire = Wire()
+    streamer = GrblStreamer(port, StreamOptions(reset=False, unlock=policy), trace=wire)
+    try:
+        if policy == "never":
+            with pytest.raises(DeviceFault) as refused:
+                streamer.connect()
+            assert str(refused.value) == (
+                "the machine is in Alarm (locked); check it, then unlock (--unlock) or home "
+                "(--home) before drawing"
+            )
+        else:
+            streamer.connect()
+    finally:
+        port.close()
+    assert wire.lines_sent() == [b"$$\n", b"$I\n", *([b"$X\n"] if policy == "unlock" else [])]
+
+
 def test_the_watchdog_waits_out_the_longest_dwell_and_no_longer():
     """A program with a 1 s dwell and a stall timeout of 0.3 s: the machine standing still for
     the dwell is no stall (the watchdog allows 1.5 x 1 s + 1 s = 2.5 s); frozen mid-job, the

@@ -329,6 +329,46 @@ def test_a_second_hold_while_held_does_not_end_the_pause():
     assert report.pauses == 1 and 1.5 < report.paused_s < 2.5
 
 
+def test_a_second_hold_after_a_resume_is_a_pause_of_its_own():
+    """Hold, resume, hold again, resume: two pauses, each from its own ``!`` to its own ``~``
+    (the second is not measured from the first hold)."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port = open_device(device)
+    wire = Wire()
+    asked: list[float] = []
+    polls_held = 0
+
+    def trace(direction: str, data: bytes) -> None:
+        nonlocal polls_held
+        wire(direction, data)
+        if direction != "tx":
+            return
+        if data in (b"!", b"~"):
+            asked.append(streamer.clock.now())
+        elif data == b"?" and wire.tx.count(b"!") > wire.tx.count(b"~"):
+            polls_held += 1
+            if polls_held in (10, 15):  # about 2 s held, then about 1 s held
+                streamer.resume()
+
+    streamer = GrblStreamer(port, StreamOptions(), trace=trace)
+    streamer.connect()
+    base = len(wire.lines_sent())
+    wire.at[base + 20] = streamer.hold
+    wire.at[base + 120] = streamer.hold
+    try:
+        report = streamer.stream(square_program(300))
+    finally:
+        port.close()
+    assert [d for d in wire.tx if d in (b"!", b"~")] == [b"!", b"~", b"!", b"~"]
+    hold1, resume1, hold2, resume2 = asked
+    assert report.pause_spans == [
+        (hold1, pytest.approx(resume1 - hold1)),
+        (hold2, pytest.approx(resume2 - hold2)),
+    ]
+    assert 0.5 < resume2 - hold2 < 1.5 < hold2 - hold1
+    assert report.outside_holds == 0 and report.pauses == 2
+
+
 def test_a_host_stall_before_the_second_drawing_line_is_named():
     """One line at a time (``mode="wait"``): the host stands still 0.5 s after sending the
     first of two pen-down lines of one run; the report names a host stall before line 2."""

@@ -447,6 +447,9 @@ def test_firmware_from_version() -> None:
     for bad in ("", "EBB 3.0.3", "EBBv13_and_above EB Firmware Version 3.0", "Grbl 1.1h"):
         with pytest.raises(ReplyError, match="not an EBB version string"):
             Firmware.from_version(bad)
+    # A reply with a byte that is not ASCII (a garbled line) is quoted with it replaced.
+    with pytest.raises(ReplyError, match=r"^V: '\ufffdBB 3\.0\.3' is not an EBB version string$"):
+        Firmware.from_version(b"\xe9BB 3.0.3\r\n")
 
 
 SINCE = [

@@ -366,6 +366,21 @@ def test_negative_steps_with_a_zero_rate_run_backwards_on_the_accel():
         Move("LM", (-1, 0), (4_000_000, 0), steps=(-10, 0)).validate()
 
 
+def test_an_lm_axis_of_no_steps_keeps_its_rates_sign_and_does_not_run():
+    """The legacy sign rule is for negative Steps only: an axis of 0 steps with a negative Rate
+    is no ``!6`` and takes no step, and its clear bit loads the accumulator by its own Rate's
+    sign (2**31 - 1 for a negative one, 0 for a positive one), as the ISR above does."""
+    for rate, cleared in ((1000, 0), (-1000, 2**31 - 1)):
+        positions, final = lm_axis(0, rate, 0, 12345, clear=True)
+        assert (positions.tolist(), final) == isr(rate, 0, 0, 12345, steps=0, clear=True)
+        assert final == cleared
+    move = Move("LM", (85899346, -1000), steps=(10, 0))
+    move.validate()
+    positions, accumulators = execute(move, (0, 777))
+    assert positions[-1].tolist() == [10, 0] and not positions[:, 1].any()
+    assert accumulators[1] == 777
+
+
 @pytest.mark.parametrize(
     ("value", "held"),
     [(2**31, -(2**31)), (2**31 - 1, 2**31 - 1), (-(2**31) - 1, 2**31 - 1), (2**32 + 5, 5)],

@@ -45,8 +45,9 @@ EXAMPLES = Path(tagbot.__file__).parent / "examples"
 
 @pytest.mark.parametrize(("name", "binding"), [("cae", 0), ("letter-b", 1)])
 def test_a_fitted_tag_fills_the_area_less_its_margin(name, binding):
-    """cae is wide (the paper's width binds), letter-b tall (its height binds)."""
-    profile = load_serial_profile("openmanipulator-x")
+    """cae is wide (the paper's width binds), letter-b tall (its height binds); the area starts
+    20 mm up the paper, so its height is y_max - y_min."""
+    profile = load_serial_profile("openmanipulator-x", ["area.y_min=20"])
     x_min, x_max, y_min, y_max = profile.area
     m = profile["area.margin"]
     box = place_on_paper(load_plan(EXAMPLES / f"{name}.json"), profile).box
@@ -231,13 +232,18 @@ def test_a_moves_excess_counts_the_samples_it_owns_and_no_others():
 
 def test_each_joint_is_held_to_its_own_acceleration():
     """Two joints, one with ten times the other's acceleration limit: the excess is each
-    joint's own ratio, the larger of them (not the largest move against the smallest limit)."""
+    joint's own ratio, the larger of them (not the largest move against the smallest limit);
+    the same for their speed limits."""
     speed = np.full(2, 100.0)
     acceleration = np.array([1.0, 10.0])
     T = 0.01
     q = np.zeros((5, 2))
     q[2] = [0.5e-4, 4e-4]  # joint 0: 1 rad/s² peak; joint 1: 8 rad/s² against its 10
     assert _excess(q, T, speed, acceleration) == pytest.approx(1.0)
+    # And to its own speed: one step of 0.01 and 0.08 rad in a tick, joint 0 at its 1 rad/s,
+    # joint 1 at 8 rad/s against its 10: 1.0 (not 8 from the largest step against 1 rad/s).
+    step = np.array([[0.0, 0.0], [0.01, 0.08]])
+    assert _excess(step, T, np.array([1.0, 10.0]), np.full(2, 1e9)) == pytest.approx(1.0)
 
 
 def test_a_way_back_to_park_that_dips_to_the_paper_is_refused_naming_the_park():

@@ -113,6 +113,24 @@ def test_the_jobs_bound_is_the_sum_of_its_moves_own_bounds(hop, letter_b, profil
         assert time_bound(program, profile) == pytest.approx(sum(bounds))
         for (kind, _, first, stop), bound in zip(program.segments, bounds, strict=True):
             assert 0.0 < bound <= (stop - first) * profile.period * (1 + 1e-6), kind
+    # With joints fast enough that the hop's second run is not slowed (time scale 1), that
+    # run's bound is the tag's own timing, its whole duration, not what the joints would allow.
+    fast = load_serial_profile(
+        "openmanipulator-x",
+        [f"joint{i}.max_speed=300" for i in range(1, 5)]
+        + [f"joint{i}.max_acceleration=3000" for i in range(1, 5)],
+    )
+    program = build_serial_program(_hop_tag(), fast)
+    assert program.setpoints.run_scales[1] == 1.0
+    draws = [
+        (stop - first, bound)
+        for (kind, _, first, stop), bound in zip(
+            program.segments, move_bounds(program, fast), strict=True
+        )
+        if kind == "draw"
+    ]
+    ticks, bound = draws[1]
+    assert bound == pytest.approx(ticks * fast.period, rel=1e-12)
 
 
 # -- goals --------------------------------------------------------------------------------------

@@ -26,6 +26,7 @@ from tagbot.arm.serial.machine import (
     contact_figures,
     executed_from_reads,
     prepare,
+    simulated_arm,
     time_bound,
 )
 from tagbot.arm.serial.profile import is_serial_profile, load_serial_profile
@@ -93,6 +94,16 @@ def test_a_bad_profile_value_is_one_line_naming_the_source_and_field() -> None:
         match=r"^--set: robot\.max_tilt_deg: must be < 90 \(the pen must point into the paper\)$",
     ):
         load_serial_profile("openmanipulator-x", ["robot.max_tilt_deg=90"])
+    # The feedforward needs a position P gain: 0 is refused with it, 1 is enough, and without
+    # the feedforward 0 is taken.
+    with pytest.raises(
+        ProfileError,
+        match=r"^--set: servo\.position_p_gain: the feedforward needs a position P gain > 0$",
+    ):
+        load_serial_profile("openmanipulator-x", ["servo.position_p_gain=0"])
+    assert load_serial_profile("openmanipulator-x", ["servo.position_p_gain=1"]).gains[0] == 1
+    off = ["servo.position_p_gain=0", "servo.feedforward=false"]
+    assert load_serial_profile("openmanipulator-x", off).gains[0] == 0
 
 
 # -- program ---------------------------------------------------------------------------------
@@ -843,3 +854,20 @@ def test_a_step_at_the_first_executed_sample_is_judged_by_that_sample() -> None:
     run = (np.array([0.0, 1.0, 2.0]), np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]))
     (figures,) = contact_figures([run], executed, np.zeros((0, 2)))
     assert figures["contact_kept_pct"] == 50.0  # steps around 0.5 s (off) and 1.5 s (on)
+
+
+def test_an_arm_on_a_port_is_traced_from_its_read_backs(profile, tmp_path) -> None:
+    """A serial arm on a port (a simulated chain attached by URL: no in-process recorder): the
+    run ends without error and its executed trace is the read-backs' forward kinematics."""
+    from sim.dynamixel import attach_chain, detach_chain
+
+    from ..conftest import small_tag
+
+    chain, _ = simulated_arm(profile)
+    url = attach_chain(chain, "tagbot_serial_arm_by_url")
+    try:
+        run = prepare(small_tag(), profile="openmanipulator-x", port=url).run(tmp_path)
+    finally:
+        detach_chain("tagbot_serial_arm_by_url")
+    assert run.error is None
+    assert len(run.executed) > 0 and run.executed[:, 3].max() == 1.0
