@@ -37,8 +37,10 @@ from tagbot.axidraw.moves import (
 from tagbot.axidraw.profile import MOTOR_AXES, load_profile
 from tagbot.errors import PlacementError
 from tagbot.io.planfile import load_plan
-from tagbot.model import Plan, Tag
+from tagbot.model import Tag
 from tagbot.plotter.place import place
+
+from .test_short_runs import _hook
 
 MAX_RATE = 2**31 - 1  # one step per tick
 CAE = Path(tagbot.__file__).parent / "examples" / "cae.json"
@@ -289,15 +291,9 @@ def test_after_a_run_built_again_every_move_still_states_its_own_error():
     """Four fast 0.4 s hooks, 15 mm apart, on 50 ms setpoints: each run has its moves split
     and is built again (the runs before it, and their pen and travel moves, left as they
     were), and every move of every run states its own error."""
-    stroke = dict(
-        dt=[0.0, 0.08],
-        mu=[math.log(0.12), math.log(0.1)],
-        sigma=[0.3, 0.3],
-        phi1=[0.0, 0.0],
-        phi2=[1.0, -2.0],
-    )
+    hook = _hook().plans[0]
     hooks = [
-        Plan(targets=[[x, 0.0], [x + 8.0, 2.0], [x + 5.0, 6.0]], start=i * 1.0, **stroke)
+        replace(hook, targets=hook.targets + np.array([x, 0.0]), start=i * 1.0)
         for i, x in enumerate((0.0, 15.0, 30.0, 45.0))
     ]
     tag = Tag(plans=tuple(hooks))

@@ -298,40 +298,10 @@ def test_a_resume_without_a_hold_is_no_pause():
     assert report.pause_spans == [] and report.pauses == 0 and report.paused_s == 0.0
 
 
-def test_a_second_hold_while_held_does_not_end_the_pause():
-    """Two ``hold()`` calls, then one ``resume()``: one pause, from the first hold to the
-    resume, and the held machine is never taken for someone else's hold."""
-    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
-    port = open_device(device)
-    wire = Wire()
-    polls_held = 0
-
-    def trace(direction: str, data: bytes) -> None:
-        nonlocal polls_held
-        wire(direction, data)
-        if direction == "tx" and data == b"?" and b"!" in wire.tx and b"~" not in wire.tx:
-            polls_held += 1
-            if polls_held == 10:  # about 2 s held
-                streamer.resume()
-
-    streamer = GrblStreamer(port, StreamOptions(), trace=trace)
-    streamer.connect()
-    base = len(wire.lines_sent())
-    wire.at[base + 20] = streamer.hold
-    wire.at[base + 21] = streamer.hold
-    try:
-        report = streamer.stream(square_program(200))
-    finally:
-        port.close()
-    assert wire.tx.count(b"!") == 2 and wire.tx.count(b"~") == 1
-    assert report.outside_holds == 0
-    assert not any("not asked for" in w for w in report.warnings)
-    assert report.pauses == 1 and 1.5 < report.paused_s < 2.5
-
-
-def test_a_second_hold_after_a_resume_is_a_pause_of_its_own():
-    """Hold, resume, hold again, resume: two pauses, each from its own ``!`` to its own ``~``
-    (the second is not measured from the first hold)."""
+def _held(holds: tuple[int, ...], resumes: tuple[int, ...], lines: int):
+    """Stream a square of ``lines`` lines, calling ``hold()`` as each line of ``holds`` (counted
+    from the first of the job) is sent, and ``resume()`` at each count in ``resumes`` of
+    status polls sent while held: the report, the wire, and when each ``!`` or ``~`` left."""
     device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
     port = open_device(device)
     wire = Wire()
@@ -347,18 +317,35 @@ def test_a_second_hold_after_a_resume_is_a_pause_of_its_own():
             asked.append(streamer.clock.now())
         elif data == b"?" and wire.tx.count(b"!") > wire.tx.count(b"~"):
             polls_held += 1
-            if polls_held in (10, 15):  # about 2 s held, then about 1 s held
+            if polls_held in resumes:
                 streamer.resume()
 
     streamer = GrblStreamer(port, StreamOptions(), trace=trace)
     streamer.connect()
     base = len(wire.lines_sent())
-    wire.at[base + 20] = streamer.hold
-    wire.at[base + 120] = streamer.hold
+    for line in holds:
+        wire.at[base + line] = streamer.hold
     try:
-        report = streamer.stream(square_program(300))
+        report = streamer.stream(square_program(lines))
     finally:
         port.close()
+    return report, wire, asked
+
+
+def test_a_second_hold_while_held_does_not_end_the_pause():
+    """Two ``hold()`` calls, then one ``resume()``: one pause, from the first hold to the
+    resume, and the held machine is never taken for someone else's hold."""
+    report, wire, _ = _held((20, 21), (10,), 200)  # resumed about 2 s after
+    assert wire.tx.count(b"!") == 2 and wire.tx.count(b"~") == 1
+    assert report.outside_holds == 0
+    assert not any("not asked for" in w for w in report.warnings)
+    assert report.pauses == 1 and 1.5 < report.paused_s < 2.5
+
+
+def test_a_second_hold_after_a_resume_is_a_pause_of_its_own():
+    """Hold, resume, hold again, resume: two pauses, each from its own ``!`` to its own ``~``
+    (the second is not measured from the first hold)."""
+    report, wire, asked = _held((20, 120), (10, 15), 300)  # held about 2 s, then about 1 s
     assert [d for d in wire.tx if d in (b"!", b"~")] == [b"!", b"~", b"!", b"~"]
     hold1, resume1, hold2, resume2 = asked
     assert report.pause_spans == [
