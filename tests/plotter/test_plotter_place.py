@@ -454,6 +454,21 @@ def test_a_buffer_goal_a_hair_above_the_natural_least_is_met(above: float) -> No
     assert 1.01 <= placed.scale / free.scale <= 1.01 * 1.001 + 1e-9
 
 
+def test_a_buffer_goal_half_again_the_least_is_met_by_every_run_of_cae() -> None:
+    """cae's three runs hold 0.49, 0.61 and 0.55 s in their least 18 lines at their natural
+    timing. A goal 1.5 times the least is met by each, also by the one whose lines lengthen
+    less than in proportion at the first slowing (it is slowed again, not kept at the faster
+    timing)."""
+    tag = tagbot.load_plan(EXAMPLES / "cae.json")
+    blocks = 15 - 1 + RX_LINES
+    free = place(tag, load_profile(None, ["motion.min_buffer=0"]))
+    goal = 1.5 * min(buffered(r.t, blocks) for r in free.runs)
+    placed = place(tag, load_profile(None, [f"motion.min_buffer={goal!r}"]))
+    for run, before in zip(placed.runs, free.runs, strict=True):
+        assert buffered(run.t, blocks) >= goal * (1 - 1e-6)
+        assert run.scale > before.scale and run.limits["buffer"] == run.scale
+
+
 def test_the_bed_check_allows_a_micrometre_on_every_edge_and_not_more() -> None:
     """Setpoints exactly 1e-6 mm past an edge (rounding of a tag fitted edge to edge) are
     accepted on each of the four edges; 2e-6 mm past it is refused, naming that edge."""
