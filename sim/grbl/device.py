@@ -849,11 +849,12 @@ class SimulatedGrbl:
         self._checkpoint()
 
     def _cycle_stopped(self) -> None:
-        self._check_starving()
+        self._check_starving(at_rest=True)
 
-    def _check_starving(self) -> None:
-        """Note when the planner is down to its last block (it must plan a stop) with no line
-        asking for that (pen change, dwell, program end): starvation if more motion follows."""
+    def _check_starving(self, at_rest: bool = False) -> None:
+        """Note when the planner is down to its last block (it must plan a stop), or the machine
+        came to rest, with no line asking for that (pen change, dwell, program end): starvation
+        if more motion follows before such a line."""
         queued = self.executor.queued_blocks
         if queued > 1:
             self._flowing = True  # a motion sequence is under way (the first block is priming)
@@ -861,7 +862,7 @@ class SimulatedGrbl:
         waiting = any(isinstance(a, _Wait) and a.item is None for a in self._actions)
         if waiting or self.executor._dwell is not None:
             self._flowing = False
-        elif self._flowing and self._ran_dry is None:
+        elif (self._flowing or at_rest) and self._ran_dry is None:
             self._ran_dry = self.now
             self._flowing = False
 
@@ -979,7 +980,9 @@ class SimulatedGrbl:
                     tag = action.item.tag
                     if isinstance(tag, int):
                         self._line_blocks[tag] = self._line_blocks.get(tag, 0) + 1
-                if self._ran_dry is not None and isinstance(action.item, MotionBlock):
+                if action.item is None:
+                    self._ran_dry = None  # a line asked for the stop: the pen change, dwell, end
+                elif self._ran_dry is not None and isinstance(action.item, MotionBlock):
                     self.starvation.append(self._ran_dry)
                     self._ran_dry = None
             elif callable(action):

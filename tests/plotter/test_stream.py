@@ -317,6 +317,43 @@ def test_a_slow_line_starves_the_planner_and_the_simulator_counts_it():
     assert len(device.starvation) > 20
 
 
+def test_a_link_too_slow_for_two_queued_blocks_starves_at_nearly_every_line():
+    """At 2400 baud a 10 ms line takes ~90 ms to arrive: the machine comes to rest after each
+    one, so the planner never holds two blocks. Every rest counts (only the few lines read
+    during the pen's dwell flow on), and the streamer's stall spans, from Idle reports, are
+    no more than the simulator saw."""
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port = open_device(device, baud=2400)
+    lines = square_program(30)
+    try:
+        streamer = GrblStreamer(port)
+        streamer.connect()
+        report = streamer.stream(lines, drawing=[line.startswith("G1") for line in lines])
+    finally:
+        port.close()
+    assert 20 <= len(device.starvation) <= 29
+    assert 1 <= len(report.stall_spans) <= len(device.starvation)
+
+
+def test_strokes_ending_before_their_pen_up_line_arrives_are_not_starvation():
+    """One-line strokes over a slow link: each stroke is at rest before its pen-up line is
+    read, but that stop is the one the program asks for."""
+    lines = ["G21\n", "G90\n", "G94\n"]
+    for k in range(8):
+        lines += [f"G0X{10 + 5 * k}Y10\n", "M3S30\n", "G4P0.1\n", f"G1X{10 + 5 * k}Y10.02F6000\n"]
+        lines += PEN_UP
+    device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
+    port = open_device(device, baud=2400)
+    try:
+        streamer = GrblStreamer(port)
+        streamer.connect()
+        report = streamer.stream([*lines, "M5\n", "M2\n"])
+    finally:
+        port.close()
+    assert report.errors == [] and device.position_mm[:2] == pytest.approx((45, 10.02), abs=0.01)
+    assert device.starvation == []
+
+
 def test_resume_preamble_recreates_modal_state_and_position():
     lines = square_program(50)
     preamble = resume_lines(lines, 20, PEN_UP, ["M3S30\n", "G4P0.1\n"])
