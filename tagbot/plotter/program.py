@@ -211,10 +211,11 @@ class Program:
         """
         t = np.asarray(t, dtype=float)
         n = len(self.lines)
-        before = (
-            np.vstack([self.notes_start[None, :], self.line_xy[:-1]]) if n else np.zeros((0, 2))
-        )
-        i = np.clip(np.searchsorted(self.line_end, t, side="left"), 0, max(n - 1, 0))
+        if not n:  # nothing to run: at rest where the job starts, pen up
+            xy = np.tile(self.notes_start, (len(t), 1))
+            return xy, np.zeros_like(xy), np.zeros(len(t), dtype=bool)
+        before = np.vstack([self.notes_start[None, :], self.line_xy[:-1]])
+        i = np.clip(np.searchsorted(self.line_end, t, side="left"), 0, n - 1)
         start, stop = self.line_start[i], self.line_end[i]
         p0, p1 = before[i], self.line_xy[i]
         length = np.hypot(*(p1 - p0).T)

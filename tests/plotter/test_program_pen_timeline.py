@@ -74,10 +74,8 @@ def test_a_timeline_step_not_above_zero_is_refused(tiny_file, dt):
         program.timeline(dt)
 
 
-def test_a_program_without_lines_has_no_motion_at_no_instants():
-    """A hand-built program of no lines, sampled at no instants, gives empty arrays of the
-    usual shapes: positions (0, 2), velocities (0, 2), pen (0,)."""
-    empty = Program(
+def _empty_program(start: tuple[float, float] = (0.0, 0.0)) -> Program:
+    return Program(
         lines=(),
         line_start=np.zeros(0),
         line_end=np.zeros(0),
@@ -90,7 +88,24 @@ def test_a_program_without_lines_has_no_motion_at_no_instants():
         scale=1.0,
         drawing_time=0.0,
         min_buffered=math.inf,
+        notes_start=np.array(start),
     )
+
+
+def test_a_program_without_lines_has_no_motion_at_no_instants():
+    """A hand-built program of no lines, sampled at no instants, gives empty arrays of the
+    usual shapes: positions (0, 2), velocities (0, 2), pen (0,)."""
+    empty = _empty_program()
     xy, v, pen = empty.at(np.zeros(0))
     assert (xy.shape, v.shape, pen.shape) == ((0, 2), (0, 2), (0,))
     assert empty.duration == 0.0
+
+
+def test_a_program_without_lines_rests_pen_up_where_it_starts():
+    """Its timeline is one instant, 0 s, at the start point, still, pen up."""
+    table = _empty_program((3.0, 4.0)).timeline(0.01)
+    assert table.t.tolist() == [0.0] and table.xy.tolist() == [[3.0, 4.0]]
+    assert table.v.tolist() == [[0.0, 0.0]] and table.speed.tolist() == [0.0]
+    assert table.pen.tolist() == [0]
+    xy, v, pen = _empty_program((3.0, 4.0)).at(np.array([-1.0, 0.5]))
+    assert xy.tolist() == [[3.0, 4.0]] * 2 and not v.any() and pen.tolist() == [False] * 2
