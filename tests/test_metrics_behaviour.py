@@ -306,6 +306,18 @@ def test_reports_of_a_run_the_stop_came_in_are_cut_short() -> None:
     assert compare_reports(planned, executed, run_of, until=1.0).runs[0].cut_short is False
 
 
+def test_one_report_of_a_run_times_its_start_and_keeps_the_planned_duration() -> None:
+    """A run planned over 1 s (10 mm) with one status report, 4 mm along 0.3 s late: the run
+    started 0.3 s late and, with nothing to measure a drift by, took its planned time (its
+    motion 0.02 mm from either end: 3 ms in from each here, sampled at 1 ms)."""
+    from tagbot.metrics import compare_reports
+
+    executed = np.array([[0.7, 4.0, 0.0, 1.0]])
+    run = compare_reports([_run(0.0)], executed, np.zeros(1, dtype=int)).runs[0]
+    assert run.executed_start == pytest.approx(0.3, abs=1e-9)
+    assert run.executed_duration == run.planned_duration == pytest.approx(0.994, abs=1e-9)
+
+
 def test_a_dot_is_reported_executed_when_its_pen_went_down() -> None:
     """A dot planned at 2 s and drawn from 5 s (the pen down 0.2 s, standing): nothing moves
     to align, so it was executed 3 s late, when its pen went down (not 1 s before, at the

@@ -92,6 +92,22 @@ def test_match_trace_puts_a_geometric_plan_on_the_traces_clock() -> None:
     assert shape_error([trace.xy], [ink_polyline(timed, geometric.size)]).mean <= 0.005
 
 
+def test_match_trace_keeps_strokes_in_the_air_where_the_pen_touched_down_moving() -> None:
+    """A capture of the middle 80 % of a timed plan's path, stamped from 3 s: ``match_trace``
+    returns the plan with strokes in the air, inked exactly over the recorded span on the
+    trace's clock from its first timestamp."""
+    rng = np.random.default_rng(21)
+    full = simulated_capture(random_timed_plan(rng), rng)
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(full.xy, axis=0).T))]
+    keep = (s >= 0.1 * s[-1]) & (s <= 0.9 * s[-1])
+    trace = Trace(full.xy[keep], full.t[keep] + 3.0)
+    geometric = fit([trace], timing="ignore")
+    timed, t0 = match_trace(geometric.plans[0], trace, geometric.size, "sigma", TimingOptions())
+    assert t0 == trace.t[0]
+    assert timed.moving_ends(geometric.size) == (True, True)
+    assert timed.ink_window(geometric.size) == pytest.approx((0.0, trace.t[-1] - t0))
+
+
 def test_ignore_is_the_geometric_fit_exactly() -> None:
     """``ignore`` (and ``auto`` on untimed traces) gives today's result: timestamps unused."""
     rng = np.random.default_rng(3)

@@ -116,6 +116,9 @@ def test_dt_adds_elided_milliseconds_to_the_sample_clock() -> None:
     assert a.t.tolist() == [0.0, 0.01]
     assert b.t.tolist() == pytest.approx([0.52], abs=1e-15)
     assert c.t.tolist() == pytest.approx([0.78], abs=1e-15)
+    # No time elided: the clock runs on as if the keyword were not there.
+    a, b = read_unipen(unp(".POINTS_PER_SECOND 100\n.PEN_DOWN\n0 0\n.DT 0\n.PEN_DOWN\n1 1\n"))
+    assert a.t.tolist() == [0.0] and b.t.tolist() == [0.01]
 
 
 def test_samples_on_the_keyword_line_blank_lines_crlf_and_bom() -> None:
@@ -290,6 +293,8 @@ def test_include_is_never_followed(tmp_path) -> None:
         (".X_POINTS_PER_MM 0\n", "line 1: .X_POINTS_PER_MM must be positive"),
         (".Y_POINTS_PER_INCH 1e-16\n", "line 1: .Y_POINTS_PER_INCH 1e-16 is too small"),
         (".DT -5\n", "line 1: .DT is negative ('-5')"),
+        (".VERSION 1.0\n.SEGMENT\n", "line 2: .SEGMENT has no type"),
+        ('.VERSION 1.0\n\n.SEGMENT "only a label"\n', "line 3: .SEGMENT has no type"),
         (".X_POINTS_PER_MM 1e-15\n.PEN_DOWN\n1e15 0\n",
          "line 2: a sample is beyond ±1e+15 mm once converted"),
         # the component holding the far sample is named, not the one ending just before it
