@@ -5,7 +5,15 @@ import pytest
 
 from tagbot.errors import PlanError
 from tagbot.model.euler import wrap_angle
-from tagbot.model.plan import DEFAULT_MU, DEFAULT_SIGMA, Plan, Tag
+from tagbot.model.plan import (
+    DEFAULT_MU,
+    DEFAULT_SIGMA,
+    MAX_DELAY,
+    MAX_SIGMA,
+    MU_RANGE,
+    Plan,
+    Tag,
+)
 
 TARGETS = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]
 GOOD = {
@@ -38,6 +46,26 @@ def make(targets=TARGETS, start=0.0, **changes):
 def test_bad_stroke_fields_are_named(changes, message):
     with pytest.raises(PlanError, match=message):
         make(**changes)
+
+
+@pytest.mark.parametrize(
+    ("field", "limit", "beyond", "message"),
+    [
+        ("sigma", MAX_SIGMA, 3.0000001, r"strokes\[1\]\.sigma: must be <= 3, got 3\.0000001"),
+        ("dt", MAX_DELAY, 3600.5, r"strokes\[1\]\.dt: must be <= 3600 s, got 3600\.5"),
+        ("mu", MU_RANGE[1], 6.0000001, r"strokes\[1\]\.mu: must be in \[-12, 6\], got 6\.0000001"),
+        ("mu", MU_RANGE[0], -12.0000001, r"strokes\[1\]\.mu: must be in \[-12, 6\]"),
+    ],
+)
+def test_stroke_fields_at_their_limits_are_kept_just_beyond_refused(field, limit, beyond, message):
+    """A stroke's sigma, delay or mu exactly at its bound makes a plan; a hair past it is refused,
+    naming the stroke, the bound and the value."""
+    values = list(GOOD[field])
+    values[1] = limit
+    assert getattr(make(**{field: values}), field)[1] == limit
+    values[1] = beyond
+    with pytest.raises(PlanError, match=message):
+        make(**{field: values})
 
 
 @pytest.mark.parametrize(
