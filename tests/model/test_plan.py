@@ -9,6 +9,7 @@ from tagbot.model.plan import (
     DEFAULT_MU,
     DEFAULT_SIGMA,
     MAX_DELAY,
+    MAX_DURATION,
     MAX_SIGMA,
     MU_RANGE,
     Plan,
@@ -136,6 +137,18 @@ def test_tag_validation():
     with pytest.raises(PlanError, match=message):
         Tag((first, make(start=0.5)))
     Tag((first, make(start=end)))  # right after (no lift at all): fine
+
+
+def test_a_tag_longer_than_four_hours_is_refused_with_its_length() -> None:
+    """Three plans, the last starting 4 h after the first: the message gives the tag's length,
+    from the first plan's start to the last plan's end; one ending just within 4 h is fine."""
+    size = Tag((make(),)).size
+    end = make().end(size)
+    Tag((make(), make(start=2 * end), make(start=MAX_DURATION - 2 * end)))
+    late = make(start=MAX_DURATION)
+    message = rf"^plans: the tag lasts {late.end(size):.6g} s, more than 14400 s$"
+    with pytest.raises(PlanError, match=message):
+        Tag((make(), make(start=2 * end), late))
 
 
 def test_tag_plans_overlap_in_the_air_only():
