@@ -42,6 +42,11 @@ _EDGE = 1e-9
 """A run edge within this of the ink window's edge (seconds) starts or ends there."""
 
 
+def _ramp_share(jerk_limited: bool) -> float:
+    """``S(1)``: the share of a ramp's length the plan's clock advances over it."""
+    return 0.5 if jerk_limited else 2.0 / 3.0
+
+
 @dataclass(frozen=True)
 class RunClock:
     """The map from a run's clock ``u`` to the tag's clock (module docstring)."""
@@ -60,8 +65,7 @@ class RunClock:
 
     @property
     def _kept(self) -> float:
-        """``S(1)``: the share of a ramp's length the plan's clock advances over it."""
-        return 0.5 if self.jerk_limited else 2.0 / 3.0
+        return _ramp_share(self.jerk_limited)
 
     def _ramp(self, x: Array) -> tuple[Array, Array]:
         """``S(x)`` and ``S'(x)``."""
@@ -133,8 +137,7 @@ def run_clock(
     )
     ramp = min(EASE, off - on)
     if all(eases):  # both ramps within the run: together they cover 2·S(1)·ramp of its clock
-        kept = RunClock(on, off, jerk_limited=jerk_limited)._kept
-        ramp = min(ramp, (off - on) / (2.0 * kept))
+        ramp = min(ramp, (off - on) / (2.0 * _ramp_share(jerk_limited)))
     ease_in = ramp if eases[0] else 0.0
     ease_out = ramp if eases[1] else 0.0
     return RunClock(on, off, ease_in, ease_out, jerk_limited)
