@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import tagbot
+from tagbot.model import Plan, Tag
 from tagbot.model.motion import evaluate_plan
 from tagbot.plotter import build_program, load_profile, place
 from tagbot.plotter.place import (
@@ -240,6 +241,38 @@ def test_runs_start_and_end_one_step_from_their_ends(tiny_file, name):
     )
     for run in untrimmed.runs:
         assert run.span == (tag.plans[run.plan].start, tag.plans[run.plan].end(tag.size))
+
+
+def test_a_flick_still_moving_a_step_in_its_last_millisecond_is_trimmed_before_its_end(
+    tiny_file,
+):
+    """A 10 ms flick that still moves more than a motor step in the millisecond before its end
+    (its last placement sample): the run still ends where the flick last enters the ±1-step box
+    around its end point, before the plan's end, and nothing after that is drawn."""
+    plan = Plan(
+        targets=[[0.0, 0.0], [10.0, 0.0]],
+        dt=[0.0],
+        mu=[math.log(0.01)],
+        sigma=[0.05],
+        phi1=[0.0],
+        phi2=[0.0],
+        start=0.0,
+    )
+    tag = Tag(plans=(plan,))
+    profile = load_profile(tiny_file)
+    placed = place(tag, profile)
+    box = step_box(profile)
+    (run,) = placed.runs
+    end = plan.end(tag.size)
+    ms_before, last = _exact(tag, placed, run, np.array([end - 0.001, end]))
+    assert np.any(np.abs(ms_before - last) >= box)  # a step moved in the last millisecond
+    on, off = run.span
+    assert plan.start < on < off < end
+    at_off = _exact(tag, placed, run, np.array([off]))[0]
+    assert np.max(np.abs(at_off - last) / box) == pytest.approx(1.0, abs=0.02)
+    after = _exact(tag, placed, run, np.linspace(off, end, 200)[1:])
+    assert np.all(np.all(np.abs(after - last) < box, axis=1))
+    assert run.tag_t[-1] <= off
 
 
 def test_resting_share_is_measured_and_removed():

@@ -199,6 +199,9 @@ def test_planned_runs_timeline_and_buffer(tiny):
     table = program.timeline(0.01)
     assert table.t[0] == 0.0 and table.t[-1] == pytest.approx(program.duration)
     assert np.all(np.diff(table.t) > 0)
+    # The speed column is the velocity's magnitude, its x and its y part both counted.
+    assert np.max(np.abs(table.v[:, 0])) > 1.0
+    assert np.allclose(table.speed, np.sqrt(table.v[:, 0] ** 2 + table.v[:, 1] ** 2))
     xy, _, pen = program.at(program.line_end)
     assert np.allclose(xy, program.line_xy, atol=1e-9)
     assert np.array_equal(pen, program.line_pen)

@@ -491,3 +491,32 @@ def test_a_travel_that_cruises_is_halfway_along_at_half_its_time(slow):
     assert xy[0] == pytest.approx(0.5 * here, abs=1e-9)
     speed = min(20.0, slow["limits.x_max_feed"] / 60.0 / abs(d[0] / length))
     assert v[0] == pytest.approx(speed * d / length, rel=1e-9)
+
+
+def test_a_run_starting_beside_the_last_ones_end_on_the_same_y_is_travelled_to(tiny_file):
+    """Two runs on one horizontal line, the second starting 5 mm right of where the first ends:
+    the pen lifts, travels along x alone to the second run's start and comes down there, not
+    where the first run ended."""
+    profile = load_profile(tiny_file)
+    runs = tuple(
+        Run(
+            plan=k,
+            t=np.array([0.0, 1.0]),
+            xy=np.array([[x, 10.0], [x + 10.0, 10.0]]),
+            v=np.zeros(2),
+        )
+        for k, x in enumerate((10.0, 25.0))
+    )
+    setpoints = Setpoints(
+        runs=runs,
+        dt=0.05,
+        scale=1.0,
+        size=1.0,
+        matrix=np.eye(2),
+        offset=np.zeros(2),
+        limits={},
+    )
+    program = build_program(setpoints, profile)
+    second_down = [k for k, line in enumerate(program.lines) if line == "M3S30\n"][1]
+    assert program.lines[second_down - 1] == "G1X25Y10F1200\n"
+    assert program.line_xy[second_down].tolist() == pytest.approx([25.0, 10.0])

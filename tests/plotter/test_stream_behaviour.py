@@ -309,11 +309,11 @@ def test_a_host_stall_after_the_lines_drawing_covers_is_no_warning():
 
 
 @pytest.mark.parametrize("answers", [2, None])
-def test_a_reset_the_controller_misses_in_a_safe_stop_is_sent_again(answers):
+def test_a_reset_the_controller_misses_in_a_safe_stop_is_sent_again(answers, caplog):
     """A fault mid-job; the controller, stopped by the feed hold, misses the safe stop's first
     reset (no banner within 1.5 s): the reset is sent again, and once a banner comes the pen is
     lifted. A controller that answers none of three resets: the safe stop is incomplete, said
-    in the report, and the pen lines are not sent."""
+    in the report and in the log, and the pen lines are not sent."""
     device = SimulatedGrbl(SETTINGS, pen_servo=(30, 50))
     port = open_device(device)
     wire = Wire()
@@ -334,11 +334,15 @@ def test_a_reset_the_controller_misses_in_a_safe_stop_is_sent_again(answers):
     streamer.connect()
     device.inject_error(device.lines_received + 100, 22)
     try:
-        with pytest.raises(DeviceFault, match="error:22"):
+        with (
+            caplog.at_level("WARNING", logger="tagbot.plotter.stream"),
+            pytest.raises(DeviceFault, match="error:22"),
+        ):
             streamer.stream(square_program(300), pen_up=PEN_UP)
     finally:
         port.close()
     errors = streamer.last_report.errors
+    logged = [r.getMessage() for r in caplog.records if r.name == "tagbot.plotter.stream"]
     after_hold = wire.tx[wire.tx.index(b"!") :]
     pen_lines = [d for d in after_hold if d.endswith(b"\n")]
     if answers is None:
@@ -347,8 +351,13 @@ def test_a_reset_the_controller_misses_in_a_safe_stop_is_sent_again(answers):
             "safe stop incomplete: no welcome after 3 resets: the machine may still hold lines;"
             " switch it off"
         ]
+        assert (
+            "grbl: safe stop incomplete: no welcome after 3 resets: the machine may still hold"
+            " lines; switch it off" in logged
+        ), logged
     else:
         assert seen["resets"] == 2 and len(errors) == 1
+        assert not any("safe stop incomplete" in m for m in logged), logged
         assert pen_lines == [line.encode() for line in PEN_UP]
 
 
@@ -424,3 +433,38 @@ def test_a_command_waited_on_polls_the_status_at_the_poll_rate():
     finally:
         port.close()
     assert 4 <= wire.tx[before:].count(b"?") <= 6
+
+
+def test_a_machine_frozen_on_its_last_move_after_every_ok_is_caught_by_the_watchdog():
+    """Every line acknowledged, the one move left frozen mid-way (``Bf:14``: a single planner
+    block waits): waiting for the end, the host raises the stall after the stall timeout, naming
+    the move as not executed, rather than waiting on (it is freed 4 s later)."""
+    device = SimulatedGrbl({**SETTINGS, 10: 3}, pen_servo=(30, 50))
+    port = open_device(device)
+    lines = ["G21\n", "G90\n", "G94\n", "G1X100Y0F600\n"]  # one 10 s move, all sent at once
+    started: list[float] = []
+    frozen_at: list[float] = []
+
+    def trace(direction: str, data: bytes) -> None:
+        if started and not frozen_at and device.now > started[0] + 1.0:
+            frozen_at.append(device.now)
+            device.freeze_motion()
+        elif frozen_at and device.now > frozen_at[0] + 4.0:
+            device.freeze_motion(False)
+
+    streamer = GrblStreamer(port, StreamOptions(stall_timeout=1.0), trace=trace)
+    streamer.connect()
+    started.append(device.now)
+    try:
+        with pytest.raises(
+            DeviceTimeout,
+            match=r"^after line 3 .*resume with --resume-from 4 .*: the machine stopped executing:"
+            r" no motion and no answer for 1\.\d s with lines queued \(Run,",
+        ):
+            streamer.stream(lines)
+    finally:
+        device.freeze_motion(False)
+        port.close()
+    report = streamer.last_report
+    assert frozen_at and report.lines_acknowledged == 4 and report.lines_executed == 3
+    assert frozen_at[0] + 1.0 < report.stop_requested < frozen_at[0] + 4.0
