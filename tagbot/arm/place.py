@@ -174,7 +174,8 @@ class ArmProgram:
         return len(self.joints)
 
     def describe(self, k: int) -> str:
-        """What tick ``k`` belongs to: ``"plan 2"``, ``"travel before plan 0"``..."""
+        """What tick ``k`` belongs to: ``"plan 2"``, ``"travel at plan 0"``,
+        ``"pen move at plan 1"``, ``"travel to park"``, else ``"program"``."""
         for kind, plan, first, stop in self.segments:
             if first <= k < stop:
                 if kind == "draw":

@@ -106,6 +106,17 @@ def test_unreachable_area_is_refused() -> None:
     )
 
 
+def test_an_arm_and_paper_moved_together_place_the_tag_moved_with_them() -> None:
+    """The shoulder axis (arm.base_x) and the paper (area.x_min/x_max) 60 mm to the right: the
+    reach is measured from where the shoulder is, so the tag is placed at the same size,
+    60 mm to the right."""
+    here = place(small_tag(), load_profile())
+    moved = ["arm.base_x=60", "area.x_min=-88.5", "area.x_max=208.5"]
+    there = place(small_tag(), load_profile(None, moved))
+    assert there.mm_per_unit == pytest.approx(here.mm_per_unit, rel=1e-9)
+    np.testing.assert_allclose(there.offset, here.offset + np.array([60.0, 0.0]), atol=1e-9)
+
+
 def test_joint_limits_shrink_the_workspace() -> None:
     wide = place(small_tag(), load_profile())
     narrow_profile = load_profile(None, ["shoulder.min_deg=80", "shoulder.max_deg=100"])
@@ -370,6 +381,19 @@ def test_program_layout_and_pen(profile) -> None:
     assert program.describe(program.segments[2][2]) == "plan 0"
 
 
+def test_a_jobs_planned_timeline_is_its_programs_setpoints_pen_down_1_up_0() -> None:
+    """The job's planned timeline (the run folder's motion.csv) is its program's setpoints in
+    mm, the speed their velocity's norm and the pen 1 down, 0 up, as int8 like every motion
+    table's."""
+    job = prepare(two_plan_tag())
+    planned, sp = job.planned, job.program.setpoints
+    np.testing.assert_array_equal(planned.t, sp.t)
+    np.testing.assert_array_equal(planned.xy, sp.xy)
+    np.testing.assert_array_equal(planned.speed, np.hypot(sp.v[:, 0], sp.v[:, 1]))
+    assert planned.pen.dtype == np.int8
+    assert planned.pen.tolist() == [1 if down else 0 for down in sp.pen.tolist()]
+
+
 def test_joint_speed_refused_before_anything() -> None:
     profile = load_profile(None, ["shoulder.max_speed=5", "motion.max_time_scale=2"])
     with pytest.raises(PlacementError) as raised:
@@ -400,6 +424,17 @@ def test_check_program_names_tick_and_limit(profile) -> None:
     off[program.setpoints.pen] += [0.0, 500.0]
     with pytest.raises(PlacementError, match="outside the safe reach"):
         check_program(replace(program, setpoints=replace(program.setpoints, xy=off)), profile)
+    # a servo's range ends, 0 and 4095 ticks, are goals; a tick beyond either is not
+    where = re.escape(f"tick {k} (t = {k / 100:.3f} s, plan 0)")
+    for end, beyond in ((0, -1), (4095, 4096)):
+        goals = program.joints.copy()
+        goals[k, 3] = end
+        check_program(replace(program, joints=goals), profile)
+        goals[k, 3] = beyond
+        with pytest.raises(
+            PlacementError, match=rf"^{where}: pen goal {beyond} ticks is outside 0\.\.4095$"
+        ):
+            check_program(replace(program, joints=goals), profile)
 
 
 def test_approach_time_respects_the_limits(profile) -> None:

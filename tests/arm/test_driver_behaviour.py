@@ -92,6 +92,24 @@ def test_a_hardware_error_says_how_to_clear_it(tmp_path):
     )
 
 
+def test_a_hardware_error_whose_status_cannot_be_read_says_so(tmp_path, monkeypatch):
+    """A servo flags a hardware error mid-run and its Hardware Error Status read then fails:
+    the message says the cause is unknown because that register could not be read."""
+
+    def flag_and_break_the_read(chain) -> None:
+        chain.set_hardware_error(13, 4)
+        failed = (0, sdk.COMM_RX_TIMEOUT, 0)
+        ph = type(sdk.PacketHandler(2.0))
+        monkeypatch.setattr(ph, "read1ByteTxRx", lambda self, port, id, address: failed)
+
+    error, *_ = _faulted(load_plan(LETTER_B), tmp_path, flag_and_break_the_read)
+    assert isinstance(error, DeviceError)
+    assert str(error).endswith(
+        "hardware error: unknown (Hardware Error Status could not be read); remove the cause,"
+        " then reboot the servo (REBOOT or a power cycle) to clear it"
+    )
+
+
 def test_a_lift_that_cannot_be_written_is_named_in_the_message_and_the_log(
     tmp_path, monkeypatch, caplog
 ):
@@ -789,3 +807,49 @@ def test_a_planar_arm_stopped_says_whether_its_pen_went_up(
     warned = [w for w in run.warnings if w.startswith(not_raised)]
     assert len(warned) == 1 and warned[0].endswith("): it may still be on the paper")
     assert said in warned[0]
+
+
+def test_a_serial_arm_told_to_go_limp_after_an_error_lifts_its_pen_then_drops_torque(
+    record, caplog
+):
+    """With ``servo.torque_off_after_error`` a serial arm's stop after an error lifts the pen,
+    then switches every joint's torque off and logs that it did."""
+    profile = load_serial_profile("openmanipulator-x", ("servo.torque_off_after_error=true",))
+    sim = record(simulated_arm(profile)[0])
+    with (
+        ArmDriver(sim.url, profile) as driver,
+        caplog.at_level(logging.INFO, logger="tagbot.arm.driver"),
+    ):
+        driver.lifter = ArmLift(profile)
+        driver.connect()
+        assert all(sim.servo(id).torque for id in profile.bus_ids)
+        driver.safe_stop(error=True)
+        assert driver.lifted and driver.lift_failure is None
+    assert not any(sim.servo(id).torque for id in profile.bus_ids)
+    logged = [r.getMessage() for r in caplog.records]
+    assert "stopped safely: pen lifted by the arm, torque off" in logged
+
+
+def test_a_hole_between_looks_at_the_bus_is_a_host_stall_only_beyond_two_periods_and_5_ms(
+    record, profile
+):
+    """The read-back loop away from the bus for exactly two periods and 5 ms is no host stall
+    (no servo's silence is excused for it); a microsecond longer is one, from look to look."""
+    from tagbot.arm.driver import ReadBack
+
+    sim = record(simulated_chain(profile))
+    with ArmDriver(sim.url, profile) as driver:
+        driver.open()  # the simulated clock at 0: early instants, where the hole is exact
+        clock = driver.clock
+        readback = ReadBack(driver, clock.now(), dict.fromkeys(driver.ids, 0.0))
+        gap = 2 * profile.period + 0.005
+        assert readback.gap == gap
+        clock.sleep_until(0.05)
+        readback.looked = 0.05 - gap
+        assert clock.now() - readback.looked == gap  # the hole, to the bit
+        readback.poll("test")
+        assert readback.host_stalls == []
+        clock.sleep_until(0.06)
+        readback.looked = 0.06 - gap - 1e-6
+        readback.poll("test")
+        assert readback.host_stalls == [(0.06 - gap - 1e-6, 0.06)]

@@ -461,6 +461,28 @@ def test_the_executed_trace_spans_the_first_goals_due_time_to_the_streams_end_bo
     np.testing.assert_allclose(kept[:, 0], [10.05 - zero, 11.0 - zero, 12.0 - zero])
 
 
+def test_a_stopped_runs_pen_drew_to_its_sample_at_the_streams_end_on_a_long_running_clock(
+    small,
+) -> None:
+    """After a stop, the pen drew to the program time of its last pen-down sample up to the
+    stream's end, that instant included even on a clock 2**24 s (194 days) on, where 1 ns is
+    below its resolution; a sample 1 µs after the end is not counted."""
+    from tagbot.arm.driver import Scheduler, StreamResult
+    from tagbot.arm.run import _drawn_to
+    from tagbot.clock import MonotonicClock
+
+    program = small.program
+    period = float(program.joints[1, 0] - program.joints[0, 0])
+    scheduler = Scheduler(MonotonicClock(), period)
+    t0 = scheduler.start(2.0**24)
+    lead, end = 0.05, t0 + 0.05 + 0.5
+    assert end + 1e-9 == end  # the clock's resolution here
+    result = StreamResult(ticks_sent=100, start=t0, end=end, lead=lead, scheduler=scheduler)
+    trace = np.column_stack([[end - 0.25, end, end + 1e-6], np.zeros((3, 2)), np.ones(3)])
+    until = _drawn_to(trace, result, program)
+    assert until == pytest.approx(float(program.joints[0, 0]) + 0.5, abs=1e-6)
+
+
 def test_joints_csv_holds_every_ticks_goals_under_its_header(tmp_path) -> None:
     """The run folder's joints.csv, written before anything is sent: the header, then one row
     per tick (row k is tick k), time to the microsecond and whole goal ticks."""

@@ -336,6 +336,17 @@ def test_a_run_touching_down_moving_and_trimmed_still_eases_from_rest():
     assert np.hypot(*program.setpoints.v[rows[0]]) == 0.0
 
 
+def test_a_run_whose_ink_starts_and_ends_faster_than_the_trim_is_drawn_whole():
+    """A plan touching down and lifting off moving, more than motion.trim_mm (0.05 mm) on the
+    paper in each first and last millisecond of its ink: the trim cuts nothing, the run spans
+    the ink window to its last instant."""
+    tag = Tag((lifted(start=0.0),))
+    profile = load_serial_profile("openmanipulator-x")
+    assert profile["motion.trim_mm"] == 0.05
+    clock = build_serial_program(tag, profile).setpoints.run_clocks[0]
+    assert (clock.on, clock.off) == tag.plans[0].ink_window(tag.size)
+
+
 def test_a_run_over_its_limit_by_a_hair_whatever_its_scale_is_still_retimed(monkeypatch):
     """A run whose joint acceleration barely shrinks as it is slowed (as the IK's per-sample
     pull of the pen's axis makes part of it: ga3 19981 stayed 1e-4 over, round after round,

@@ -5,8 +5,10 @@ and a fault mid-run lifting the pen by the arm."""
 from __future__ import annotations
 
 import json
+import locale
 import logging
 import math
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -25,6 +27,7 @@ from tagbot.arm.serial.machine import (
     bridge_hops,
     contact_figures,
     executed_from_reads,
+    move_bounds,
     prepare,
     simulated_arm,
     time_bound,
@@ -42,6 +45,8 @@ from tagbot.errors import (
     ProfileError,
     ReachError,
 )
+
+from ..conftest import small_tag
 
 EXAMPLES = Path(tagbot.__file__).parent / "examples"
 
@@ -237,6 +242,28 @@ def test_contact_lost_and_force_out_of_range_are_warnings() -> None:
         " error, set by the servos' whole ticks, is as large as its motion)",
         "run 2 (plan 3): speed SNR 12.0 dB below 25 dB",
     ]
+
+
+def test_a_run_drawn_short_and_slow_is_warned_of_as_a_short_run_with_its_length(tmp_path) -> None:
+    """The hook drawn 0.05 mm per tag unit (under 0.8 mm of ink): the simulated arm's run
+    scores below the speed SNR budget, and the warning says it is a short run, naming its
+    planned length."""
+    report = draw(
+        small_tag(),
+        tmp_path / "tiny",
+        device="dynamixel",
+        profile="openmanipulator-x",
+        overrides=("place.scale=0.05",),
+        pictures=False,
+    ).report
+    assert report["completed"]
+    (warning,) = report["warnings"]
+    short = re.fullmatch(
+        r"run 1 \(plan 0\): speed SNR [\d.]+ dB below 25 dB \(a short run, ([\d.]+) mm: the"
+        r" arm's speed error, set by the servos' whole ticks, is as large as its motion\)",
+        warning,
+    )
+    assert short is not None and 0.0 < float(short[1]) <= 0.8
 
 
 def test_the_pen_pressed_too_deep_digs_in_and_aimed_at_the_surface_skips(letter_b, tmp_path):
@@ -494,6 +521,18 @@ def test_the_check_names_the_tick_of_a_joint_beyond_its_speed_or_the_servo_range
     goals[5, 2] = 4200
     with pytest.raises(PlacementError, match=r"^tick 5 .*joint2 goal 4200 ticks is outside"):
         check_serial_program(replace(program, joints=goals), profile)
+    # the servo's range ends, 0 and 4095 ticks, are goals; a tick beyond either is not
+    for end, beyond in ((0, -1), (4095, 4096)):
+        goals = program.joints.copy()
+        goals[5, 2] = end
+        check_serial_program(replace(program, joints=goals), profile)
+        goals[5, 2] = beyond
+        with pytest.raises(
+            PlacementError,
+            match=rf"^tick 5 \(t = 0\.050 s, travel at plan 0\): joint2 goal {beyond} ticks"
+            r" is outside 0\.\.4095$",
+        ):
+            check_serial_program(replace(program, joints=goals), profile)
 
 
 def test_a_scale_too_large_and_a_park_pose_near_the_paper_are_refused(letter_b) -> None:
@@ -502,6 +541,24 @@ def test_a_scale_too_large_and_a_park_pose_near_the_paper_are_refused(letter_b) 
     low = ("joint2.park_deg=40", "joint3.park_deg=0", "joint4.park_deg=80")  # the pen under it
     with pytest.raises(PlacementError, match=r"\(travel before plan 0\): the pen's point would"):
         prepare(letter_b, profile="openmanipulator-x", overrides=low)
+
+
+def test_a_move_of_one_tick_after_a_run_is_bounded_by_its_step(profile) -> None:
+    """The move to park one tick long, its shoulder stepping 0.01 rad from the run's last
+    pose: its bound is that step at the joint's speed or acceleration limit, whichever binds
+    (the arm standing before and after), not nothing."""
+    from types import SimpleNamespace
+
+    q = np.zeros((4, len(profile.joints)))
+    q[3, 0] = 0.01
+    job = SimpleNamespace(
+        angles=q,
+        segments=(("draw", 0, 0, 3), ("park", 0, 3, 4)),
+        setpoints=SimpleNamespace(run_scales=(1.0,)),
+    )
+    joint = profile.joints[0]
+    step = max(0.01 / joint.max_speed, math.sqrt(0.01 / joint.max_acceleration))
+    assert move_bounds(job, profile)[1] == pytest.approx(step, rel=1e-12)
 
 
 def test_the_job_time_bound_is_each_move_at_the_joints_limits(program, profile) -> None:
@@ -613,6 +670,19 @@ def test_a_run_planned_as_a_dot_has_no_ink_to_lose() -> None:
     assert figures["contact_kept_pct"] == 100.0
 
 
+def test_a_run_of_one_planned_instant_or_with_nothing_executed_has_no_figures() -> None:
+    """A run of a single planned instant, or a run with no executed sample, has its three
+    figures under their report keys, each NaN (nothing to judge)."""
+    executed = np.column_stack([np.linspace(0, 2, 21), np.zeros(21), np.zeros(21), np.ones(21)])
+    dot = (np.array([0.5]), np.zeros((1, 2)))
+    line = (np.array([0.5, 1.5]), np.array([[0.0, 0.0], [1.0, 0.0]]))
+    out = contact_figures([dot], executed, np.zeros((0, 2)))
+    out += contact_figures([line], executed[:0], np.zeros((0, 2)))
+    for figures in out:
+        assert sorted(figures) == ["contact_kept_pct", "force_max_n", "force_min_n"]
+        assert all(math.isnan(v) for v in figures.values())
+
+
 def test_planned_instants_in_whole_seconds_move_on_by_a_pause() -> None:
     """A pause of 0.25 s at 0.5 s on the executed clock: the planned instants after it are found
     0.25 s later, given as whole seconds too."""
@@ -692,6 +762,28 @@ def test_a_description_without_the_pens_mount_is_named_with_the_profile_file(tmp
         load_serial_profile(path)
 
 
+def test_a_description_with_non_ascii_text_loads_into_the_physics_whatever_the_locale(
+    tmp_path,
+) -> None:
+    """A robot description holding non-ASCII text (a note naming the arm's pen, épaule)
+    loads into the physics simulator under an ASCII locale too: its copy with the pen is
+    written as UTF-8, as MuJoCo reads it."""
+    shipped = load_serial_profile("openmanipulator-x").description.read_text(encoding="utf-8")
+    note = '<custom><text name="note" data="the arm\u2019s pen, épaule"/></custom></mujoco>'
+    model = shipped.replace("</mujoco>", note)
+    assert model != shipped
+    profile = load_serial_profile(_profile_file(tmp_path, f'"{tmp_path / "my_arm.xml"}"', model))
+    before = locale.setlocale(locale.LC_CTYPE)
+    locale.setlocale(locale.LC_CTYPE, "C")
+    try:
+        assert locale.getencoding() != "UTF-8"
+        _chain, physics = simulated_arm(profile)
+    finally:
+        locale.setlocale(locale.LC_CTYPE, before)
+    assert physics.model.ntext == 1
+    physics.detach()
+
+
 def test_the_budgets_warnings_are_logged_as_worded(caplog) -> None:
     report = {"runs": [{"plan": 2, "path_deviation_max_mm": 0.5, "speed_snr_db": 30.0}]}
     contacts = [{"contact_kept_pct": 100.0, "force_min_n": 0.3, "force_max_n": 0.5}]
@@ -703,10 +795,12 @@ def test_the_budgets_warnings_are_logged_as_worded(caplog) -> None:
 
 def test_lifting_and_lowering_at_a_pose_retrace_one_path(program, profile) -> None:
     """From a pose on the paper, the lift's goals are the lowering's in reverse, the pose's own
-    standing goal ending the lowering (and not in the lift)."""
+    standing goal ending the lowering (and not in the lift); all are whole ticks, as the
+    program's goals."""
     lift = ArmLift(profile, program)
     row = program.goals[next(s for s in program.segments if s[0] == "draw")[2] + 5]
     up, down = lift.up(row), lift.down(row)
+    assert up.dtype == down.dtype == lift.stand(row).dtype == program.goals.dtype == np.int64
     assert len(up) >= 2 and len(down) == len(up) + 1
     np.testing.assert_array_equal(down[::-1][1:], up)
     np.testing.assert_array_equal(down[-1], lift.stand(row)[0])
