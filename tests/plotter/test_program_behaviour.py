@@ -377,6 +377,19 @@ def test_a_dot_has_no_resting_share(tiny_file):
     assert resting_share(program, profile) == 0.0
 
 
+def _unplaced(runs: tuple[Run, ...]) -> Setpoints:
+    """Hand-built runs as setpoints every 50 ms, in machine mm as they are (no placement)."""
+    return Setpoints(
+        runs=runs,
+        dt=0.05,
+        scale=1.0,
+        size=1.0,
+        matrix=np.eye(2),
+        offset=np.zeros(2),
+        limits={},
+    )
+
+
 def test_dwell_mode_counts_each_surplus_too_short_for_a_dwell(tiny_file):
     """slow_lines = dwell: four one-step runs (slowest 0.0327 s, $1 0.025 s) planned 0.02 s,
     0.0004 s, 0.06 s and 0.0499 s slower than that; the 0.02 s and 0.0499 s surpluses are too
@@ -400,16 +413,7 @@ def test_dwell_mode_counts_each_surplus_too_short_for_a_dwell(tiny_file):
         )
         for k, surplus in enumerate((0.02, 0.0004, 0.06, 0.0499))
     )
-    setpoints = Setpoints(
-        runs=runs,
-        dt=0.05,
-        scale=1.0,
-        size=1.0,
-        matrix=np.eye(2),
-        offset=np.zeros(2),
-        limits={},
-    )
-    program = build_program(setpoints, profile)
+    program = build_program(_unplaced(runs), profile)
     assert program.notes["short_surpluses"] == 2.0
     inside = [
         line
@@ -507,16 +511,7 @@ def test_a_run_starting_beside_the_last_ones_end_on_the_same_y_is_travelled_to(t
         )
         for k, x in enumerate((10.0, 25.0))
     )
-    setpoints = Setpoints(
-        runs=runs,
-        dt=0.05,
-        scale=1.0,
-        size=1.0,
-        matrix=np.eye(2),
-        offset=np.zeros(2),
-        limits={},
-    )
-    program = build_program(setpoints, profile)
+    program = build_program(_unplaced(runs), profile)
     second_down = [k for k, line in enumerate(program.lines) if line == "M3S30\n"][1]
     assert program.lines[second_down - 1] == "G1X25Y10F1200\n"
     assert program.line_xy[second_down].tolist() == pytest.approx([25.0, 10.0])
