@@ -95,6 +95,8 @@ def test_a_whole_tag_follows_the_plan(drawn, job):
     assert report["stalls"] == 0  # the board never ran dry
     # The moves' own stated error against the plan, per run (letter-b has one), in mm.
     assert report["details"]["run_error_mm"] == job.job.run_error
+    # The largest of the moves' own stated errors, as the job states it (well under 1 mm).
+    assert report["details"]["move_error_max_mm"] == float(np.max(job.job.move_error)) < 0.02
     # The job's size: every command sent (travel, pen, draw) a move, the draw moves among them.
     assert report["details"]["moves"] == len(job.job.entries)
     assert report["details"]["draw_moves"] == sum(e.kind == "draw" for e in job.job.entries)
@@ -291,6 +293,26 @@ def test_the_stopped_position_names_the_moves_executed(job):
     assert locate(job.job, (10**6, 10**6), 5, 9) == 5
     # Nothing sent: nothing executed, wherever the motors stand (even on a later move's end).
     assert locate(job.job, entries[inside].steps, 0, 0) == 0
+
+
+def test_a_stop_on_the_jobs_first_tick_counts_a_one_tick_first_move():
+    """The motors stopped where the job's very first tick put them, the end of a one-tick
+    first move (the next one leaves that place): that move executed, though the board had
+    reported none."""
+    from firmware_protocols.ebb.motion import TICK_HZ, Move
+    from tagbot.axidraw.moves import Entry, Job
+
+    one = Move("LM", (2**31 - 1, 0), steps=(1, 0))
+    two = Move("LM", (2**31 - 1, 0), steps=(2, 0))
+    entries = [
+        Entry("travel", one.line(), 0.0, 1 / TICK_HZ, -1, (1, 0), False, one),
+        Entry("travel", two.line(), 1 / TICK_HZ, 2 / TICK_HZ, -1, (3, 0), False, two),
+    ]
+    ticks = np.array([[1, 0], [2, 0], [3, 0]], dtype=np.int64)
+    job = Job(entries, [], [], ticks, np.arange(1, 4) / TICK_HZ, np.zeros(2), [], 80.0)
+    assert list(entry_end_ticks(job)) == [1, 3]
+    assert locate(job, (1, 0), 0, 2) == 1
+    assert locate(job, (0, 0), 0, 2) == 0  # still home: nothing executed
 
 
 def test_a_stop_on_a_travels_last_step_has_not_lowered_the_pen(job):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 
@@ -278,3 +279,13 @@ def test_a_move_that_strays_from_the_plan_is_split(overrides):
         inside = (job.tick_time > mine[0].start + 1e-9) & (job.tick_time <= mine[-1].end + 1e-9)
         gap = np.hypot(*(job.xy(job.ticks[inside]) - at(job.tick_time[inside] - start)).T)
         assert gap.max() <= SPLIT_ERROR + 1e-9, (k, gap.max())
+        # Split at the middle tick: each move spans its stretch between setpoints (after a
+        # T3 run's settle move) halved some number of times, to the tick.
+        ticks = [round((e.start - start) * TICK_HZ) for e in mine]
+        ticks.append(round((mine[-1].end - start) * TICK_HZ))
+        edges = set(np.round(run.t * TICK_HZ).astype(int).tolist())
+        if ticks[1] == round(SETTLE * TICK_HZ):
+            edges.add(ticks[1])
+        for a, b in itertools.pairwise(ticks):
+            m = min(x for x in edges if x >= b) - max(x for x in edges if x <= a)
+            assert any(b - a in (m >> j, -(-m >> j)) for j in range(16)), (k, a, b, m)

@@ -113,6 +113,72 @@ class _SilentLink:
         return b""
 
 
+class _WaitingLink:
+    """A board whose reply is all waiting on the port once the command is written; it keeps
+    the size of every read asked of it."""
+
+    def __init__(self, reply: bytes) -> None:
+        self.clock, self.reply, self.held, self.reads = _Clock(), reply, b"", []
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self.held)
+
+    def write(self, data: bytes) -> int:
+        self.held += self.reply
+        return len(data)
+
+    def read(self, n: int = 1) -> bytes:
+        self.reads.append(n)
+        chunk, self.held = self.held[:n], self.held[n:]
+        return chunk
+
+
+def test_a_reply_waiting_on_the_port_is_read_in_one_call():
+    """The reply the port already holds is read at once (all ``in_waiting`` bytes), not a
+    byte a call."""
+    link = _WaitingLink(b"QM,0,0,0,0\r\n")
+    streamer = EBBStreamer(link, load_profile(), {})
+    assert streamer.ask("QM", data=True, ok=False) == b"QM,0,0,0,0"
+    assert link.reads == [12]
+
+
+class _SlowBoard(_WaitingLink):
+    """A board that answers at once and holds every motion line written to it until its clock
+    reaches ``done`` (OK to anything else; idle at home, button not pressed)."""
+
+    def __init__(self, done: float) -> None:
+        super().__init__(b"")
+        self.done, self.lines, self.written = done, 0, []
+
+    def write(self, data: bytes) -> int:
+        self.written.append(bytes(data))
+        name = data.split(b",")[0].strip()
+        busy = self.lines if self.clock.t < self.done else 0
+        replies = {
+            b"QM": b"QM,%d,0,0,0\r\n" % min(busy, 1),
+            b"QU": b"QU,%d\r\nOK\r\n" % max(busy - 1, 0),
+            b"QS": b"0,0\r\nOK\r\n",
+            b"QB": b"0\r\nOK\r\n",
+        }
+        self.lines += name == b"SM"
+        self.held += replies.get(name, b"OK\r\n")
+        return len(data)
+
+
+def test_a_board_found_idle_one_recheck_after_its_due_time_has_not_run_dry():
+    """Two 1 ms lines sent at 100 s should be done at 100.002 s; the board, still full then,
+    has room at the next look 1 ms later (100.003 s) and takes the third line: that is the
+    host's own re-check period, not a stall, and the line goes out without another look."""
+    board = _SlowBoard(done=100.0025)
+    streamer = EBBStreamer(board, load_profile(), {})
+    report = streamer.stream([b"SM,1,0,0"] * 3, durations=[0.001] * 3)
+    assert report.stalls == [] and report.executed == 3
+    # One look (QM, QU,6) a millisecond from the poll at 100 s to the third line, no more.
+    second, third = [i for i, line in enumerate(board.written) if line.startswith(b"SM")][1:]
+    assert board.written[second + 1 : third].count(b"QM\r") == 4
+
+
 def test_a_stop_on_a_silent_board_gives_up_after_the_resync_timeout():
     link = _SilentLink()
     streamer = EBBStreamer(link, load_profile(), {})
@@ -549,6 +615,19 @@ def test_a_stop_waits_out_the_pens_rise_before_asking_the_board_again():
         # ES, then V past every reply in flight, QS where the motors stopped, the pen lifted
         # and one look at the board's state (QM, QU): idle.
         assert stop == [b"ES\r", b"V\r", b"QS\r", up, b"QM\r", b"QU,6\r"]
+    finally:
+        link.close()
+
+
+def test_connect_ends_by_reading_the_button_to_forget_an_old_press():
+    """The set-up's last command is the documented ``QB`` (upper case, as every command sent):
+    a press from before the job is read there, not taken for a pause."""
+    link = serial.serial_for_url(_url(SimulatedEBB()), timeout=0.01)
+    try:
+        wire = _Recording(link)
+        EBBStreamer(wire, load_profile(), {}).connect()
+        assert wire.written[0] == b"V\r" and wire.written[-1] == b"QB\r"
+        assert all(line == line.upper() for line in wire.written)
     finally:
         link.close()
 

@@ -422,6 +422,15 @@ def test_parameter_refusals_name_their_reason():
         assert str(caught.value) == f"!6 Err: Invalid parameter value ({detail})"
 
 
+def test_an_lm_not_given_one_parameter_per_motor_is_a_programming_error():
+    """An LM with one motor's rate, or a third motor's steps, is no command the board could
+    answer: a plain ValueError, never the firmware's "no axis can move" reply."""
+    for move in (Move("LM", (0,), steps=(0, 0)), Move("LM", (0, 5), steps=(3, 0, 9))):
+        with pytest.raises(ValueError, match="zip") as caught:
+            move.validate()
+        assert not isinstance(caught.value, EBBCommandError)
+
+
 def test_a_t3_that_wraps_only_at_its_peak_is_summed_tick_by_tick():
     """Loaded rate r + 100k - k² over 100 ticks peaks at tick 50, 3 above int32 (ticks 49-51
     wrap, 48 and 52 do not), while both ends stay inside: the closed form would miss it."""
